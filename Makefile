@@ -1,0 +1,39 @@
+# Two commands do all the setup on a fresh machine (python3 + make):
+#   make bench  - create .venv, install, run the default benchmark, write the report
+#   make test   - create .venv, install, run the test suite
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+OUT    ?= results
+
+.PHONY: bench test quick benchmark check-bound speed clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+bench: $(STAMP)
+	$(VENV)/bin/solnic-bench run --out $(OUT)
+
+quick: $(STAMP)
+	$(VENV)/bin/solnic-bench run --quick --out $(OUT)-quick
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+benchmark: $(STAMP)
+	$(PY) -m pytest benchmarks --benchmark-enable --benchmark-only -q
+
+check-bound: $(STAMP)
+	$(VENV)/bin/solnic-bench check-bound --out $(OUT)
+
+speed: $(STAMP)
+	$(VENV)/bin/solnic-bench speed
+
+clean:
+	rm -rf $(VENV) $(OUT) $(OUT)-quick *.egg-info

@@ -1,0 +1,144 @@
+"""Dithered linear controller, ``dithered`` (SPEC §4, section 2.3).
+
+The :mod:`controllers.linear` design plus a square-wave dither at the drive input:
+
+    u(t) = clip(−C(z)·y(n) + A_d·sq(f_d·t + φ), ±u_max),   t ∈ [n·τs, (n+1)·τs)
+
+where sq(θ) = +1 for frac(θ) < ½ and −1 otherwise. The command is a list of (offset, level)
+segments, so the dither switches inside the sample interval and f_d may exceed the 50 Hz
+Nyquist rate. The phase φ is drawn once per run from the controller's own generator.
+Inequality (2-6) still holds for dither slower than the bandwidth limit ωb; only
+f_d above ωb/(2π) can break it, paying with motor current (mean |x3|, rms x3).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from controllers.base import register
+from controllers.linear import LinearController
+from plant.drive import DriveCommand, DriveType
+from plant.params import PlantParams
+
+__all__ = ["DitheredController", "square_wave_segments", "DEFAULT_DITHER_AMPLITUDE",
+           "DEFAULT_DITHER_FREQUENCY_HZ"]
+
+# Defaults from dither_sweep (controllers/dither_sweep.py) on Table 2-1: see the class docstring.
+DEFAULT_DITHER_AMPLITUDE = 4.0  # ozf·in
+DEFAULT_DITHER_FREQUENCY_HZ = 250.0  # Hz
+
+_EDGE_TOL_S = 1e-12  # switches closer than this to an interval edge are merged into it
+
+
+def square_wave_segments(t0: float, duration: float, base: float, amplitude: float,
+                         frequency_hz: float, phase: float, limit: float) -> tuple:
+    """(offset, level) segments of clip(base + A·sq(f·t + φ), ±limit) on [t0, t0 + duration).
+
+    Parameters
+    ----------
+    t0, duration : float
+        Interval start and length [s].
+    base : float
+        Level held over the interval [ozf·in].
+    amplitude, frequency_hz, phase : float
+        A [ozf·in], f [Hz] and φ [cycles] of the square wave.
+    limit : float
+        Clip bound u_max [ozf·in].
+    """
+    if amplitude == 0.0:
+        return ((0.0, min(max(base, -limit), limit)),)
+    cycles0 = frequency_hz * t0 + phase
+    first = math.floor(2.0 * cycles0) + 1  # next half-cycle index after t0
+    offsets = [0.0]
+    k = first
+    while True:
+        off = (0.5 * k - cycles0) / frequency_hz
+        if off >= duration - _EDGE_TOL_S:
+            break
+        if off > _EDGE_TOL_S:
+            offsets.append(off)
+        k += 1
+    bounds = offsets + [duration]
+    segments: list[tuple[float, float]] = []
+    for a, b in zip(bounds, bounds[1:]):
+        theta = cycles0 + frequency_hz * 0.5 * (a + b)  # midpoint: immune to edge round-off
+        sign = 1.0 if (theta - math.floor(theta)) < 0.5 else -1.0
+        level = min(max(base + amplitude * sign, -limit), limit)
+        if not segments or segments[-1][1] != level:
+            segments.append((a, level))
+    return tuple(segments)
+
+
+@register("dithered")
+class DitheredController(LinearController):
+    """Linear lead/lag controller plus square-wave dither at the drive input.
+
+    Parameters
+    ----------
+    dither_amplitude : float
+        A_d ≥ 0 [ozf·in]; must stay below u_max.
+    dither_frequency : float
+        f_d > 0 [Hz].
+    random_phase : bool
+        Draw φ ~ U[0, 1) at reset from the controller's generator; otherwise φ = 0.
+    **linear_options
+        Options of :class:`~controllers.linear.LinearController`.
+
+    Notes
+    -----
+    The defaults (A_d = 4 ozf·in, f_d = 250 Hz) come from ``dither_sweep`` on Table 2-1
+    (SPEC §4): the lowest peak error among the frequencies above the crossover ωb/(2π).
+    """
+
+    description = "Lead/lag linear controller plus square-wave dither at the drive input"
+
+    def __init__(self, *, dither_amplitude: float = DEFAULT_DITHER_AMPLITUDE,
+                 dither_frequency: float = DEFAULT_DITHER_FREQUENCY_HZ,
+                 random_phase: bool = True, **linear_options: Any) -> None:
+        super().__init__(**linear_options)
+        for name, value in (("dither_amplitude", dither_amplitude),
+                            ("dither_frequency", dither_frequency)):
+            if (isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value)):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+        if dither_amplitude < 0:
+            raise ValueError(f"dither_amplitude must be >= 0 ozf·in, got {dither_amplitude!r}")
+        if dither_frequency <= 0:
+            raise ValueError(f"dither_frequency must be > 0 Hz, got {dither_frequency!r}")
+        if not isinstance(random_phase, bool):
+            raise ValueError(f"random_phase must be a bool, got {random_phase!r}")
+        self.dither_amplitude = float(dither_amplitude)
+        self.dither_frequency = float(dither_frequency)
+        self.random_phase = random_phase
+        self._phase = 0.0
+
+    def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
+        """Design, zero the state, and draw the dither phase."""
+        if self.dither_amplitude >= params.u_max:
+            raise ValueError(f"dither_amplitude must be < u_max ({params.u_max!r}), "
+                             f"got {self.dither_amplitude!r}")
+        super().reset(params, rng)
+        self._tau_s = params.sample_period
+        self._n = 0
+        self._phase = float(rng.random()) if self.random_phase else 0.0
+
+    def step(self, y: float) -> DriveCommand:
+        """Linear level −C(z)·y(n) plus the dither over [n·τs, (n+1)·τs)."""
+        base = self.control_level(y)
+        segments = square_wave_segments(self._n * self._tau_s, self._tau_s, base,
+                                         self.dither_amplitude, self.dither_frequency,
+                                         self._phase, self._u_max)
+        self._n += 1
+        return DriveCommand(segments, DriveType.LINEAR)
+
+    def summary(self) -> dict[str, Any]:
+        out = super().summary()
+        if out:
+            out.update(dither_amplitude=self.dither_amplitude,
+                       dither_frequency_hz=self.dither_frequency,
+                       dither_above_crossover=2 * math.pi * self.dither_frequency
+                       > out["crossover_rad_s"])
+        return out

@@ -1,0 +1,468 @@
+"""Lag-compensated linear controller, ``linear`` (SPEC §4, section 2.2).
+
+A sampled-data lead/lag design made with python-control on the *discretized* loop. The plant
+from drive level u [ozf·in] to shaft angle c [rad] is
+
+    G(s) = 1/(τ3·s + 1) · 1/(J·s²)
+
+(motor lag, then pure inertia), discretized with a zero-order hold at τs. The runner applies the
+command computed from y(n·τs) over [n·τs, (n+1)·τs), so the loop has no computation delay beyond
+the ZOH and none is modelled. The compensator acts on the measured error y = x1 + w1 [rad]:
+
+    u(n) = −C(z)·y(n),   C(z) = K · Π lead_i(z) · lag(z)
+
+* ``lead_i`` — identical lead stages (1 + s/ωl)/(1 + s/ωh), ωl·ωh = ωc², each giving at most
+  ``max_lead_phase_deg`` of phase at ωc; together they place the phase margin at ωc exactly.
+* ``lag`` — (s + ωz)/(s + ωz/L): DC gain L, unit high-frequency gain, upper corner
+  ωz = ``lag_corner_fraction``·ωc. L defaults to the Bohacek–Tuteur limit
+  Lmax = 2k̄s/(k̄s − k̄c)  (2-1). ``integral=True`` replaces it by the pure integral (s + ωz)/s.
+  When k̄s = k̄c, Lmax is infinite and the default is the finite cap :data:`LAG_RATIO_CAP`.
+* Every section is discretized by Tustin's method prewarped at ωc, so its phase at ωc is the
+  continuous one exactly; K then puts the discrete gain crossover at ωc.
+
+The default crossover is the highest ωc that :func:`highest_crossover` finds feasible: phase
+margin ≥ target, gain margin ≥ 6 dB, at most two lead stages, no negative-real (sign-alternating)
+compensator pole, and an RMS drive noise from w1 ≤ 5 % of u_max. For Table 2-1 the gain margin
+— that is, the sample rate — is the binding limit; the measurement noise is far from it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import control as ct
+import numpy as np
+import scipy.integrate
+
+from controllers.base import Controller, register
+from plant.drive import DriveCommand, DriveType
+from plant.params import PlantParams
+
+__all__ = ["LAG_RATIO_CAP", "LinearDesign", "design_linear", "highest_crossover", "LinearController"]
+
+#: Lag ratio used when Lmax = 2k̄s/(k̄s − k̄c) is infinite (k̄s = k̄c): any ratio is allowed by
+#: (2-1) then, and 10 keeps the lag network's phase cost and wind-up time moderate.
+LAG_RATIO_CAP = 10.0
+
+_MIN_GAIN_MARGIN_DB = 6.0
+_MAX_LEAD_STAGES = 2
+_MAX_NOISE_DRIVE_FRACTION = 0.05  # RMS drive noise from w1, as a fraction of u_max
+
+
+@dataclass(frozen=True, eq=False)
+class LinearDesign:
+    """A discrete lead/lag design and its loop properties.
+
+    Attributes
+    ----------
+    params : PlantParams
+        The plant it was designed for.
+    crossover_target_rad_s : float
+        Requested gain-crossover frequency ωc [rad/s].
+    lag_ratio : float
+        Lag corner ratio L (``inf`` for the pure integral).
+    integral : bool
+        Whether the lag network is the pure integral (s + ωz)/s.
+    lag_corner_rad_s : float
+        Upper lag corner ωz [rad/s].
+    lead_stages : int
+        Number of identical lead stages.
+    lead_ratio : float
+        Pole/zero ratio a = ωh/ωl of each lead stage.
+    gain : float
+        K [ozf·in/rad].
+    plant : control.TransferFunction
+        ZOH-discretized plant Pd(z), u [ozf·in] → c [rad].
+    sections : tuple of control.TransferFunction
+        Discrete unit-gain sections; ``compensator = gain · Π sections``.
+    compensator : control.TransferFunction
+        C(z); the drive level is u(n) = −C(z)·y(n) [ozf·in per rad].
+    state_space : tuple of numpy arrays
+        (A, B, C, D) realization of C(z) as a cascade of the sections.
+    open_loop : control.TransferFunction
+        C(z)·Pd(z).
+    crossover_rad_s, phase_margin_deg : float
+        Gain crossover [rad/s] and phase margin [deg] of the discrete loop
+        (control.stability_margins, worst crossover).
+    gain_margin_db : float
+        Gain increase to instability [dB], at ``phase_crossover_rad_s`` (inf when none).
+    phase_crossover_rad_s : float
+        Frequency of the gain margin [rad/s] (nan when none).
+    gain_reduction_margin_db : float
+        Gain decrease to instability [dB, negative] of the conditionally stable loop
+        (nan when none).
+    static_stiffness : float
+        |C(z=1)|, drive torque per rad of steady error [ozf·in/rad] (inf for the integral).
+    closed_loop_poles : numpy.ndarray
+        Roots of the characteristic polynomial of 1 + C·Pd.
+    stable : bool
+        All closed-loop poles strictly inside the unit circle.
+    noise_drive_rms : float
+        RMS drive level caused by the measurement noise w1 [ozf·in].
+    noise_error_rms : float
+        RMS shaft error caused by w1 [rad].
+    """
+
+    params: PlantParams
+    crossover_target_rad_s: float
+    lag_ratio: float
+    integral: bool
+    lag_corner_rad_s: float
+    phase_margin_target_deg: float
+    lead_stages: int
+    lead_ratio: float
+    gain: float
+    plant: ct.TransferFunction
+    sections: tuple
+    compensator: ct.TransferFunction
+    state_space: tuple
+    open_loop: ct.TransferFunction
+    crossover_rad_s: float
+    phase_margin_deg: float
+    gain_margin_db: float
+    phase_crossover_rad_s: float
+    gain_reduction_margin_db: float
+    static_stiffness: float
+    closed_loop_poles: np.ndarray
+    stable: bool
+    noise_drive_rms: float
+    noise_error_rms: float
+
+    @property
+    def lag_ratio_limit(self) -> float:
+        """Lmax = 2k̄s/(k̄s − k̄c)  (2-1)."""
+        return self.params.lag_ratio_limit
+
+    def summary(self) -> dict[str, Any]:
+        """Design report: crossover, margins, static stiffness, L and the (2-6) bounds."""
+        p = self.params
+        return {
+            "crossover_rad_s": self.crossover_rad_s,
+            "phase_margin_deg": self.phase_margin_deg,
+            "gain_margin_db": self.gain_margin_db,
+            "gain_reduction_margin_db": self.gain_reduction_margin_db,
+            "static_stiffness": self.static_stiffness,
+            "lag_ratio": self.lag_ratio,
+            "lag_ratio_limit": p.lag_ratio_limit,
+            "integral": self.integral,
+            "lead_stages": self.lead_stages,
+            "lead_ratio": self.lead_ratio,
+            "lag_corner_rad_s": self.lag_corner_rad_s,
+            "gain": self.gain,
+            "stable": self.stable,
+            "noise_drive_rms": self.noise_drive_rms,
+            "noise_error_rms_rad": self.noise_error_rms,
+            "bound_at_crossover_rad": p.classical_bound(self.crossover_target_rad_s),  # (2-6)
+            "bound_at_nyquist_rad": p.classical_bound(),
+        }
+
+
+def _eval_tf(sys: ct.TransferFunction, z: complex | np.ndarray) -> complex | np.ndarray:
+    num, den = sys.num[0][0], sys.den[0][0]
+    return np.polyval(num, z) / np.polyval(den, z)
+
+
+def _discrete_plant(params: PlantParams) -> ct.TransferFunction:
+    # G(s) = 1/((τ3 s + 1)·J s²), motor lag then pure inertia (figure 2-1)
+    plant = ct.tf([1.0], [params.motor_time_constant * params.inertia, params.inertia, 0.0, 0.0])
+    return ct.sample_system(plant, params.sample_period, method="zoh")
+
+
+def _plant_phase(plant: ct.TransferFunction, omega: float, tau_s: float) -> float:
+    """Unwrapped phase of Pd(e^{jωτs}) [rad], on the branch that starts at −π at low ω."""
+    w = np.linspace(omega * 1e-3, omega, 2048)
+    ph = np.unwrap(np.angle(_eval_tf(plant, np.exp(1j * w * tau_s))))
+    return float(ph[-1] - 2 * np.pi * np.round((ph[0] + np.pi) / (2 * np.pi)))
+
+
+def _tustin(num: list[float], den: list[float], tau_s: float, omega: float) -> ct.TransferFunction:
+    return ct.sample_system(ct.tf(num, den), tau_s, method="tustin", prewarp_frequency=omega)
+
+
+def _cascade_ss(gain: float, sections: tuple) -> tuple[np.ndarray, ...]:
+    """(A, B, C, D) of gain·Π sections, realised as a cascade of first-order blocks."""
+    sys = ct.ss(ct.tf([gain], [1.0], sections[0].dt))
+    for sec in sections:
+        sys = ct.series(sys, ct.ss(sec))
+    return tuple(np.array(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D))
+
+
+def _h2_norm(sys: ct.TransferFunction, n_grid: int = 1 << 14) -> float:
+    """Discrete H2 norm √Σh(n)² = √((1/π)∫₀^π |H(e^{jθ})|² dθ) (Parseval), for a stable H."""
+    theta = np.linspace(0.0, np.pi, n_grid + 1)
+    power = np.abs(_eval_tf(sys, np.exp(1j * theta))) ** 2
+    return float(np.sqrt(scipy.integrate.simpson(power, x=theta) / np.pi))
+
+
+def _margins(open_loop: ct.TransferFunction) -> dict[str, float]:
+    """Phase margin (worst gain crossover), upper gain margin and gain-reduction margin.
+
+    A lag network on a double integrator makes the loop conditionally stable: the phase dips
+    below −180° under ωc, so reducing the gain also destabilises it. python-control's default
+    reports the smallest gain ratio, which is that lower margin; both are reported here.
+    """
+    gm, pm, _, w_pc, w_gc, _ = ct.stability_margins(open_loop, method="poly", returnall=True)
+    gm, pm, w_pc, w_gc = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (gm, pm, w_pc, w_gc))
+    if pm.size == 0:
+        return dict(crossover_rad_s=math.nan, phase_margin_deg=math.nan, gain_margin_db=math.nan,
+                    phase_crossover_rad_s=math.nan, gain_reduction_margin_db=math.nan)
+    i = int(np.argmin(pm))
+    w_c = float(w_gc[i])
+    upper = (w_pc > w_c) & (gm > 0)
+    lower = (w_pc < w_c) & (gm > 1e-9)  # gm ≈ 0 entries are the ω → 0 limit of the 1/s² plant
+    j = int(np.argmin(np.where(upper, gm, np.inf))) if upper.any() else -1
+    return dict(
+        crossover_rad_s=w_c, phase_margin_deg=float(pm[i]),
+        gain_margin_db=float(20 * np.log10(gm[j])) if j >= 0 else math.inf,
+        phase_crossover_rad_s=float(w_pc[j]) if j >= 0 else math.nan,
+        gain_reduction_margin_db=float(20 * np.log10(gm[lower].max())) if lower.any() else math.nan)
+
+
+def _check_options(params: PlantParams, crossover: float | None, lag_ratio: float | None,
+                   phase_margin_deg: float, lag_corner_fraction: float,
+                   max_lead_phase_deg: float, integral: bool) -> None:
+    nyquist = math.pi / params.sample_period
+    if crossover is not None and not (0 < crossover < nyquist):
+        raise ValueError(f"crossover must be in (0, π/τs = {nyquist:.6g}) rad/s, got {crossover!r}")
+    if lag_ratio is not None:
+        if integral:
+            raise ValueError("lag_ratio must be None when integral=True (the ratio is infinite)")
+        if not (math.isfinite(lag_ratio) and lag_ratio >= 1):
+            raise ValueError(f"lag_ratio must be a finite number >= 1, got {lag_ratio!r}")
+    if not (0 < phase_margin_deg < 90):
+        raise ValueError(f"phase_margin_deg must be in (0, 90), got {phase_margin_deg!r}")
+    if not (0 < lag_corner_fraction < 1):
+        raise ValueError(f"lag_corner_fraction must be in (0, 1), got {lag_corner_fraction!r}")
+    if not (0 < max_lead_phase_deg < 90):
+        raise ValueError(f"max_lead_phase_deg must be in (0, 90), got {max_lead_phase_deg!r}")
+
+
+def design_linear(params: PlantParams, crossover: float | None = None,
+                  lag_ratio: float | None = None, *, integral: bool = False,
+                  phase_margin_deg: float = 45.0, lag_corner_fraction: float = 0.1,
+                  max_lead_phase_deg: float = 60.0) -> LinearDesign:
+    """Lead/lag design on the ZOH-discretized loop (cached; the result is immutable).
+
+    Parameters
+    ----------
+    params : PlantParams
+        The plant.
+    crossover : float, optional
+        Gain-crossover frequency ωc [rad/s]; default :func:`highest_crossover`.
+    lag_ratio : float, optional
+        Lag corner ratio L ≥ 1; default Lmax (2-1), or :data:`LAG_RATIO_CAP` when Lmax = inf.
+    integral : bool
+        Use the pure integral (s + ωz)/s instead of a lag network.
+    phase_margin_deg : float
+        Phase margin placed at ωc [deg].
+    lag_corner_fraction : float
+        Upper lag corner ωz as a fraction of ωc.
+    max_lead_phase_deg : float
+        Most phase one lead stage may add [deg]; the stage count follows.
+
+    Raises
+    ------
+    ValueError
+        On an option out of range, or an ωc that needs more than four lead stages.
+    """
+    _check_options(params, crossover, lag_ratio, phase_margin_deg, lag_corner_fraction,
+                   max_lead_phase_deg, integral)
+    if crossover is None:
+        crossover = highest_crossover(params, lag_ratio, integral=integral,
+                                      phase_margin_deg=phase_margin_deg,
+                                      lag_corner_fraction=lag_corner_fraction,
+                                      max_lead_phase_deg=max_lead_phase_deg)
+    if lag_ratio is None and not integral:
+        limit = params.lag_ratio_limit
+        lag_ratio = LAG_RATIO_CAP if math.isinf(limit) else limit
+    return _design(params, float(crossover), math.inf if integral else float(lag_ratio),
+                   bool(integral), float(phase_margin_deg), float(lag_corner_fraction),
+                   float(max_lead_phase_deg))
+
+
+@functools.lru_cache(maxsize=512)
+def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: bool,
+            pm_deg: float, lag_corner_fraction: float, max_lead_phase_deg: float) -> LinearDesign:
+    tau_s = params.sample_period
+    z_c = np.exp(1j * omega_c * tau_s)
+    plant = _discrete_plant(params)
+
+    omega_z = lag_corner_fraction * omega_c
+    lag_den = [1.0, 0.0] if integral else [1.0, omega_z / lag_ratio]
+    lag = _tustin([1.0, omega_z], lag_den, tau_s, omega_c)  # DC gain L, HF gain 1
+
+    # lead phase that puts ∠(C·Pd) = −180° + PM at ωc
+    need = (-math.pi + math.radians(pm_deg) - _plant_phase(plant, omega_c, tau_s)
+            - float(np.angle(_eval_tf(lag, z_c))))
+    stages = max(1, math.ceil(need / math.radians(max_lead_phase_deg) - 1e-12))
+    if need <= 0 or stages > 4:
+        raise ValueError(f"crossover {omega_c!r} rad/s needs {math.degrees(need):.1f}° of lead; "
+                         "choose a lower crossover")
+    phi = need / stages
+    a = (1 + math.sin(phi)) / (1 - math.sin(phi))  # lead ratio for maximum phase φ at ωc
+    lead = _tustin([1.0 / (omega_c / math.sqrt(a)), 1.0], [1.0 / (omega_c * math.sqrt(a)), 1.0],
+                   tau_s, omega_c)
+    sections = (lag,) + (lead,) * stages
+
+    shape = ct.tf([1.0], [1.0], tau_s)
+    for sec in sections:
+        shape = shape * sec
+    gain = float(1.0 / abs(_eval_tf(shape, z_c) * _eval_tf(plant, z_c)))
+    comp = ct.tf(gain * shape.num[0][0], shape.den[0][0], tau_s)
+    open_loop = comp * plant
+
+    margins = _margins(open_loop)
+    char = np.polyadd(np.polymul(comp.den[0][0], plant.den[0][0]),
+                      np.polymul(comp.num[0][0], plant.num[0][0]))
+    poles = np.roots(char)
+    stable = bool(np.all(np.abs(poles) < 1.0))
+    stiffness = math.inf if integral else float(abs(_eval_tf(comp, 1.0)))
+    if stable:
+        drive_rms = params.measurement_noise_std * _h2_norm(ct.feedback(comp, plant))
+        error_rms = params.measurement_noise_std * _h2_norm(ct.feedback(open_loop, 1))
+    else:
+        drive_rms = error_rms = math.inf
+    return LinearDesign(
+        params=params, crossover_target_rad_s=omega_c, lag_ratio=lag_ratio, integral=integral,
+        lag_corner_rad_s=omega_z, phase_margin_target_deg=pm_deg, lead_stages=stages,
+        lead_ratio=a, gain=gain, plant=plant, sections=sections, compensator=comp,
+        state_space=_cascade_ss(gain, sections), open_loop=open_loop,
+        **margins,
+        static_stiffness=stiffness, closed_loop_poles=poles, stable=stable,
+        noise_drive_rms=drive_rms, noise_error_rms=error_rms)
+
+
+def _feasible(params: PlantParams, omega_c: float, lag_ratio: float | None, integral: bool,
+              pm_deg: float, lag_corner_fraction: float, max_lead_phase_deg: float,
+              min_gain_margin_db: float) -> bool:
+    try:
+        d = design_linear(params, omega_c, lag_ratio, integral=integral, phase_margin_deg=pm_deg,
+                          lag_corner_fraction=lag_corner_fraction,
+                          max_lead_phase_deg=max_lead_phase_deg)
+    except ValueError:
+        return False
+    poles = np.concatenate([np.roots(s.den[0][0]) for s in d.sections])
+    return (d.stable and d.lead_stages <= _MAX_LEAD_STAGES
+            and d.phase_margin_deg >= pm_deg - 1e-6
+            and d.gain_margin_db >= min_gain_margin_db
+            and bool(np.all(poles.real >= 0))
+            and d.noise_drive_rms <= _MAX_NOISE_DRIVE_FRACTION * params.u_max)
+
+
+@functools.lru_cache(maxsize=64)
+def highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
+                      integral: bool = False, phase_margin_deg: float = 45.0,
+                      lag_corner_fraction: float = 0.1, max_lead_phase_deg: float = 60.0,
+                      min_gain_margin_db: float = _MIN_GAIN_MARGIN_DB) -> float:
+    """Highest feasible ωc [rad/s], to 0.1 rad/s (see the module docstring for the criteria).
+
+    Raises
+    ------
+    ValueError
+        If no crossover between 1 rad/s and the Nyquist frequency is feasible.
+    """
+    args = (lag_ratio, integral, phase_margin_deg, lag_corner_fraction, max_lead_phase_deg,
+            min_gain_margin_db)
+    nyquist = math.pi / params.sample_period
+    grid = np.geomspace(1.0, 0.99 * nyquist, 40)
+    ok = [_feasible(params, float(w), *args) for w in grid]
+    if not any(ok):
+        raise ValueError("no feasible crossover: relax phase_margin_deg or min_gain_margin_db")
+    i = max(k for k, flag in enumerate(ok) if flag)
+    if i == len(grid) - 1:
+        return float(np.floor(grid[i] * 10) / 10)
+    lo, hi = float(grid[i]), float(grid[i + 1])
+    while hi - lo > 0.02:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _feasible(params, mid, *args) else (lo, mid)
+    return float(np.floor(lo * 10) / 10)
+
+
+def _check_number(name: str, value: Any, *, allow_none: bool = True) -> None:
+    if value is None and allow_none:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+
+
+@register("linear")
+class LinearController(Controller):
+    """Lag-compensated linear controller on the linear amplifier: u(n) = −C(z)·y(n).
+
+    Parameters
+    ----------
+    crossover : float, optional
+        ωc [rad/s]; default the highest feasible one for the plant (:func:`highest_crossover`).
+    lag_ratio : float, optional
+        L ≥ 1; default Lmax = 2k̄s/(k̄s − k̄c)  (2-1).
+    phase_margin_deg : float
+        Phase-margin target at ωc [deg], default 45.
+    integral : bool
+        Pure integral instead of the lag network.
+    lag_corner_fraction : float
+        Upper lag corner as a fraction of ωc, default 0.1.
+    """
+
+    drive = DriveType.LINEAR
+    description = "Lead/lag sampled-data design at the Bohacek–Tuteur lag limit (2-1)"
+
+    def __init__(self, *, crossover: float | None = None, lag_ratio: float | None = None,
+                 phase_margin_deg: float = 45.0, integral: bool = False,
+                 lag_corner_fraction: float = 0.1) -> None:
+        _check_number("crossover", crossover)
+        if crossover is not None and crossover <= 0:
+            raise ValueError(f"crossover must be > 0 rad/s, got {crossover!r}")
+        _check_number("lag_ratio", lag_ratio)
+        if lag_ratio is not None and lag_ratio < 1:
+            raise ValueError(f"lag_ratio must be >= 1, got {lag_ratio!r}")
+        _check_number("phase_margin_deg", phase_margin_deg, allow_none=False)
+        if not 0 < phase_margin_deg < 90:
+            raise ValueError(f"phase_margin_deg must be in (0, 90), got {phase_margin_deg!r}")
+        if not isinstance(integral, bool):
+            raise ValueError(f"integral must be a bool, got {integral!r}")
+        if integral and lag_ratio is not None:
+            raise ValueError("lag_ratio must be None when integral=True (the ratio is infinite)")
+        _check_number("lag_corner_fraction", lag_corner_fraction, allow_none=False)
+        if not 0 < lag_corner_fraction < 1:
+            raise ValueError(f"lag_corner_fraction must be in (0, 1), got {lag_corner_fraction!r}")
+        self._options = dict(crossover=crossover, lag_ratio=lag_ratio, integral=integral,
+                             phase_margin_deg=phase_margin_deg,
+                             lag_corner_fraction=lag_corner_fraction)
+        self.design: LinearDesign | None = None
+        self._u_max = math.inf
+
+    def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
+        """Design for ``params`` (cached) and zero the compensator state."""
+        o = self._options
+        self.design = design_linear(params, o["crossover"], o["lag_ratio"], integral=o["integral"],
+                                    phase_margin_deg=o["phase_margin_deg"],
+                                    lag_corner_fraction=o["lag_corner_fraction"])
+        self._A, self._B, self._C, self._D = self.design.state_space
+        self._B = self._B[:, 0]
+        self._C = self._C[0]
+        self._D = float(self._D[0, 0])
+        self._x = np.zeros(self._A.shape[0])
+        self._u_max = params.u_max
+        self._level = 0.0
+
+    def control_level(self, y: float) -> float:
+        """Advance the compensator with y(n) [rad]; the clipped level u(n) [ozf·in]."""
+        if self.design is None:
+            raise RuntimeError("LinearController.reset must be called before step")
+        u = -(float(self._C @ self._x) + self._D * y)  # u(n) = −C(z)·y(n)
+        self._x = self._A @ self._x + self._B * y
+        self._level = min(max(u, -self._u_max), self._u_max)
+        return self._level
+
+    def step(self, y: float) -> DriveCommand:
+        """Hold −C(z)·y(n), clipped to ±u_max, over the next interval."""
+        return DriveCommand.hold(self.control_level(y), DriveType.LINEAR)
+
+    def internals(self) -> dict[str, float]:
+        return {"u_linear": self._level}
+
+    def summary(self) -> dict[str, Any]:
+        return {} if self.design is None else self.design.summary()

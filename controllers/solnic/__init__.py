@@ -1,0 +1,15 @@
+"""The solnic controller (Acker 1967, ch. 5–7), split by idea.
+
+* :mod:`~controllers.solnic.predictor` — the internal plant model, Δc_p, t_nominal, quasipartials;
+* :mod:`~controllers.solnic.mode2_filter` — Kalman filter on (x1, x4) while stuck;
+* :mod:`~controllers.solnic.friction_filter` — modified Kalman filter on (k̂c, k̂s);
+* :mod:`~controllers.solnic.cost` — the cycle cost (6-1)–(6-5) and the a_c calibration;
+* :mod:`~controllers.solnic.strategy` — sizes, the optimiser (6-9), (6-10), the trigger;
+* :mod:`~controllers.solnic.presets` — option sets and validation;
+* :mod:`~controllers.solnic.controller` — :class:`SolnicController`, registered as ``"solnic"``.
+"""
+
+from controllers.solnic.controller import SolnicController
+from controllers.solnic.presets import PRESETS
+
+__all__ = ["SolnicController", "PRESETS"]

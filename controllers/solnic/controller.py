@@ -1,0 +1,303 @@
+"""The solnic controller: semi-open-loop, nonlinear, identification and control (ch. 5–7).
+
+Every sample the controller
+
+1. propagates the mode-2 filter on (x̂1, x̂4) and uses y(n) only if the shaft is stuck with
+   confidence 0.9987, i.e. past t_max = t_nominal + 3√(H_tb P_b H_tb') of the last pulse (5-11);
+2. plans the next correction: Δt_u from the size schedule, Δc_p,cond and the quasipartials from
+   the internal plant model, and the unsymmetrical trigger (section 7.2). When a correction is
+   due it first evaluates the previous cycle — Δc_e (5-13), VAR[Δc_e] (5-14), the 0.98
+   significance test, the friction-filter update (5-15)–(5-18), the start-up sizes and, after
+   twelve cycles, the costs (6-1)–(6-5) and the updates (6-9), (6-10) — and re-plans;
+3. launches the pulse, possibly inside the interval at the predicted trigger time, and resets
+   x̂1 and its variance from the prediction, (5-6) and (5-9).
+
+Interpretation of (5-14): the text prints 2·COV[x̂1(t_b), x̂1(t_a)]·(t_b − t_a), which has the
+wrong units; Δc_e = x̂1(t_b) + x̂4(t_b)(t_b − t_a) − x̂1(t_a) with x̂1(t_a) taken as independent
+gives 2·COV[x̂1(t_b), x̂4(t_b)]·(t_b − t_a), which we use.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from statistics import NormalDist
+from typing import Any
+
+import numpy as np
+
+from controllers.base import Controller, register
+from plant.drive import DriveCommand, DriveType
+from plant.params import PlantParams
+
+from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
+from controllers.solnic.friction_filter import FrictionFilter
+from controllers.solnic.mode2_filter import Mode2Filter
+from controllers.solnic.predictor import Predictor, PulsePrediction
+from controllers.solnic.presets import resolve_options
+from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
+                                         SizeSchedule, plan_trigger)
+
+__all__ = ["SolnicController", "adjusted_increment"]
+
+_NAN = float("nan")
+
+
+@lru_cache(maxsize=32)
+def adjusted_increment(params: PlantParams, a_c: float, a_ratio: float = 2.0) -> tuple[float, float]:
+    """(Δt_u,opt, Δt_u,inc) properly adjusted for the true plant: the optimum of the noise-free
+    cost curve at x4 = ``command_velocity_initial`` and the increment with Δc ratio ``a_ratio``.
+
+    Section 7.3's "Δt_u,inc four times too large" is relative to this increment.
+    """
+    opt = optimal_dtu(params, a_c)
+    return opt, optimal_increment(params, opt, a_ratio)
+
+
+def _max_on_time(params: PlantParams) -> float:
+    """Largest Δt_u whose current is back to zero within one sample period [s]."""
+    tau, ts = params.motor_time_constant, params.sample_period
+    lo, hi = 0.0, ts
+    for _ in range(80):                         # t_cz(Δt) = Δt + τ3·ln(2 − e^(−Δt/τ3)), increasing
+        mid = 0.5 * (lo + hi)
+        if mid + tau * math.log(2.0 - math.exp(-mid / tau)) < ts:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@dataclass
+class _Cycle:
+    """What the controller remembers about the pulse whose outcome is still to be measured."""
+
+    t_a: float
+    x1_a: float
+    var_x1_a: float
+    sign: int
+    dt_u: float
+    size: int
+    delta_c: float            # |Δc_p,cond| [rad]
+    H_b: np.ndarray           # quasipartials of |Δc| (positive-direction convention)
+    peak_torque: float
+    moving_time: float
+    overshoot: bool
+
+
+@register("solnic")
+class SolnicController(Controller):
+    """Solnic controller on the switched bridge (levels +u_max, 0, −u_max).
+
+    Parameters
+    ----------
+    preset : str
+        ``"thesis"`` (default) or ``"high-error-cost"``; see :mod:`controllers.solnic.presets`.
+    **options
+        Any key of :data:`controllers.solnic.presets.DEFAULTS`, e.g. ``a_c``, ``a_cov``,
+        ``initial_friction_factor``, ``initial_increment_factor``, ``friction_noise_in_filter``.
+
+    Raises
+    ------
+    ValueError
+        Naming the offending option.
+    """
+
+    drive = DriveType.BRIDGE
+    description = "solnic: semi-open-loop nonlinear identification and control (Acker 1967)"
+
+    def __init__(self, preset: str = "thesis", **options: Any) -> None:
+        self.options = resolve_options(preset, **options)
+        self._ready = False
+
+    # ------------------------------------------------------------------ run set-up
+    def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
+        o = self.options
+        self.params = params
+        self.rng = rng
+        self.predictor = Predictor(params, fd_step=o["fd_step"])
+        f = o["initial_friction_factor"]
+        kc0, ks0 = f * params.coulomb, f * params.stiction
+        ks0 = min(ks0, 0.999 * params.u_max)
+        kc0 = min(kc0, ks0)
+        s = o["friction_prior_std_fraction"]
+        self.friction = FrictionFilter(kc0, ks0, np.diag([(s * kc0) ** 2, (s * ks0) ** 2]),
+                                       params.u_max, a=o["a_cov"],
+                                       max_correction_fraction=o["max_correction_fraction"])
+        self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq,
+                                 params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9,
+                                 [0.0, 0.0], np.diag([o["x1_prior_std"] ** 2, o["x4_prior_std"] ** 2]))
+        if o["dtu_inc_initial"] is not None:
+            inc0 = o["dtu_inc_initial"]
+            self.adjusted = (_NAN, _NAN)
+        else:
+            self.adjusted = adjusted_increment(params, o["a_c"], o["a_ratio"])
+            inc0 = o["initial_increment_factor"] * self.adjusted[1]
+        self.schedule = SizeSchedule(dtu_opt=o["dtu_opt_initial"], dtu_inc=inc0)
+        self.dtu_max = _max_on_time(params)
+        self.z_motion = NormalDist().inv_cdf(o["motion_confidence"])
+        self._n = 0
+        self._t_max = -math.inf
+        self._pending: _Cycle | None = None
+        self._costs = (_NAN, _NAN, _NAN)
+        self._dc_ratio = _NAN
+        self.log: list[dict[str, float]] = []
+        self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
+                           cycles_evaluated=0, significant_cycles=0, friction_updates=0,
+                           cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0)
+        self._ready = True
+
+    # ------------------------------------------------------------------ per sample
+    def step(self, y: float) -> DriveCommand:
+        if not self._ready:
+            raise RuntimeError("SolnicController.step called before reset")
+        t = self._n * self.params.sample_period
+        self._n += 1
+        self.mode2.predict(t)
+        if t >= self._t_max and math.isfinite(y):
+            self.mode2.update(y)
+            self.counts["samples_used"] += 1
+        else:
+            self.counts["samples_rejected"] += 1
+        return self._plan(t)
+
+    def _next_dtu(self) -> float:
+        sch = self.schedule
+        for _ in range(4):
+            dtu = sch.next_dtu()
+            if dtu > 0:
+                return min(dtu, self.dtu_max)
+            if sch.size >= SMALL:
+                sch.skip_size()
+                if sch.set_complete:
+                    self._reoptimise()
+            else:
+                sch.dtu_startup = sch.dtu_inc / 4.0
+        return min(max(sch.next_dtu(), sch.dtu_inc), self.dtu_max)
+
+    def _plan(self, t: float) -> DriveCommand:
+        ts = self.params.sample_period
+        earliest = max(0.0, self._t_max - t)
+        for attempt in range(2):
+            dtu = self._next_dtu()
+            pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
+            x1, x4 = self.mode2.x
+            trig = plan_trigger(x1, x4, self.mode2.drift_std(), abs(pred.delta_c), horizon=ts,
+                                earliest=earliest, duration=pred.t_current_zero,
+                                overshoot_factor=self.options["overshoot_factor"])
+            if trig is None:
+                return DriveCommand.hold(0.0, DriveType.BRIDGE)
+            if self._pending is not None and attempt == 0:
+                self._evaluate(t)
+                continue
+            return self._launch(t, trig.offset, trig.sign, trig.overshoot, dtu, pred)
+        return DriveCommand.hold(0.0, DriveType.BRIDGE)
+
+    def _launch(self, t: float, offset: float, sign: int, overshoot: bool, dtu: float,
+                pred: PulsePrediction) -> DriveCommand:
+        t_a = t + offset
+        self.mode2.predict(t_a)
+        x1_a, var_x1_a = float(self.mode2.x[0]), float(self.mode2.P[0, 0])
+        dc = abs(pred.delta_c)
+        p_zero = self.friction.prob_no_motion(pred.peak_torque)
+        var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
+        self.mode2.add_motion(sign * dc, var_dc)                                    # (5-6)
+        sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
+        k = self.options["stuck_confidence_sigmas"]
+        self._t_max = t_a + pred.t_nominal + k * sd_t                               # (5-11)
+        moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+        self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
+        self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
+                               np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot)
+        if self.schedule.size in (STARTUP_RAISE, STARTUP_SETTLE):
+            self.counts["startup_cycles"] += 1
+        self.schedule.launched(dtu)
+        self.counts["pulses"] += 1
+        self.counts["overshoot_corrections"] += int(overshoot)
+        return DriveCommand.pulse(offset, dtu, sign * self.params.u_max)
+
+    def _evaluate(self, t_b: float) -> None:
+        c, self._pending = self._pending, None
+        x1_b, x4_b = (float(v) for v in self.mode2.x)
+        P = self.mode2.P
+        dt = t_b - c.t_a
+        dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
+        var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2        # (5-14)
+        var_meas = var_e
+        if self.options["friction_noise_in_filter"]:
+            p = self.params
+            var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
+        sd = math.sqrt(max(var_e, 1e-300))
+        z = c.sign * dc_e / sd
+        significant = z >= self.z_motion
+        self.counts["cycles_evaluated"] += 1
+        entry = dict(t_a=c.t_a, t_b=t_b, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
+                     dc_p=c.delta_c, dc_e=c.sign * dc_e, sd_e=sd, significant=float(significant),
+                     ks_before=self.friction.ks, kc_before=self.friction.kc)
+        if significant:
+            self.counts["significant_cycles"] += 1
+            upd = self.friction.update(c.H_b, c.sign * dc_e - c.delta_c, var_meas, c.peak_torque)
+            self.counts["friction_updates"] += 1
+            self.counts["shrinks"] += upd.shrinks
+            self.counts["clipped_updates"] += int(upd.clipped)
+        entry.update(ks=self.friction.ks, kc=self.friction.kc)
+        self.log.append(entry)
+        self.schedule.evaluated(significant, c.size, c.dt_u)
+        if self.schedule.set_complete:
+            self._reoptimise()
+
+    def _reoptimise(self) -> None:
+        """Costs of the three sizes with the current estimates (6-1)–(6-5); (6-10), (6-9)."""
+        sch, o, p = self.schedule, self.options, self.params
+        x4 = float(self.mode2.x[1])
+        costs, motions = [], []
+        for size in (SMALL, MEDIUM, LARGE):
+            dtu = sch.normal_dtu(size)
+            if dtu <= 0:
+                costs.append(math.inf)
+                motions.append(0.0)
+                continue
+            dtu = min(dtu, self.dtu_max)
+            pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
+            var_dc = var_x1 = 0.0
+            if o["cost_variances"]:
+                var_dc = self.friction.motion_variance(pred.H_b)
+                var_x1 = float(self.mode2.P[0, 0])
+            costs.append(cycle_cost(dtu, abs(pred.delta_c), x4, o["a_c"], p, var_dc, var_x1).total)
+            motions.append(abs(pred.delta_c))
+        ratio = motions[2] / motions[0] if motions[0] > 0 else math.inf
+        self._costs = tuple(costs)
+        self._dc_ratio = ratio
+        sch.reoptimise(*costs, ratio, o["a_gain"], o["a_ratio"], o["min_inc_factor"])
+        self.counts["cost_evaluations"] += 1
+
+    # ------------------------------------------------------------------ reporting
+    def internals(self) -> dict[str, float]:
+        if not self._ready:
+            return {}
+        P = self.friction.P
+        sch = self.schedule
+        return {
+            "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,
+            "P_kc_kc": float(P[0, 0]), "P_ks_ks": float(P[1, 1]), "P_kc_ks": float(P[0, 1]),
+            "dtu_opt": sch.dtu_opt,
+            "dtu_inc": sch.dtu_inc,
+            "cost_small": self._costs[0], "cost_medium": self._costs[1], "cost_large": self._costs[2],
+            "dc_ratio": self._dc_ratio, "cycle_size": float(sch.size),
+            "x1_hat": float(self.mode2.x[0]), "x4_hat": float(self.mode2.x[1]),
+        }
+
+    def summary(self) -> dict[str, Any]:
+        if not self._ready:
+            return {"preset": self.options["preset"], "a_c": self.options["a_c"]}
+        out: dict[str, Any] = {
+            "preset": self.options["preset"], "a_c": self.options["a_c"],
+            "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,
+            "P_kc_kc": float(self.friction.P[0, 0]), "P_ks_ks": float(self.friction.P[1, 1]),
+            "P_kc_ks": float(self.friction.P[0, 1]),
+            "dtu_opt": self.schedule.dtu_opt, "dtu_inc": self.schedule.dtu_inc,
+            "dtu_opt_adjusted": self.adjusted[0], "dtu_inc_adjusted": self.adjusted[1],
+            "x4_hat": float(self.mode2.x[1]), "model_runs": self.predictor.n_model_runs,
+        }
+        out.update(self.counts)
+        return out

@@ -1,0 +1,178 @@
+"""Modified Kalman filter on the friction estimates (k̂c, k̂s), (5-1)–(5-18).
+
+The state is k = (k̂c, k̂s) [ozf·in] with covariance P_b (5-5). The scalar "observation" of one
+correction cycle is the measured motion Δc_e (5-13) with variance VAR[Δc_e] (5-14); the
+prediction is Δc_p,cond (5-6) from the controller's plant model and the observation matrix is
+the row of quasipartials H_b (5-2). The four modifications of section 5.2 are:
+
+1. the prediction comes from the nonlinear model (not from H_b·k);
+2. H_b holds quasipartials;
+3. full-weight corrections but the covariance reduction is scaled by a = 0.5 (5-18);
+4. nonlinear constraints (section 5.3):
+
+   * motion occurred, so k̂s cannot exceed the largest torque applied in that cycle: when the
+     corrected k̂s would, the quasipartial of k̂s is shrunk and the correction recomputed
+     (halving it, at most ``max_shrinks`` times; a final clip is the last resort);
+   * k̂s is never reduced below k̂c (it is raised to k̂c) and k̂c ≥ 0;
+   * large corrections are limited without falsifying P by a fictitiously large variance in
+     place of VAR[Δc_e] in (5-16), chosen so that no component moves by more than
+     ``max_correction_fraction``·k̂s in one update.
+
+Between updates the estimates drift with x5, which moves only while the shaft moves
+(SPEC §2: x5 is frozen in mode 2). (5-15) with the σ5 block of (4-10): both k̂c and k̂s carry
+the same x5, so COV[N] = σ5²·h_moving·[[1, 1], [1, 1]]. Φ = I: the decay e^(−h/τ5) of x5
+would pull k toward the unknown mean k̄ and differs from 1 by ~h/τ5 ≈ 5e-6 per cycle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FrictionFilter", "FrictionUpdate"]
+
+
+@dataclass(frozen=True)
+class FrictionUpdate:
+    """What one call of :meth:`FrictionFilter.update` did."""
+
+    residual: float          # Δc_e − Δc_p,cond [rad]
+    innovation_var: float    # H P H' + R used [rad²]
+    fictitious_var: float    # R actually used in (5-16) [rad²]
+    shrinks: int             # number of k̂s-quasipartial reductions
+    clipped: bool            # a final clip to a constraint was needed
+    delta: tuple[float, float]   # applied change of (k̂c, k̂s)
+
+
+class FrictionFilter:
+    """(k̂c, k̂s) and P_b with the modified update (5-16)–(5-18).
+
+    Parameters
+    ----------
+    kc0, ks0 : float
+        Initial estimates [ozf·in].
+    P0 : array_like
+        Initial 2×2 covariance, order (k̂c, k̂s).
+    u_max : float
+        Upper bound for k̂s (a valid plant has k̂s < u_max).
+    a : float
+        Covariance-reduction weight of (5-18); 0.5 in the text.
+    max_correction_fraction : float
+        Largest change of either estimate in one update, as a fraction of k̂s (inf: no limit).
+    max_shrinks : int
+        How many times the k̂s quasipartial may be halved (section 5.3).
+    """
+
+    def __init__(self, kc0: float, ks0: float, P0, u_max: float, *, a: float = 0.5,
+                 max_correction_fraction: float = 0.25, max_shrinks: int = 10) -> None:
+        if not 0 < a <= 1:
+            raise ValueError(f"a must be in (0, 1], got {a!r}")
+        if not max_correction_fraction > 0:
+            raise ValueError(f"max_correction_fraction must be > 0, got {max_correction_fraction!r}")
+        if not 0 <= kc0 <= ks0 < u_max:
+            raise ValueError(f"need 0 <= kc0 <= ks0 < u_max, got kc0={kc0!r}, ks0={ks0!r}")
+        self.k = np.array([kc0, ks0], dtype=float)
+        self.P = np.array(P0, dtype=float).reshape(2, 2)
+        self.u_max = float(u_max)
+        self.a = float(a)
+        self.max_correction_fraction = float(max_correction_fraction)
+        self.max_shrinks = int(max_shrinks)
+        self.n_updates = 0
+
+    @property
+    def kc(self) -> float:
+        return float(self.k[0])
+
+    @property
+    def ks(self) -> float:
+        return float(self.k[1])
+
+    def propagate(self, moving_time: float, sigma5_sq: float) -> None:
+        """P = Φ P Φ' + COV[N] with Φ = I and the common x5 drift over ``moving_time``  (5-15)."""
+        if moving_time > 0 and sigma5_sq > 0:
+            self.P = self.P + sigma5_sq * moving_time * np.ones((2, 2))
+
+    def prob_no_motion(self, peak_torque: float) -> float:
+        """Prob(Δc = 0) = Prob(ks ≥ peak torque) under k̂s ~ N(k̂s, P_ss)  (used in (5-9))."""
+        sd = math.sqrt(max(self.P[1, 1], 0.0))
+        if sd == 0:
+            return 1.0 if self.ks >= peak_torque else 0.0
+        return 0.5 * math.erfc((peak_torque - self.ks) / (sd * math.sqrt(2.0)))
+
+    def motion_variance(self, H_b: np.ndarray) -> float:
+        """H_b P_b H_b', the conditional variance of Δc_p (5-1), (5-10) [rad²]."""
+        H = np.asarray(H_b, dtype=float)
+        return float(H @ self.P @ H)
+
+    def time_variance(self, H_tb: np.ndarray) -> float:
+        """H_tb P_b H_tb' [s²], for t_max (5-11)."""
+        H = np.asarray(H_tb, dtype=float)
+        return float(H @ self.P @ H)
+
+    def _gain(self, H: np.ndarray, residual: float, R: float) -> tuple[np.ndarray, float, float]:
+        """K (5-16) with R possibly raised to a fictitious variance to cap the correction."""
+        PH = self.P @ H
+        S0 = float(H @ PH)
+        R_used = R
+        limit = self.max_correction_fraction * max(self.ks, 1e-12)
+        if math.isfinite(limit):
+            # |Δk_i| = |PH_i·r|/(S0 + R) ≤ limit  ⇔  R ≥ |PH_i·r|/limit − S0
+            need = float(np.max(np.abs(PH * residual))) / limit - S0
+            R_used = max(R, need)
+        S = S0 + R_used
+        if not S > 0:
+            return np.zeros(2), S0 + R, R_used
+        return PH / S, S, R_used
+
+    def update(self, H_b, residual: float, meas_var: float, peak_torque: float) -> FrictionUpdate:
+        """One modified-Kalman correction (5-16)–(5-18) with the section-5.3 constraints.
+
+        Parameters
+        ----------
+        H_b : array_like
+            Quasipartials (∂Δc/∂k̂c, ∂Δc/∂k̂s) of the motion in the *direction of the pulse*
+            (the caller flips signs so that motion is positive).
+        residual : float
+            Δc_e − Δc_p,cond, in the same direction convention [rad].
+        meas_var : float
+            VAR[Δc_e] (5-14) [rad²].
+        peak_torque : float
+            The largest torque applied in the cycle; k̂s must not end above it.
+        """
+        H = np.array(H_b, dtype=float)
+        if not (np.all(np.isfinite(H)) and math.isfinite(residual) and meas_var >= 0):
+            raise ValueError("H_b, residual and meas_var must be finite, meas_var >= 0")
+        ks_cap = min(peak_torque * (1.0 - 1e-6), self.u_max * (1.0 - 1e-9))
+        shrinks = 0
+        while True:
+            K, S, R_used = self._gain(H, residual, meas_var)
+            k_new = self.k + K * residual                                   # (5-17)
+            raising = K[1] * residual > 0.0         # only a raise of k̂s can be fallacious
+            if k_new[1] <= ks_cap or not raising or shrinks >= self.max_shrinks or H[1] == 0.0:
+                break
+            H[1] *= 0.5                                                     # shrink ∂Δc/∂k̂s
+            shrinks += 1
+        P_new = (np.eye(2) - self.a * np.outer(K, H)) @ self.P              # (5-18)
+        P_new = 0.5 * (P_new + P_new.T)
+        clipped = False
+        if k_new[1] > ks_cap:
+            k_new[1] = ks_cap
+            clipped = True
+        if k_new[0] < 0.0:
+            k_new[0] = 0.0
+            clipped = True
+        if k_new[1] < k_new[0]:                     # k̂s is not reduced below k̂c
+            k_new[1] = k_new[0]
+            clipped = True
+        if k_new[0] > ks_cap:                       # keep a valid plant model
+            k_new[0] = k_new[1] = ks_cap
+            clipped = True
+        delta = (float(k_new[0] - self.k[0]), float(k_new[1] - self.k[1]))
+        self.k = k_new
+        self.P = P_new
+        self.n_updates += 1
+        return FrictionUpdate(residual=float(residual), innovation_var=float(S),
+                              fictitious_var=float(R_used), shrinks=shrinks, clipped=clipped,
+                              delta=delta)

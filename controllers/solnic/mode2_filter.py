@@ -1,0 +1,145 @@
+"""Linear discrete Kalman filter on (x1, x4) while the shaft is stuck (mode 2), section 5.3.
+
+Model in mode 2 (x2 ≡ 0)::
+
+    ẋ1 = −x4                     x1 = c − r, shaft error [rad]
+    ẋ4 = −x4/τ4 + w4             x4 = ṙ, commanded velocity [rad/s], E[w4 w4'] = σ4²·δ
+    y(n) = x1(n·τs) + w1(n)      w1 ~ N(0, σ1²) [rad]
+
+Over a step h the exact discretisation is x(t+h) = Φ(h) x(t) + N with (3-22) and (4-11)::
+
+    Φ(h) = [[1, −τ4(1 − e^(−h/τ4))], [0, e^(−h/τ4)]]
+    COV[N] = σ4² ∫₀ʰ g(v) g(v)' dv,   g(v) = (−τ4(1 − e^(−v/τ4)), e^(−v/τ4))
+
+evaluated in closed form without cancellation. (The text's (4-11) keeps only the leading terms
+and prints E11·h/3 for h³/3; SPEC §9.)
+
+The filter is a plain textbook filter (predict, update); what is solnic-specific lives in the
+controller: samples are used only past t_max (5-11), and after each correction the estimate of
+x1 and its variance are reset from the Δc prediction with :meth:`Mode2Filter.add_motion`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["Mode2Filter", "mode2_transition"]
+
+
+def _e1(x: float) -> float:
+    """1 − e^(−x) without cancellation."""
+    return -math.expm1(-x)
+
+
+def _f3(x: float) -> float:
+    """x − 2(1 − e^(−x)) + (1 − e^(−2x))/2 = x³/3 − x⁴/4 + …, without cancellation."""
+    if x < 0.1:
+        # Σ_{n≥3} (−1)^(n+1) (2^(n−1) − 2) xⁿ / n!
+        total, term = 0.0, x * x / 2.0          # term = xⁿ/n! at n = 2
+        for n in range(3, 30):
+            term *= x / n
+            total += (-1) ** (n + 1) * (2.0 ** (n - 1) - 2.0) * term
+            if abs(term) * 2.0 ** n < 1e-18 * abs(total):
+                break
+        return total
+    return x - 2.0 * _e1(x) + _e1(2.0 * x) / 2.0
+
+
+def mode2_transition(h: float, tau4: float, sigma4_sq: float) -> tuple[np.ndarray, np.ndarray]:
+    """Φ(h) (3-22) and the process-noise covariance (4-11) of (x1, x4) over h seconds."""
+    if h < 0:
+        raise ValueError(f"h must be >= 0, got {h!r}")
+    b = 1.0 / tau4
+    x = b * h
+    e = _e1(x)
+    Phi = np.array([[1.0, -tau4 * e], [0.0, 1.0 - e]])
+    q11 = sigma4_sq * tau4**3 * _f3(x)                   # ≈ σ4² h³/3
+    q14 = -sigma4_sq * tau4**2 * e * e / 2.0             # ≈ −σ4² h²/2
+    q44 = sigma4_sq * tau4 * _e1(2.0 * x) / 2.0          # ≈ σ4² h
+    Q = np.array([[q11, q14], [q14, q44]])
+    return Phi, Q
+
+
+class Mode2Filter:
+    """Kalman filter on (x1, x4), time-stamped.
+
+    Parameters
+    ----------
+    tau4 : float
+        τ4 [s].
+    sigma4_sq : float
+        σ4², intensity of w4 [rad²/s³].
+    sigma1 : float
+        σ1, measurement-noise std [rad].
+    x0 : array_like
+        Initial (x̂1 [rad], x̂4 [rad/s]).
+    P0 : array_like
+        Initial 2×2 covariance.
+    t0 : float
+        Time of the initial estimate [s].
+    """
+
+    def __init__(self, tau4: float, sigma4_sq: float, sigma1: float, x0, P0, t0: float = 0.0) -> None:
+        if not tau4 > 0:
+            raise ValueError(f"tau4 must be > 0, got {tau4!r}")
+        if not sigma4_sq >= 0:
+            raise ValueError(f"sigma4_sq must be >= 0, got {sigma4_sq!r}")
+        if not sigma1 > 0:
+            raise ValueError(f"sigma1 must be > 0, got {sigma1!r}")
+        self.tau4 = float(tau4)
+        self.sigma4_sq = float(sigma4_sq)
+        self.R = float(sigma1) ** 2
+        self.x = np.array(x0, dtype=float).reshape(2)
+        self.P = np.array(P0, dtype=float).reshape(2, 2)
+        self.t = float(t0)
+        self._cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _transition(self, h: float) -> tuple[np.ndarray, np.ndarray]:
+        hit = self._cache.get(h)
+        if hit is None:
+            hit = mode2_transition(h, self.tau4, self.sigma4_sq)
+            if len(self._cache) < 64:
+                self._cache[h] = hit
+        return hit
+
+    def predicted(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(x̂, P) propagated to time ``t`` ≥ self.t, without changing the filter."""
+        h = t - self.t
+        if h < -1e-12:
+            raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
+        if h <= 0:
+            return self.x.copy(), self.P.copy()
+        Phi, Q = self._transition(h)
+        return Phi @ self.x, Phi @ self.P @ Phi.T + Q
+
+    def predict(self, t: float) -> None:
+        """Time update to ``t``:  x̂ = Φx̂,  P = ΦPΦ' + COV[N]."""
+        self.x, self.P = self.predicted(t)
+        self.t = max(self.t, float(t))
+
+    def update(self, y: float) -> float:
+        """Measurement update with y = x1 + w1 at the filter's time; returns the innovation."""
+        innovation = float(y) - self.x[0]
+        S = self.P[0, 0] + self.R
+        K = self.P[:, 0] / S
+        self.x = self.x + K * innovation
+        self.P = self.P - np.outer(K, self.P[0, :])
+        self.P = 0.5 * (self.P + self.P.T)
+        return innovation
+
+    def add_motion(self, delta_c: float, variance: float) -> None:
+        """Reset after a correction: x̂1 += Δc_p,cond (5-6), VAR[x̂1] += (5-9).
+
+        The motion's prediction error is independent of the errors in (x̂1, x̂4), so only
+        P11 grows.
+        """
+        if not variance >= 0:
+            raise ValueError(f"variance must be >= 0, got {variance!r}")
+        self.x[0] += float(delta_c)
+        self.P[0, 0] += float(variance)
+
+    def drift_std(self) -> float:
+        """√P44, the std of x̂4 [rad/s]."""
+        return math.sqrt(max(self.P[1, 1], 0.0))

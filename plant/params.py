@@ -1,0 +1,158 @@
+"""Plant parameters of the gimbal shaft with stiction and Coulomb friction (Table 2-1).
+
+Units follow the dissertation: torque in ozf·in, inertia in ozf·in·s², angles in rad.
+The drive voltage ``u`` is normalised by the torque-motor scale factor, so it is stated
+in ozf·in as well (section 2.6).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+__all__ = ["PlantParams"]
+
+
+def _require(condition: bool, field: str, message: str) -> None:
+    if not condition:
+        raise ValueError(f"PlantParams.{field} {message}")
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Parameters of the multimode plant, figure (2-1) and Table (2-1).
+
+    Attributes
+    ----------
+    inertia : float
+        Load inertia J [ozf·in·s²].
+    motor_time_constant : float
+        Torque-motor time constant τ3 [s].
+    u_max : float
+        Maximum drive level, voltage × torque scale [ozf·in].
+    coulomb : float
+        Mean Coulomb friction k̄c [ozf·in].
+    stiction : float
+        Mean stiction k̄s [ozf·in].
+    sample_period : float
+        Sensor sample period τs [s].
+    measurement_noise_std : float
+        σ1, standard deviation of the position measurement noise w1 [rad per sample].
+    friction_noise_psd : float
+        σ2², intensity of the white friction-torque noise w2 [ozf²·in²·s].
+    correlated_friction_std : float
+        √VAR(x5), stationary std of the correlated friction noise x5 [ozf·in].
+    correlated_friction_tau : float
+        τ5, correlation time of x5 [s].
+    command_velocity_std : float
+        √VAR(x4), stationary std of the commanded velocity x4 [rad/s].
+    command_velocity_tau : float
+        τ4, correlation time of x4 [s].
+    command_velocity_initial : float
+        x4(0) of a benchmark run [rad/s].
+    """
+
+    inertia: float = 0.5
+    motor_time_constant: float = 8e-3
+    u_max: float = 20.0
+    coulomb: float = 1.4
+    stiction: float = 2.1
+    sample_period: float = 0.01
+    measurement_noise_std: float = 5e-6
+    friction_noise_psd: float = 4e-4
+    correlated_friction_std: float = 0.3
+    correlated_friction_tau: float = 1000.0
+    command_velocity_std: float = 3e-6
+    command_velocity_tau: float = 1000.0
+    command_velocity_initial: float = 30e-6
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"PlantParams.{f.name} must be a real number, got {value!r}")
+            _require(math.isfinite(value), f.name, f"must be finite, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+        for name in ("inertia", "motor_time_constant", "u_max", "sample_period",
+                     "correlated_friction_tau", "command_velocity_tau"):
+            _require(getattr(self, name) > 0, name, f"must be > 0, got {getattr(self, name)!r}")
+        _require(self.coulomb >= 0, "coulomb", f"must be >= 0, got {self.coulomb!r}")
+        _require(self.stiction >= self.coulomb, "stiction",
+                 f"must be >= coulomb ({self.coulomb!r}), got {self.stiction!r}")
+        _require(self.u_max > self.stiction, "u_max",
+                 f"must be > stiction ({self.stiction!r}), got {self.u_max!r}")
+        for name in ("measurement_noise_std", "friction_noise_psd", "correlated_friction_std",
+                     "command_velocity_std"):
+            _require(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)!r}")
+
+    # Derived symbols of chapter 3.
+    @property
+    def alpha(self) -> float:
+        """α = 1/J  (3-1) [rad/s² per ozf·in]."""
+        return 1.0 / self.inertia
+
+    @property
+    def beta3(self) -> float:
+        """β3 = 1/τ3  (3-2) [1/s]."""
+        return 1.0 / self.motor_time_constant
+
+    @property
+    def beta4(self) -> float:
+        """β4 = 1/τ4  (3-3) [1/s]."""
+        return 1.0 / self.command_velocity_tau
+
+    @property
+    def beta5(self) -> float:
+        """β5 = 1/τ5  (3-4) [1/s]."""
+        return 1.0 / self.correlated_friction_tau
+
+    @property
+    def sigma2_sq(self) -> float:
+        """σ2², white friction-noise intensity [ozf²·in²·s]."""
+        return self.friction_noise_psd
+
+    @property
+    def sigma4_sq(self) -> float:
+        """σ4² = 2·VAR(x4)/τ4, intensity of w4 [rad²/s³·s]."""
+        return 2.0 * self.command_velocity_std**2 / self.command_velocity_tau
+
+    @property
+    def sigma5_sq(self) -> float:
+        """σ5² = 2·VAR(x5)/τ5, intensity of w5 [ozf²·in²/s]."""
+        return 2.0 * self.correlated_friction_std**2 / self.correlated_friction_tau
+
+    @property
+    def breakaway_time(self) -> float:
+        """Noise-free breakaway time from rest under +u_max: −τ3·ln(1 − k̄s/u_max) [s]."""
+        return -self.motor_time_constant * math.log1p(-self.stiction / self.u_max)
+
+    @property
+    def lag_ratio_limit(self) -> float:
+        """Bohacek–Tuteur limit Lmax = 2k̄s/(k̄s − k̄c)  (2-1); inf when k̄s = k̄c."""
+        gap = self.stiction - self.coulomb
+        return math.inf if gap == 0 else 2.0 * self.stiction / gap
+
+    def classical_bound(self, bandwidth: float | None = None) -> float:
+        """Minimum LTI peak error θe ≥ (k̄s − k̄c)/(2·J·ωb²)  (2-6) [rad].
+
+        ``bandwidth`` is ωb [rad/s]; the default is the Nyquist frequency π/τs used by the
+        thesis's "classical limit" (7.09 µrad for Table 2-1).
+        """
+        omega = math.pi / self.sample_period if bandwidth is None else float(bandwidth)
+        if not (omega > 0 and math.isfinite(omega)):
+            raise ValueError(f"bandwidth must be a finite positive number, got {bandwidth!r}")
+        return (self.stiction - self.coulomb) / (2.0 * self.inertia * omega**2)
+
+    def replace(self, **changes: float) -> "PlantParams":
+        """A copy with some fields changed; unknown names raise ``ValueError``."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise ValueError(f"PlantParams has no field {unknown[0]!r}; fields are {sorted(names)}")
+        return dataclasses.replace(self, **changes)
+
+    def noise_free(self) -> "PlantParams":
+        """The same plant with every noise source switched off."""
+        return self.replace(measurement_noise_std=0.0, friction_noise_psd=0.0,
+                            correlated_friction_std=0.0, command_velocity_std=0.0)

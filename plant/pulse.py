@@ -1,0 +1,102 @@
+"""The response of the shaft to one switched-bridge torque pulse (section 3.2, 6.1).
+
+Starting from rest (stuck, x3 = x4 = x5 = 0), the bridge applies sign·u_max for ``dt_u``
+seconds, then is switched off: the flyback diodes apply −sign·u_max until the current is
+zero, and u = 0 after that. The shaft breaks away when x3 passes k̄s and stops when its
+velocity returns to zero with |x3| ≤ ks. This is the controller's "internal plant model"
+and the figure every solnic correction is built from.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from plant.drive import DriveCommand, DriveType
+from plant.multimode import Accumulator, SimOptions, Status, advance, initial_state
+from plant.params import PlantParams
+from plant.transition import X1, X3
+
+__all__ = ["PulseResponse", "pulse_response"]
+
+
+@dataclass(frozen=True)
+class PulseResponse:
+    """Outcome of one pulse.
+
+    Attributes
+    ----------
+    delta_c : float
+        Net shaft motion [rad] (signed).
+    t_breakaway : float or None
+        First breakaway time [s]; None if the shaft never moves.
+    t_current_zero : float
+        Time the motor current returns to zero after switch-off [s].
+    t_stop : float
+        Time the shaft is stuck for good [s]; 0 if it never moved.
+    """
+
+    delta_c: float
+    t_breakaway: float | None
+    t_current_zero: float
+    t_stop: float
+
+
+_HORIZON_S = 1.0
+
+
+def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int | None = None,
+                   options: SimOptions | None = None) -> PulseResponse:
+    """Simulate one pulse exactly; ``seed=None`` is noise-free.
+
+    With a seed, friction noise w2 and x5's diffusion act (x4 stays 0 so x1 is the shaft
+    angle); the pulse's random stream is ``numpy.random.default_rng(SeedSequence(seed))``.
+
+    Raises
+    ------
+    ValueError
+        If ``dt_u`` is negative, not finite, or ``sign`` is not ±1.
+    """
+    if not (isinstance(dt_u, (int, float)) and math.isfinite(dt_u) and dt_u >= 0):
+        raise ValueError(f"dt_u must be a finite number of seconds >= 0, got {dt_u!r}")
+    if sign not in (1, -1):
+        raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+    dt_u = float(dt_u)
+    if dt_u == 0.0:
+        return PulseResponse(0.0, None, 0.0, 0.0)
+    noisy = seed is not None
+    p = params.replace(command_velocity_std=0.0)
+    opts = options or SimOptions(noise=noisy)
+    if not noisy:
+        opts = SimOptions(noise=False, zero_velocity=opts.zero_velocity, substep=opts.substep,
+                          bisection_tol=opts.bisection_tol, max_events=opts.max_events)
+    rng = np.random.default_rng(np.random.SeedSequence(seed)) if noisy else None
+    state = initial_state(p, x5=0.0, x4=0.0)
+    level = sign * p.u_max
+    times: dict[str, float] = {}
+
+    def recorder(t: float, X: np.ndarray, mode: int) -> None:
+        if mode != 2 and "breakaway" not in times:
+            times["breakaway"] = t
+        if mode == 2 and "breakaway" in times:
+            times["stop"] = t
+        if t > dt_u and X[X3] == 0.0 and "current_zero" not in times:
+            times["current_zero"] = t
+
+    acc = Accumulator(active=False)
+    on = DriveCommand(((0.0, level),), DriveType.BRIDGE)
+    state, status, message = advance(state, on, dt_u, p, rng, options=opts, acc=acc, recorder=recorder)
+    off = DriveCommand(((0.0, 0.0),), DriveType.BRIDGE)
+    t_fly = p.motor_time_constant * math.log1p(abs(state.X[X3]) / p.u_max)
+    chunk = max(2.0 * t_fly, 1e-3)
+    while status == Status.OK and (state.mode != 2 or state.flyback) and state.t < _HORIZON_S:
+        state, status, message = advance(state, off, chunk, p, rng, options=opts, acc=acc, recorder=recorder)
+    if status != Status.OK:
+        raise RuntimeError(f"pulse simulation ended with status {status}: {message}")
+    if state.mode != 2:
+        raise RuntimeError(f"shaft still moving {_HORIZON_S} s after a {dt_u} s pulse")
+    t_cz = times.get("current_zero", dt_u + t_fly)
+    t_brk = times.get("breakaway")
+    return PulseResponse(float(state.X[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)

@@ -1,0 +1,302 @@
+"""Reference simulators for validation and for the speed claim (SPEC §2 "Reference simulators").
+
+* :func:`fixed_step` — "standard fixed-increment numerical integration": Euler–Maruyama with
+  the same mode logic checked once per step (breakaway, reflection, reversal, sticking), the
+  flyback end checked once per step. Step size is a parameter. The kernel is compiled with
+  numba; its unit normals come in chunks from a ``numpy.random.Generator``, so the random
+  stream has the same single root as everything else.
+* :func:`event_driven` — noise-free, ``scipy.integrate.solve_ivp`` with terminal events at tight
+  tolerance, one call per mode segment. This is what a user would reach for today.
+
+Both take the same command schedule as the exact simulator: a list of
+:class:`~plant.drive.DriveCommand`, one per sample interval of length ``interval``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.integrate import solve_ivp
+
+from plant.drive import DriveCommand, DriveType
+from plant.params import PlantParams
+
+__all__ = ["Schedule", "schedule_from_commands", "fixed_step", "fixed_step_pulses", "event_driven",
+           "FixedStepResult"]
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Piecewise-constant command levels: ``levels[k]`` holds on [times[k], times[k+1])."""
+
+    times: np.ndarray
+    levels: np.ndarray
+    drive: DriveType
+    t_end: float
+
+
+def schedule_from_commands(commands: list[DriveCommand], interval: float, t0: float = 0.0) -> Schedule:
+    """Flatten per-interval commands (interval ``interval`` s each) into one schedule."""
+    if not commands:
+        raise ValueError("commands must not be empty")
+    drive = commands[0].drive
+    times, levels = [], []
+    for n, cmd in enumerate(commands):
+        if cmd.drive is not drive:
+            raise ValueError("all commands of a schedule must use the same drive")
+        base = t0 + n * interval
+        for off, lvl in cmd.segments:
+            if off < interval:
+                times.append(base + off)
+                levels.append(lvl)
+    return Schedule(np.array(times), np.array(levels), drive, t0 + len(commands) * interval)
+
+
+def _param_vector(p: PlantParams) -> np.ndarray:
+    return np.array([p.alpha, p.beta3, p.beta4, p.beta5, math.sqrt(p.sigma2_sq), math.sqrt(p.sigma4_sq),
+                     math.sqrt(p.sigma5_sq), p.u_max, p.coulomb, p.stiction])
+
+
+@njit(cache=True)
+def _em_chunk(S, n_steps, t0, dt, times, levels, bridge, prm, z, peak):
+    """Advance every path (rows of S) by n_steps Euler–Maruyama steps.
+
+    S columns: x1, x2, x3, x4, x5, u, mode, k (schedule index). z: (n_steps, n_paths, 3).
+    """
+    alpha, b3, b4, b5, s2, s4, s5, umax, kcb, ksb = prm
+    sq = math.sqrt(dt)
+    n_paths = S.shape[0]
+    n_sched = times.shape[0]
+    for j in range(n_paths):
+        x1, x2, x3, x4, x5, u, mode, k = S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4], S[j, 5], S[j, 6], int(S[j, 7])
+        pk = peak[j]
+        for i in range(n_steps):
+            t = t0 + i * dt
+            while k + 1 < n_sched and times[k + 1] <= t + 1e-15:
+                k += 1
+            lvl = levels[k]
+            if bridge:
+                if lvl > 0:
+                    u = umax
+                elif lvl < 0:
+                    u = -umax
+                elif u != 0.0:
+                    u = -umax if x3 > 0 else (umax if x3 < 0 else 0.0)
+            else:
+                u = min(max(lvl, -umax), umax)
+            x3n = x3 + (u - x3) * b3 * dt
+            if bridge and lvl == 0.0 and u != 0.0 and (x3n == 0.0 or (x3n > 0) != (x3 > 0)):
+                x3n = 0.0          # flyback diodes stop conducting
+                u = 0.0
+            x4n = x4 - b4 * x4 * dt + s4 * sq * z[i, j, 1]
+            if mode == 2:
+                x1 = x1 - x4 * dt
+                ks = max(ksb + x5, 0.0)
+                if x3n > ks:
+                    mode = 3.0
+                elif x3n < -ks:
+                    mode = 1.0
+                x2 = 0.0
+            else:
+                s = 1.0 if mode == 3.0 else -1.0
+                kc = max(kcb + x5, 0.0)
+                x2n = x2 + alpha * (x3 - s * kc) * dt + alpha * s2 * sq * z[i, j, 0]
+                x1 = x1 + (x2 - x4) * dt
+                x5 = x5 - b5 * x5 * dt + s5 * sq * z[i, j, 2]
+                ks = max(ksb + x5, 0.0)
+                if s * x2n <= 0.0:
+                    if s * x3n > ks:
+                        x2n = -x2n                   # reflect: torque still breaks stiction
+                    elif -s * x3n > ks:
+                        mode = 1.0 if mode == 3.0 else 3.0
+                    else:
+                        x2n = 0.0
+                        mode = 2.0
+                x2 = x2n
+            x3 = x3n
+            x4 = x4n
+            if abs(x1) > pk:
+                pk = abs(x1)
+        S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = x1, x2, x3, x4, x5, u, mode, k
+        peak[j] = pk
+
+
+@dataclass(frozen=True)
+class FixedStepResult:
+    """Final states (rows: paths; columns x1, x2, x3, x4, x5, u, mode) and sampled x1."""
+
+    final: np.ndarray
+    sample_times: np.ndarray
+    x1_samples: np.ndarray
+    peak_abs_x1: np.ndarray
+    n_steps: int
+
+
+_CHUNK = 4096
+
+
+def fixed_step(params: PlantParams, schedule: Schedule, dt: float, *, x0: np.ndarray | None = None,
+               n_paths: int = 1, rng: np.random.Generator | None = None,
+               sample_every: float | None = None) -> FixedStepResult:
+    """Euler–Maruyama with the plant's mode logic, fixed step ``dt`` [s].
+
+    ``x0`` is (x1, x2, x3, x4, x5, mode) for every path (default: rest, mode 2, x4 =
+    command_velocity_initial). ``rng=None`` runs noise-free. ``sample_every`` [s] records x1
+    at multiples of it (e.g. the sample period).
+    """
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"dt must be a finite positive step in seconds, got {dt!r}")
+    t_end = schedule.t_end
+    n_total = int(round((t_end - schedule.times[0]) / dt))
+    S = np.zeros((n_paths, 8))
+    if x0 is None:
+        S[:, 3] = params.command_velocity_initial
+        S[:, 6] = 2.0
+    else:
+        x0 = np.asarray(x0, dtype=float)
+        S[:, [0, 1, 2, 3, 4, 6]] = x0
+    peak = np.abs(S[:, 0]).copy()
+    prm = _param_vector(params)
+    bridge = schedule.drive is DriveType.BRIDGE
+    every = n_total if sample_every is None else max(1, int(round(sample_every / dt)))
+    samples, stimes = [S[:, 0].copy()], [schedule.times[0]]
+    done = 0
+    t0 = schedule.times[0]
+    while done < n_total:
+        n = min(_CHUNK, n_total - done, every - (done % every))
+        if rng is None:
+            z = np.zeros((n, n_paths, 3))
+        else:
+            z = rng.standard_normal((n, n_paths, 3))
+        _em_chunk(S, n, t0 + done * dt, dt, schedule.times, schedule.levels, bridge, prm, z, peak)
+        done += n
+        if done % every == 0:
+            samples.append(S[:, 0].copy())
+            stimes.append(t0 + done * dt)
+    return FixedStepResult(S[:, :7].copy(), np.array(stimes), np.array(samples), peak, n_total)
+
+
+def fixed_step_pulses(params: PlantParams, dt_u: float, dt: float, n_paths: int, seed: int,
+                      horizon: float = 0.01, sign: int = 1) -> np.ndarray:
+    """Δc of ``n_paths`` independent pulses of ``dt_u`` seconds by Euler–Maruyama (x4 ≡ 0)."""
+    p = params.replace(command_velocity_std=0.0, command_velocity_initial=0.0)
+    sched = Schedule(np.array([0.0, dt_u]), np.array([sign * p.u_max, 0.0]), DriveType.BRIDGE, horizon)
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 2.0])
+    res = fixed_step(p, sched, dt, x0=x0, n_paths=n_paths, rng=np.random.default_rng(np.random.SeedSequence(seed)))
+    moving = res.final[:, 6] != 2.0
+    if np.any(moving):
+        raise RuntimeError(f"{int(moving.sum())} paths still moving at the horizon {horizon} s")
+    return res.final[:, 0]
+
+
+# --- solve_ivp with events --------------------------------------------------------------------
+
+def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12, atol: float = 1e-20,
+                 x0: np.ndarray | None = None, sample_times: np.ndarray | None = None,
+                 dense_step: float | None = None, max_events: int = 10_000_000) -> dict[str, np.ndarray]:
+    """Noise-free reference: ``solve_ivp`` (DOP853) with terminal events per mode segment.
+
+    Returns ``x1_at`` (x1 at ``sample_times``), ``final`` (x1..x5), ``n_segments`` and, with
+    ``dense_step``, ``dense_t``/``dense_x1`` on a uniform grid of that step (for peak checks).
+    """
+    p = params
+    a, b3, b4, b5, U_, kcb, ksb = p.alpha, p.beta3, p.beta4, p.beta5, p.u_max, p.coulomb, p.stiction
+    bridge = schedule.drive is DriveType.BRIDGE
+    x = np.array([0.0, 0.0, 0.0, p.command_velocity_initial, 0.0]) if x0 is None else np.array(x0[:5], float)
+    mode = 2 if x0 is None else int(x0[5])
+    t = float(schedule.times[0])
+    t_end = schedule.t_end
+    bounds = list(schedule.times[1:]) + [t_end]
+    sample_times = np.array([]) if sample_times is None else np.asarray(sample_times, float)
+    x1_at = np.full(sample_times.shape, np.nan)
+    dense_t, dense_x1 = [], []
+    u = 0.0
+    n_seg = 0
+
+    def rhs_factory(mode: int, u: float):
+        def rhs(_t, y):
+            x1, x2, x3, x4, x5 = y
+            kc = max(kcb + x5, 0.0)
+            if mode == 2:
+                return [-x4, 0.0, (u - x3) * b3, -b4 * x4, 0.0]
+            s = 1.0 if mode == 3 else -1.0
+            return [x2 - x4, a * (x3 - s * kc), (u - x3) * b3, -b4 * x4, -b5 * x5]
+        return rhs
+
+    for k, lvl in enumerate(schedule.levels):
+        seg_end = bounds[k]
+        if bridge:
+            if lvl > 0:
+                u, fly = U_, False
+            elif lvl < 0:
+                u, fly = -U_, False
+            else:
+                fly = x[2] != 0.0
+                u = -math.copysign(U_, x[2]) if fly else 0.0
+        else:
+            u, fly = min(max(lvl, -U_), U_), False
+        while t < seg_end:
+            n_seg += 1
+            if n_seg > max_events:
+                raise RuntimeError("too many segments")
+            ks = max(ksb + x[4], 0.0)
+            events = []
+            if fly:
+                ev = lambda _t, y: y[2]
+                ev.terminal, ev.direction = True, 0
+                events.append(("fly", ev))
+            if mode == 2:
+                up = lambda _t, y, ks=ks: y[2] - ks
+                up.terminal, up.direction = True, 1
+                dn = lambda _t, y, ks=ks: y[2] + ks
+                dn.terminal, dn.direction = True, -1
+                events += [("up", up), ("dn", dn)]
+            else:
+                s = 1.0 if mode == 3 else -1.0
+                vz = lambda _t, y: y[1]
+                vz.terminal, vz.direction = True, -s
+                events.append(("vz", vz))
+            sol = solve_ivp(rhs_factory(mode, u), (t, seg_end), x, method="DOP853", rtol=rtol, atol=atol,
+                            events=[e for _, e in events], dense_output=True)
+            t_stop = sol.t[-1]
+            hit = None
+            for (name, _), te in zip(events, sol.t_events):
+                if len(te):
+                    hit = name
+            mask = (sample_times >= t) & (sample_times <= t_stop)
+            if mask.any():
+                x1_at[mask] = sol.sol(sample_times[mask])[0]
+            if dense_step:
+                grid = np.arange(math.ceil(t / dense_step), math.floor(t_stop / dense_step) + 1) * dense_step
+                grid = grid[(grid >= t) & (grid <= t_stop)]
+                if grid.size:
+                    dense_t.append(grid)
+                    dense_x1.append(sol.sol(grid)[0])
+            x = sol.y[:, -1].copy()
+            t = t_stop
+            if hit is None:
+                t = seg_end
+                continue
+            if hit == "fly":
+                x[2], u, fly = 0.0, 0.0, False
+            elif hit in ("up", "dn"):
+                x[2] = ks if hit == "up" else -ks
+                mode = 3 if hit == "up" else 1
+            else:
+                x[1] = 0.0
+                s = 1.0 if mode == 3 else -1.0
+                ks = max(ksb + x[4], 0.0)
+                if s * x[2] > ks:
+                    pass
+                elif -s * x[2] > ks:
+                    mode = 1 if mode == 3 else 3
+                else:
+                    mode = 2
+    out = {"x1_at": x1_at, "final": x, "mode": mode, "n_segments": n_seg}
+    if dense_step:
+        out["dense_t"] = np.concatenate(dense_t) if dense_t else np.array([])
+        out["dense_x1"] = np.concatenate(dense_x1) if dense_x1 else np.array([])
+    return out

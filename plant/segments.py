@@ -1,0 +1,81 @@
+"""Closed-form facts about one constant-drive segment: event times and exact integrals.
+
+Within a segment the drive level u is constant, so the motor torque is deterministic:
+x3(τ) = u + (x3₀ − u)·e^(−β3·τ). Every torque event (breakaway, flyback end, the end of the
+reflection regime) is therefore a closed-form time, and every current metric an exact
+integral (SPEC §3).
+"""
+
+from __future__ import annotations
+
+import math
+
+from plant.transition import e1
+
+__all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
+
+
+def torque_crossing_time(x3: float, u: float, level: float, tau3: float) -> float:
+    """Time for x3(τ) = u + (x3 − u)e^(−τ/τ3) to reach ``level``; ``inf`` if it never does.
+
+    x3 moves monotonically from x3 toward u, so ``level`` is reached once iff it lies strictly
+    between them. Starting exactly at ``level`` is not a future crossing (the torque leaves it).
+    """
+    gap0 = x3 - u
+    gap1 = level - u
+    if gap0 == 0.0 or gap1 == 0.0 or (gap0 > 0) != (gap1 > 0):
+        return math.inf
+    ratio = gap0 / gap1
+    if ratio <= 1.0:
+        return math.inf
+    return tau3 * math.log(ratio)
+
+
+def torque_integrals(x3: float, u: float, h: float, tau3: float) -> tuple[float, float, float]:
+    """Exact (∫x3 dτ, ∫|x3| dτ, ∫x3² dτ) over [0, h]."""
+    if h <= 0:
+        return 0.0, 0.0, 0.0
+    b3 = 1.0 / tau3
+    g = x3 - u
+    f1 = e1(b3 * h) * tau3                      # ∫ e^(−β3τ)
+    f2 = e1(2 * b3 * h) * tau3 / 2.0            # ∫ e^(−2β3τ)
+    integral = u * h + g * f1
+    square = u * u * h + 2 * u * g * f1 + g * g * f2
+    t0 = torque_crossing_time(x3, u, 0.0, tau3)
+    if t0 < h:
+        first = u * t0 + g * e1(b3 * t0) * tau3
+        absolute = abs(first) + abs(integral - first)
+    else:
+        absolute = abs(integral)
+    return integral, absolute, square
+
+
+def hermite_peak(h: float, ya: float, da: float, yb: float, db: float) -> float:
+    """Largest |y| at interior critical points of the cubic Hermite interpolant on [0, h].
+
+    Used for the peak of x1 inside a noisy sub-step, where x1 is C¹ with slope ẋ1 = x2 − x4
+    known at both ends. Returns 0 when the cubic has no interior extremum.
+    """
+    if h <= 0:
+        return 0.0
+    # y(s) = ya + da·h·s + c2·s² + c3·s³ on s ∈ [0, 1]
+    c2 = 3 * (yb - ya) - (2 * da + db) * h
+    c3 = -2 * (yb - ya) + (da + db) * h
+    # y'(s)/h = da + (2c2/h)s + (3c3/h)s²  → solve 3c3 s² + 2c2 s + da·h = 0
+    A, B, C = 3 * c3, 2 * c2, da * h
+    roots: list[float] = []
+    if A == 0.0:
+        if B != 0.0:
+            roots.append(-C / B)
+    else:
+        disc = B * B - 4 * A * C
+        if disc >= 0:
+            sq = math.sqrt(disc)
+            q = -0.5 * (B + math.copysign(sq, B))
+            if q != 0.0:
+                roots.extend((q / A, C / q))
+    best = 0.0
+    for s in roots:
+        if 0.0 < s < 1.0:
+            best = max(best, abs(ya + da * h * s + c2 * s * s + c3 * s**3))
+    return best

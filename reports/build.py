@@ -1,0 +1,424 @@
+"""Build the self-contained HTML report.
+
+:func:`build_report` takes the run's data in memory; :func:`build_report_from_dir` reads a run
+directory in the layout documented in :mod:`reports.inputs`. Both write ``out_dir/report.html``
+atomically (temporary file in the same directory, then ``os.replace``) and return its path.
+
+The page embeds plotly.js once, inline, and draws every figure with it in the browser. It loads
+nothing from the network: no CDN, no web fonts, no images by URL.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import tempfile
+from collections.abc import Mapping
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import jinja2
+import numpy as np
+import pandas as pd
+import plotly
+import plotly.offline
+
+from reports import claims as _claims
+from reports import figures as _fig
+from reports.inputs import (RESULT_METRICS, ReportInputs, SeriesRun, attribute_series,
+                            load_inputs, normalise_bound, normalise_hunting, normalise_results,
+                            normalise_speed)
+from reports.limits import PlantLimits, limits_from_config
+
+__all__ = ["build_report", "build_report_from_dir", "render_html", "REPORT_NAME"]
+
+REPORT_NAME = "report.html"
+
+# (column, label, scale) of the per-cell table; errors are shown in µrad.
+_RESULT_COLUMNS = (
+    ("peak_error_rad", "peak |x1| [µrad]", 1e6),
+    ("rms_error_rad", "RMS x1 [µrad]", 1e6),
+    ("p99_error_rad", "p99 |x1| [µrad]", 1e6),
+    ("mean_abs_current", "mean |i| [ozf·in]", 1.0),
+    ("rms_current", "RMS i [ozf·in]", 1.0),
+    ("supply_charge_rate", "supply charge rate [ozf·in]", 1.0),
+    ("runtime_s", "runtime [s]", 1.0),
+    ("realtime_factor", "real-time factor", 1.0),
+    ("n_events", "events", 1.0),
+    ("n_corrections", "corrections", 1.0),
+)
+
+_FIGURE_QUOTES = {
+    "7-2": ("The largest positional error was about 25.7 micro-radians, and it occurred about "
+            "five seconds after the controller was started.",),
+    "7-3": ("The system was operating consistently with peak errors of 0.94, 1.4, and 2.0 "
+            "micro-radians for the small, medium, and large Δc's, respectively.",
+            "The minimum obtainable peak error for this plant using a classical, linear, "
+            "time-invariant controller is given by equation (2-6) as about seven micro-radians."),
+    "7-4": ("The estimates for k_s and k_c were 71 and 102 percent of their correct values, "
+            "respectively. [20 s]",
+            "The estimate for k_s was equal to about 95 percent of its true value. [54 s]",
+            "The correlation between the two estimates was -0.65 according to the covariance "
+            "matrix in the filter."),
+    "7-5": ("The first cost-function computation and Δt_u,inc adjustment occurred at 20 seconds.",
+            "At 54 seconds, the controller computed the cost functions for the fourteenth time.",
+            "[The controller] had adjusted the size ratio for the large and small positional "
+            "corrections to 2.1."),
+}
+_FIGURE_CLAIMS = {
+    "7-2": ("largest_error", "largest_error_time", "leave_startup_sizes"),
+    "7-3": ("peak_small", "peak_medium", "peak_large", "two_sevenths"),
+    "7-4": ("ks_at_20", "kc_at_20", "ks_at_54", "kc_at_54", "within_6pct_54",
+            "ks_kc_correlation"),
+    "7-5": ("first_cost_update", "fourteenth_cost_update", "size_ratio"),
+}
+
+
+# --------------------------------------------------------------------------- formatting
+
+def _num(x: Any, digits: int = 3) -> str:
+    if x is None:
+        return "—"
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    if math.isnan(v):
+        return "—"
+    if math.isinf(v):
+        return "∞" if v > 0 else "−∞"
+    if v == int(v) and abs(v) < 1e6:
+        return f"{int(v):d}".replace("-", "−")
+    return f"{v:.{digits}g}".replace("-", "−")
+
+
+def _sortkey(x: Any) -> str:
+    """Value for the ``data-v`` attribute used by the sorting script ('' sorts last)."""
+    if x is None:
+        return ""
+    if isinstance(x, (int, float, np.integer, np.floating)):
+        v = float(x)
+        return "" if math.isnan(v) else repr(v)
+    return str(x)
+
+
+def _cell(text: Any, sort: Any = None, cls: str = "") -> dict[str, str]:
+    return {"text": str(text), "v": _sortkey(text if sort is None else sort), "cls": cls}
+
+
+# --------------------------------------------------------------------------- tables
+
+def _results_table(results: pd.DataFrame) -> dict[str, Any]:
+    present = [(c, lbl, k) for c, lbl, k in _RESULT_COLUMNS if c in results.columns]
+    missing = [c for c, _, _ in _RESULT_COLUMNS if c not in results.columns]
+    header = ["controller", "scenario", "seed", "status", "message"] + [l for _, l, _ in present]
+    rows = []
+    for _, r in results.sort_values(["scenario", "controller", "seed"]).iterrows():
+        cells = [_cell(r["controller"]), _cell(r["scenario"]), _cell(r["seed"], float(r["seed"])),
+                 _cell(r["status"], cls="ok" if r["status"] == "ok" else "bad"),
+                 _cell(r["message"], cls="msg")]
+        for col, _, k in present:
+            v = r[col] * k if pd.notna(r[col]) else math.nan
+            cells.append(_cell(_num(v), v, "num"))
+        rows.append(cells)
+    return {"header": header, "rows": rows, "missing": missing,
+            "numeric_from": 5}
+
+
+def _aggregate_table(results: pd.DataFrame) -> dict[str, Any]:
+    if results.empty:
+        return {"header": [], "rows": []}
+    header = ["controller", "scenario", "ok / cells"]
+    has_peak = "peak_error_rad" in results.columns
+    if has_peak:
+        header += ["peak mean [µrad]", "peak worst [µrad]", "peak spread (sd) [µrad]"]
+    means = [(c, lbl, k) for c, lbl, k in _RESULT_COLUMNS[1:] if c in results.columns]
+    header += [f"{lbl} (mean)" for _, lbl, _ in means]
+    rows = []
+    for (ctrl, scen), g in results.groupby(["controller", "scenario"], sort=True):
+        ok = g[g["status"] == "ok"]
+        cells = [_cell(ctrl), _cell(scen),
+                 _cell(f"{len(ok)} / {len(g)}", len(ok) / len(g),
+                       "num" if len(ok) == len(g) else "num bad")]
+        if has_peak:
+            p = ok["peak_error_rad"].dropna() * 1e6
+            sd = float(p.std(ddof=1)) if len(p) > 1 else math.nan
+            for v in (p.mean() if len(p) else math.nan, p.max() if len(p) else math.nan, sd):
+                cells.append(_cell(_num(v), v, "num"))
+        for col, _, k in means:
+            s = ok[col].dropna() * k
+            v = float(s.mean()) if len(s) else math.nan
+            cells.append(_cell(_num(v), v, "num"))
+        rows.append(cells)
+    return {"header": header, "rows": rows}
+
+
+def _speed_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
+    if not speed:
+        return []
+    return [[_cell(r["method"]), _cell(r["setting"]), _cell(_num(r["error"]), r["error"], "num"),
+             _cell(_num(r["wall_s"]), r["wall_s"], "num"),
+             _cell(_num(r["realtime_factor"]), r["realtime_factor"], "num")]
+            for r in speed["rows"]]
+
+
+def _hunting_table(hunting: pd.DataFrame | None) -> list[list[dict[str, str]]]:
+    if hunting is None:
+        return []
+    rows = []
+    for _, r in hunting.sort_values("ks_over_kc").iterrows():
+        onset = r["onset_L"]
+        rel = onset / r["lmax"] if pd.notna(onset) else math.nan
+        rows.append([_cell(_num(r["ks_over_kc"]), r["ks_over_kc"], "num"),
+                     _cell(_num(r["lmax"]), r["lmax"], "num"),
+                     _cell(_num(onset) if pd.notna(onset) else "none found", onset, "num"),
+                     _cell(_num(rel), rel, "num")])
+    return rows
+
+
+def _bound_summary(bound: pd.DataFrame | None) -> dict[str, Any] | None:
+    if bound is None:
+        return None
+    st = bound[bound["stable"]]
+    return {"n": len(bound), "n_stable": len(st), "n_unstable": len(bound) - len(st),
+            "n_violations": int((st["ratio"] < 1.0).sum()),
+            "omega_range": f"{_num(bound['omega_c'].min())}–{_num(bound['omega_c'].max())}",
+            "lag_values": ", ".join(_num(x) for x in sorted(bound["lag_ratio"].dropna().unique())),
+            "ratios": ", ".join(_num(x) for x in sorted(bound["ks_over_kc"].dropna().unique())),
+            "inertias": ", ".join(_num(x) for x in sorted(bound["inertia"].dropna().unique()))}
+
+
+# --------------------------------------------------------------------------- provenance
+
+def _git_revision_from_files(start: Path) -> str | None:
+    """HEAD commit of the repository holding ``start``, read from ``.git`` files (no git call)."""
+    for d in (start, *start.parents):
+        git = d / ".git"
+        if git.is_file():
+            text = git.read_text().strip()
+            if not text.startswith("gitdir:"):
+                return None
+            git = (d / text.split(":", 1)[1].strip()).resolve()
+        if git.is_dir():
+            try:
+                head = (git / "HEAD").read_text().strip()
+            except OSError:
+                return None
+            if not head.startswith("ref:"):
+                return head
+            ref = head.split(":", 1)[1].strip()
+            common = git
+            if (git / "commondir").exists():
+                common = (git / (git / "commondir").read_text().strip()).resolve()
+            for base in (git, common):
+                if (base / ref).exists():
+                    return (base / ref).read_text().strip()
+            packed = common / "packed-refs"
+            if packed.exists():
+                for line in packed.read_text().splitlines():
+                    parts = line.split()
+                    if len(parts) == 2 and parts[1] == ref:
+                        return parts[0]
+            return f"{ref} (no commit yet)"
+    return None
+
+
+def _build_info() -> dict[str, str]:
+    here = Path(__file__).resolve().parent
+    return {
+        "report built (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "report code revision": _git_revision_from_files(here) or "unknown (not a git checkout)",
+        "python": platform.python_version(),
+        "plotly (python / embedded plotly.js)": f"{plotly.__version__} / {_plotly_js_version()}",
+        "pandas": pd.__version__,
+        "numpy": np.__version__,
+    }
+
+
+@lru_cache(maxsize=1)
+def _plotly_js() -> str:
+    js = plotly.offline.get_plotlyjs()
+    if "</script" in js.lower():  # cannot happen with plotly's bundle; guard the inlining
+        raise RuntimeError("plotly.js bundle contains '</script' and cannot be inlined")
+    return js
+
+
+@lru_cache(maxsize=1)
+def _plotly_js_version() -> str:
+    head = _plotly_js()[:200]
+    for token in head.split():
+        if token.startswith("v") and token[1:2].isdigit():
+            return token
+    return "unknown"
+
+
+# --------------------------------------------------------------------------- rendering
+
+@lru_cache(maxsize=1)
+def _environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("reports", "templates"),
+        autoescape=jinja2.select_autoescape(["html", "j2"], default=True),
+        undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    env.filters["num"] = _num
+    env.filters["tojson_pretty"] = lambda v: json.dumps(v, indent=2, sort_keys=True, default=str)
+    return env
+
+
+def _typical_run(series: Mapping[str, SeriesRun], sel: _claims.Selection) -> SeriesRun | None:
+    if not series:
+        return None
+    if sel.typical_cell is not None:
+        if sel.typical_cell not in series:
+            raise ValueError(f"config.report.typical_cell {sel.typical_cell!r} has no series; "
+                             f"available: {sorted(series)}")
+        return series[sel.typical_cell]
+    runs = sorted(series.values(), key=lambda r: (r.controller != sel.solnic,
+                                                  r.scenario != sel.thesis_scenario,
+                                                  r.seed if r.seed is not None else 0, r.cell))
+    return runs[0]
+
+
+def render_html(inputs: ReportInputs) -> str:
+    """The report page for normalised ``inputs`` (see :func:`reports.inputs.load_inputs`)."""
+    config, meta = inputs.config, inputs.meta
+    limits: PlantLimits = limits_from_config(config)
+    selection = _claims.Selection.from_config(config)
+    warmup = float(config.get("warmup_s", 20.0))
+    rows = _claims.evaluate_claims(results=inputs.results, limits=limits, series=inputs.series,
+                                   bound=inputs.bound, hunting=inputs.hunting,
+                                   speed=inputs.speed, selection=selection, warmup_s=warmup)
+    by_key = {r.key: r for r in rows}
+    typical = _typical_run(inputs.series, selection)
+
+    figs: dict[str, str | None] = {}
+
+    def add(name: str, fig: Any, height: int = 440) -> None:
+        figs[name] = None if fig is None else _fig.figure_div(fig, f"fig-{name}", height)
+
+    add("peak-vs-current", _fig.peak_vs_current(inputs.results, limits), 480)
+    add("7-2", _fig.error_vs_time(typical, limits, 1))
+    add("7-3", _fig.error_vs_time(typical, limits, 2))
+    add("7-4", _fig.friction_estimates(typical))
+    add("7-5", _fig.cost_and_ratio(typical))
+    add("bound-omega", _fig.bound_vs_crossover(inputs.bound), 480)
+    add("bound-lag", _fig.bound_vs_lag(inputs.bound), 480)
+    add("hunting", _fig.hunting_onset(inputs.hunting))
+    add("speed", _fig.work_precision(inputs.speed), 480)
+
+    counts = {v: sum(r.verdict == v for r in rows)
+              for v in (_claims.REPRODUCED, _claims.NOT_REPRODUCED, _claims.NOT_MEASURED)}
+    figure_panels = [
+        {"id": fid, "title": title, "div": figs[fid], "quotes": _FIGURE_QUOTES[fid],
+         "claims": [by_key[k] for k in _FIGURE_CLAIMS[fid]], "needs": needs}
+        for fid, title, needs in (
+            ("7-2", "Figure 7-2 — error versus time", "series column x1"),
+            ("7-3", "Figure 7-3 — error versus time, continued", "series column x1"),
+            ("7-4", "Figure 7-4 — friction estimates versus time",
+             "series columns ks_hat_pct, kc_hat_pct"),
+            ("7-5", "Figure 7-5 — cost and Δc ratio versus time",
+             "series columns cost_small, cost_medium, cost_large, dc_ratio"))]
+    speedup = inputs.speed.get("speedup_vs_fixed_step_at_1e-6") if inputs.speed else None
+
+    context = {
+        "title": "solnic-bench report",
+        "plotly_js": _plotly_js(),
+        "synthetic": bool(meta.get("synthetic", False)),
+        "meta": meta,
+        "meta_items": sorted((str(k), v) for k, v in meta.items()),
+        "config": config,
+        "build_info": _build_info(),
+        "notes": list(inputs.notes),
+        "limits": limits,
+        "classical_limit_urad": limits.classical_limit_rad * 1e6,
+        "warmup_s": warmup,
+        "selection": selection,
+        "claims": rows,
+        "claim": by_key,
+        "counts": counts,
+        "results_table": _results_table(inputs.results),
+        "aggregate_table": _aggregate_table(inputs.results),
+        "n_cells": len(inputs.results),
+        "n_ok": int((inputs.results["status"] == "ok").sum()) if len(inputs.results) else 0,
+        "figs": figs,
+        "figure_panels": figure_panels,
+        "typical": typical,
+        "series_cells": sorted(inputs.series),
+        "bound_summary": _bound_summary(inputs.bound),
+        "hunting_rows": _hunting_table(inputs.hunting),
+        "speed": inputs.speed,
+        "speed_rows": _speed_table(inputs.speed),
+        "speedup": None if speedup is None or math.isnan(speedup) else speedup,
+    }
+    return _environment().get_template("report.html.j2").render(**context)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def build_report(out_dir: Path | str, *, results: pd.DataFrame | None,
+                 series: Mapping[str, Any] | None = None, bound: pd.DataFrame | None = None,
+                 hunting: pd.DataFrame | None = None, speed: Mapping[str, Any] | None = None,
+                 config: Mapping[str, Any] | None = None,
+                 meta: Mapping[str, Any] | None = None) -> Path:
+    """Write ``out_dir/report.html`` from in-memory data and return its path.
+
+    Parameters
+    ----------
+    out_dir : path
+        Directory of the run (created if needed).
+    results : DataFrame or None
+        One row per cell (columns in :mod:`reports.inputs`); None or empty = matrix not run.
+    series : mapping of cell id → DataFrame (or :class:`~reports.inputs.SeriesRun`), optional
+        Solnic time series for figures 7-2…7-5, keyed by the results' ``cell``.
+    bound, hunting : DataFrame, optional
+        The (2-6) check (``bound.csv`` columns) and the hunting check (``hunting.csv``).
+    speed : dict, optional
+        The speed comparison (``speed.json`` layout).
+    config, meta : dict
+        Run configuration (``"plant"`` sets the classical limit) and provenance.
+
+    Raises
+    ------
+    ValueError
+        If a piece is malformed; the message names it and the column.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    res = normalise_results(results)
+    notes = () if len(res) else ("No results: the benchmark matrix was not run.",)
+    inputs = ReportInputs(results=res, series=attribute_series(series, res),
+                          bound=normalise_bound(bound), hunting=normalise_hunting(hunting),
+                          speed=normalise_speed(speed), config=dict(config or {}),
+                          meta=dict(meta or {}), notes=notes)
+    path = out / REPORT_NAME
+    _write_atomic(path, render_html(inputs))
+    return path
+
+
+def build_report_from_dir(out_dir: Path | str) -> Path:
+    """Rebuild ``out_dir/report.html`` from whatever the run stored in ``out_dir``.
+
+    See :mod:`reports.inputs` for the file names and columns. Missing pieces are shown as
+    "not measured in this run".
+    """
+    out = Path(out_dir)
+    inputs = load_inputs(out)
+    path = out / REPORT_NAME
+    _write_atomic(path, render_html(inputs))
+    return path

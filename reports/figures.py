@@ -1,0 +1,325 @@
+"""Plotly figures of the report. Each builder returns a ``go.Figure``, or ``None`` when the
+data it needs is not in the run (the report then says "not measured in this run").
+
+Every figure is rendered in the browser by the plotly.js embedded once in the page
+(:func:`figure_div`); no figure is a static image. SVG traces only (no WebGL), so they render
+in headless browsers without a GPU.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from reports.inputs import SeriesRun
+from reports.limits import PlantLimits, lag_ratio_limit
+
+__all__ = [
+    "controller_colour", "figure_div", "peak_vs_current", "error_vs_time",
+    "friction_estimates", "cost_and_ratio", "bound_vs_crossover", "bound_vs_lag",
+    "hunting_onset", "work_precision", "decimate_minmax",
+]
+
+_PALETTE = {"linear": "#1f77b4", "dithered": "#ff7f0e", "solnic": "#2ca02c"}
+_EXTRA = ("#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+_SYMBOLS = ("circle", "square", "diamond", "triangle-up", "cross", "x", "star", "hexagon")
+_TEMPLATE = "plotly_white"
+_CONFIG = {"displaylogo": False, "responsive": True,
+           "modeBarButtonsToRemove": ["sendDataToCloud"]}
+
+
+def controller_colour(name: str, known: Sequence[str] = ()) -> str:
+    """Stable colour per controller: fixed for the three built-ins, then a cycle."""
+    if name in _PALETTE:
+        return _PALETTE[name]
+    others = sorted(n for n in known if n not in _PALETTE)
+    idx = others.index(name) if name in others else sum(map(ord, name))
+    return _EXTRA[idx % len(_EXTRA)]
+
+
+def figure_div(fig: go.Figure, div_id: str, height: int = 440) -> str:
+    """The figure as an HTML ``<div>`` plus a ``Plotly.newPlot`` script; plotly.js not included."""
+    fig.update_layout(height=height, template=_TEMPLATE, margin=dict(l=70, r=30, t=50, b=60))
+    return fig.to_html(full_html=False, include_plotlyjs=False, include_mathjax=False,
+                       div_id=div_id, config=_CONFIG, default_width="100%",
+                       default_height=f"{height}px")
+
+
+def decimate_minmax(t: np.ndarray, y: np.ndarray, max_points: int = 6000
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Thin a trace to about ``max_points`` keeping each bucket's min and max, so peaks survive."""
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    n = t.size
+    if n <= max_points:
+        return t, y
+    buckets = max_points // 2
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    keep = []
+    yy = np.where(np.isnan(y), 0.0, y)
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b <= a:
+            continue
+        seg = yy[a:b]
+        keep.extend((a + int(np.argmin(seg)), a + int(np.argmax(seg))))
+    idx = np.unique(np.array(keep))
+    return t[idx], y[idx]
+
+
+def peak_vs_current(results: pd.DataFrame, limits: PlantLimits) -> go.Figure | None:
+    """Peak error against mean |current|, one colour per controller, one point per ok cell."""
+    need = {"peak_error_rad", "mean_abs_current"}
+    if results.empty or not need <= set(results.columns):
+        return None
+    ok = results[(results["status"] == "ok") & results["peak_error_rad"].notna()
+                 & results["mean_abs_current"].notna()]
+    if ok.empty:
+        return None
+    scenarios = sorted(ok["scenario"].unique())
+    controllers = sorted(ok["controller"].unique())
+    fig = go.Figure()
+    for ctrl in controllers:
+        d = ok[ok["controller"] == ctrl]
+        fig.add_trace(go.Scatter(
+            x=d["mean_abs_current"], y=d["peak_error_rad"] * 1e6, mode="markers", name=ctrl,
+            marker=dict(color=controller_colour(ctrl, controllers), size=10,
+                        symbol=[_SYMBOLS[scenarios.index(s) % len(_SYMBOLS)]
+                                for s in d["scenario"]],
+                        line=dict(width=0.5, color="#333")),
+            customdata=np.stack([d["scenario"], d["seed"].astype(str)], axis=-1),
+            hovertemplate=(f"<b>{ctrl}</b><br>scenario %{{customdata[0]}}, seed "
+                           "%{customdata[1]}<br>peak %{y:.3g} µrad<br>mean |i| %{x:.3g} ozf·in"
+                           "<extra></extra>")))
+    lim = limits.classical_limit_rad * 1e6
+    fig.add_hline(y=lim, line=dict(color="#b00", dash="dash"),
+                  annotation_text=f"classical limit (2-6): {lim:.3g} µrad",
+                  annotation_position="top left")
+    fig.add_hline(y=lim / 10, line=dict(color="#b00", dash="dot", width=1),
+                  annotation_text="limit / 10", annotation_position="bottom left")
+    fig.update_layout(
+        title="Peak error vs mean |current| (symbol = scenario: " +
+              ", ".join(f"{_SYMBOLS[i % len(_SYMBOLS)]} {s}" for i, s in enumerate(scenarios)) +
+              ")",
+        xaxis_title="mean |x3|, torque-equivalent current [ozf·in]",
+        yaxis_title="peak |x1| in scoring window [µrad]", yaxis_type="log",
+        legend_title="controller")
+    return fig
+
+
+def _need(run: SeriesRun | None, cols: Sequence[str]) -> bool:
+    return run is not None and all(c in run.frame.columns and run.frame[c].notna().any()
+                                   for c in cols)
+
+
+def error_vs_time(run: SeriesRun | None, limits: PlantLimits, part: int) -> go.Figure | None:
+    """Figures 7-2 (first half of the run) and 7-3 (second half): error x1 vs time."""
+    if not _need(run, ("x1",)):
+        return None
+    f = run.frame
+    t_end = float(f["t"].iloc[-1])
+    mid = t_end / 2
+    sel = f[(f["t"] <= mid)] if part == 1 else f[(f["t"] >= mid)]
+    t, y = decimate_minmax(sel["t"].to_numpy(), sel["x1"].to_numpy() * 1e6)
+    fig = go.Figure(go.Scatter(x=t, y=y, mode="lines", name="x1 (true error)",
+                               line=dict(color=_PALETTE["solnic"], width=1)))
+    lim = limits.classical_limit_rad * 1e6
+    for sign in (1, -1):
+        fig.add_hline(y=sign * lim, line=dict(color="#b00", dash="dash", width=1))
+    fig.add_annotation(x=1, xref="paper", y=lim, text=f"±classical limit {lim:.3g} µrad",
+                       showarrow=False, xanchor="right", yanchor="bottom",
+                       font=dict(color="#b00"))
+    fig.update_layout(title=f"Figure 7-{2 if part == 1 else 3}: error versus time"
+                            f"{'' if part == 1 else ', continued'} — {run.cell}",
+                      xaxis_title="time [s]", yaxis_title="x1 = c − r [µrad]", showlegend=False)
+    return fig
+
+
+def friction_estimates(run: SeriesRun | None) -> go.Figure | None:
+    """Figure 7-4: k̂s and k̂c as % of the true effective friction vs time."""
+    if not _need(run, ("ks_hat_pct",)) and not _need(run, ("kc_hat_pct",)):
+        return None
+    f = run.frame
+    fig = go.Figure()
+    for col, name, colour in (("ks_hat_pct", "k̂s / ks", "#d62728"),
+                              ("kc_hat_pct", "k̂c / kc", "#1f77b4")):
+        if col in f.columns:
+            t, y = decimate_minmax(f["t"].to_numpy(), f[col].to_numpy(), 4000)
+            fig.add_trace(go.Scatter(x=t, y=y, mode="lines", name=name, line=dict(color=colour)))
+    fig.add_hrect(y0=94, y1=106, fillcolor="#2ca02c", opacity=0.08, line_width=0,
+                  annotation_text="±6 % (§1.2)", annotation_position="bottom right")
+    fig.add_hline(y=100, line=dict(color="#444", width=1))
+    fig.add_trace(go.Scatter(x=[20, 54, 20, 54], y=[71, 95, 102, 101.4], mode="markers",
+                             name="thesis values (§7.3, §1.2)",
+                             marker=dict(symbol="x", size=11, color="#000"),
+                             text=["k̂s 71 %", "k̂s 95 %", "k̂c 102 %", "k̂c 101.4 %"],
+                             hovertemplate="%{text} at %{x} s<extra>thesis</extra>"))
+    fig.update_layout(title=f"Figure 7-4: friction estimates versus time — {run.cell}",
+                      xaxis_title="time [s]", yaxis_title="estimate / truth [%]")
+    return fig
+
+
+def cost_and_ratio(run: SeriesRun | None) -> go.Figure | None:
+    """Figure 7-5: cost of each correction size and the Δc ratio vs time."""
+    cost_cols = [c for c in ("cost_small", "cost_medium", "cost_large")
+                 if _need(run, (c,))]
+    has_ratio = _need(run, ("dc_ratio",))
+    if not cost_cols and not has_ratio:
+        return None
+    f = run.frame
+    fig = make_subplots(specs=[[{"secondary_y": True}]])
+    colours = {"cost_small": "#9467bd", "cost_medium": "#2ca02c", "cost_large": "#ff7f0e"}
+    for col in cost_cols:
+        d = _steps(f["t"], f[col])
+        fig.add_trace(go.Scatter(x=d.index, y=d.values, mode="lines", line_shape="hv",
+                                 name=col.replace("cost_", "cost, ") + " Δc",
+                                 line=dict(color=colours[col])), secondary_y=False)
+    if has_ratio:
+        d = _steps(f["t"], f["dc_ratio"])
+        fig.add_trace(go.Scatter(x=d.index, y=d.values, mode="lines", line_shape="hv",
+                                 name="Δc ratio (large/small)",
+                                 line=dict(color="#000", dash="dot")), secondary_y=True)
+        fig.add_trace(go.Scatter(x=[54], y=[2.1], mode="markers", name="thesis: 2.1 at 54 s",
+                                 marker=dict(symbol="x", size=11, color="#000")),
+                      secondary_y=True)
+    fig.update_layout(title=f"Figure 7-5: cost and Δc ratio versus time — {run.cell}",
+                      xaxis_title="time [s]")
+    fig.update_yaxes(title_text="cost J (6-5)", secondary_y=False)
+    fig.update_yaxes(title_text="Δc ratio [–]", secondary_y=True)
+    return fig
+
+
+def _steps(t: pd.Series, v: pd.Series) -> pd.Series:
+    """The change points of a held (step) signal, plus its last sample."""
+    s = pd.Series(v.to_numpy(), index=t.to_numpy()).dropna()
+    if s.empty:
+        return s
+    keep = np.r_[True, s.to_numpy()[1:] != s.to_numpy()[:-1]]
+    keep[-1] = True
+    return s[keep]
+
+
+def _bound_scatter(bound: pd.DataFrame, x: str, title: str, xtitle: str,
+                   colour_by: str, colour_title: str) -> go.Figure:
+    fig = go.Figure()
+    integral = ~np.isfinite(bound["lag_ratio"])
+    for noise in (False, True):
+        for is_int in (False, True):
+            d = bound[bound["stable"] & (bound["noise"] == noise) & bound["ratio"].notna()
+                      & (integral == is_int)]
+            if d.empty:
+                continue
+            name = f"{'pure integral' if is_int else 'lead/lag'}, noise {'on' if noise else 'off'}"
+            colour = d[colour_by].where(np.isfinite(d[colour_by]))
+            marker = dict(size=9, symbol=("star" if is_int else "circle") + ("" if noise else
+                                                                              "-open"))
+            if colour.notna().all():
+                marker.update(color=colour, coloraxis="coloraxis")
+            else:
+                marker.update(color="#000")
+            fig.add_trace(go.Scatter(
+                x=d[x], y=d["ratio"], mode="markers", name=name, marker=marker, text=d["design"],
+                customdata=np.stack([d["omega_c"], d["lag_ratio"], d["ks_over_kc"],
+                                     d["inertia"], d["theta_rad"] * 1e6], axis=-1),
+                hovertemplate=("%{text}<br>ωc %{customdata[0]:.3g} rad/s, L %{customdata[1]:.3g}"
+                               "<br>ks/kc %{customdata[2]:.3g}, J %{customdata[3]:.3g}"
+                               "<br>θ %{customdata[4]:.3g} µrad, θ/θb %{y:.3g}"
+                               "<extra></extra>")))
+    un = bound[~bound["stable"]]
+    if not un.empty and un["ratio"].notna().any():
+        fig.add_trace(go.Scatter(
+            x=un[x], y=un["ratio"], mode="markers",
+            name=f"unstable / hunting (excluded from verdict)",
+            marker=dict(symbol="x", color="#999", size=7), text=un["design"],
+            hovertemplate="%{text} (unstable)<extra></extra>"))
+    fig.add_hline(y=1.0, line=dict(color="#b00", dash="dash"),
+                  annotation_text="θ = θb (2-6)", annotation_position="bottom right")
+    fig.update_layout(title=title, xaxis_title=xtitle, yaxis_title="θ / θb [–]",
+                      yaxis_type="log", legend=dict(orientation="h", y=-0.25),
+                      coloraxis=dict(colorscale="Viridis", colorbar=dict(title=colour_title)))
+    return fig
+
+
+def bound_vs_crossover(bound: pd.DataFrame | None) -> go.Figure | None:
+    """θ/θb against the design's crossover ωc (colour = lag ratio L)."""
+    if bound is None or bound.empty:
+        return None
+    fig = _bound_scatter(bound, "omega_c", "Inequality (2-6): θ/θb vs crossover ωc",
+                         "crossover ωc [rad/s]", "lag_ratio", "L")
+    fig.update_xaxes(type="log")
+    return fig
+
+
+def bound_vs_lag(bound: pd.DataFrame | None) -> go.Figure | None:
+    """θ/θb against the lag ratio L (colour = k̄s/k̄c); pure integral plotted at the right edge."""
+    if bound is None or bound.empty:
+        return None
+    b = bound.copy()
+    finite_max = b.loc[np.isfinite(b["lag_ratio"]), "lag_ratio"].max()
+    edge = (finite_max if np.isfinite(finite_max) else 1.0) * 2
+    b["lag_x"] = b["lag_ratio"].where(np.isfinite(b["lag_ratio"]), edge)
+    fig = _bound_scatter(b, "lag_x", "Inequality (2-6): θ/θb vs lag ratio L "
+                         f"(pure integral drawn at L = {edge:.3g})", "lag ratio L [–]",
+                         "ks_over_kc", "ks/kc")
+    for r in sorted(b["ks_over_kc"].dropna().unique()):
+        lm = lag_ratio_limit(r)
+        if math.isfinite(lm):
+            fig.add_vline(x=lm, line=dict(color="#888", dash="dot", width=1),
+                          annotation_text=f"Lmax({r:g})", annotation_position="top")
+    fig.update_xaxes(type="log")
+    return fig
+
+
+def hunting_onset(hunting: pd.DataFrame | None) -> go.Figure | None:
+    """Onset of hunting vs k̄s/k̄c, with the (2-1) curve Lmax = 2r/(r−1)."""
+    if hunting is None or hunting.empty:
+        return None
+    h = hunting.sort_values("ks_over_kc")
+    r = np.linspace(max(1.05, h["ks_over_kc"].min() * 0.95), h["ks_over_kc"].max() * 1.05, 200)
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(x=r, y=[lag_ratio_limit(x) for x in r], mode="lines",
+                             name="Lmax = 2ks/(ks−kc) (2-1)", line=dict(color="#b00")))
+    fig.add_trace(go.Scatter(x=h["ks_over_kc"], y=h["lmax"], mode="markers", name="Lmax (run)",
+                             marker=dict(symbol="circle-open", size=12, color="#b00")))
+    found = h[h["onset_L"].notna()]
+    fig.add_trace(go.Scatter(x=found["ks_over_kc"], y=found["onset_L"], mode="markers",
+                             name="measured hunting onset", marker=dict(size=10,
+                                                                        color="#1f77b4")))
+    none = h[h["onset_L"].isna()]
+    if not none.empty:
+        fig.add_trace(go.Scatter(x=none["ks_over_kc"], y=none["lmax"], mode="markers",
+                                 name="no hunting found in swept range",
+                                 marker=dict(symbol="x", size=10, color="#999")))
+    fig.update_layout(title="Hunting onset vs the Bohacek–Tuteur limit (2-1)",
+                      xaxis_title="ks/kc [–]", yaxis_title="lag ratio L [–]", yaxis_type="log")
+    return fig
+
+
+def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
+    """Work-precision diagram: error against wall time, per method."""
+    if not speed or not speed.get("rows"):
+        return None
+    df = pd.DataFrame(speed["rows"])
+    df = df[(df["error"] > 0) & (df["wall_s"] > 0)]
+    if df.empty:
+        return None
+    fig = go.Figure()
+    methods = list(dict.fromkeys(df["method"]))
+    for i, m in enumerate(methods):
+        d = df[df["method"] == m].sort_values("wall_s")
+        fig.add_trace(go.Scatter(x=d["wall_s"], y=d["error"], mode="lines+markers+text",
+                                 name=m, text=d["setting"], textposition="top center",
+                                 marker=dict(size=9, symbol=_SYMBOLS[i % len(_SYMBOLS)]),
+                                 hovertemplate=(f"<b>{m}</b> %{{text}}<br>wall %{{x:.3g}} s"
+                                                "<br>error %{y:.3g} rad<extra></extra>")))
+    fig.add_hline(y=1e-6, line=dict(color="#888", dash="dot"),
+                  annotation_text="1e-6 rad (speed-up reference)")
+    fig.update_layout(title="Work-precision: error vs wall time (same command sequence)",
+                      xaxis_title="wall time [s]", xaxis_type="log",
+                      yaxis_title=f"error [rad] — {speed.get('error_metric', 'error')}",
+                      yaxis_type="log")
+    return fig
