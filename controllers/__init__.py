@@ -1,0 +1,13 @@
+"""Pluggable controllers, registered by name (see :mod:`controllers.base`).
+
+Built in: ``linear`` (lag-compensated, Bohacek–Tuteur limit), ``dithered`` (the same plus
+square-wave dither) and ``solnic`` (Acker's semi-open-loop identification and control).
+"""
+
+from controllers.base import Controller, available_controllers, get_controller, make_controller, register
+
+from controllers import linear as _linear  # noqa: E402,F401  (registers "linear")
+from controllers import dithered as _dithered  # noqa: E402,F401  (registers "dithered")
+from controllers import solnic as _solnic  # noqa: E402,F401  (registers "solnic")
+
+__all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller"]

@@ -101,6 +101,9 @@ class SimOptions:
         Locator of a noisy velocity zero (see module docstring).
     substep : float
         Gaussian sub-step inside moving segments [s].
+    reflect_substep : float
+        Sub-step while zero crossings are reflected [s]. The reflected x2 is exact at any
+        step; its push enters x1 as ½·L·h, whose bias shrinks like √h (see module docstring).
     bisection_tol : float
         Width [s] at which bridge bisection stops (≤ 1 µs by SPEC). At 1 µs the position
         error it leaves is |x2|·1 µs ≈ 1e-9 rad, a thousandth of the smallest corrections.
@@ -113,6 +116,7 @@ class SimOptions:
     noise: bool = True
     zero_velocity: str = "bridge"
     substep: float = 1e-4
+    reflect_substep: float = 1e-5
     bisection_tol: float = 1e-6
     max_events: int = 200_000
     diverge_error: float = 1.0
@@ -122,6 +126,8 @@ class SimOptions:
             raise ValueError(f"SimOptions.zero_velocity must be 'bridge' or 'newton', got {self.zero_velocity!r}")
         if not (0 < self.substep <= 1e-2):
             raise ValueError(f"SimOptions.substep must be in (0, 0.01] s, got {self.substep!r}")
+        if not (0 < self.reflect_substep <= 1e-2):
+            raise ValueError(f"SimOptions.reflect_substep must be in (0, 0.01] s, got {self.reflect_substep!r}")
         if not (0 < self.bisection_tol <= 1e-6):
             raise ValueError(f"SimOptions.bisection_tol must be in (0, 1e-6] s, got {self.bisection_tol!r}")
         if self.max_events < 1:
@@ -411,7 +417,11 @@ def _moving(run: _Run, t_end: float) -> None:
     h_fb = _flyback_time(run)
     # At breakaway x3 = ±ks exactly and still rising: that is inside the reflection regime.
     reflecting = s * x3 > ks or (s * x3 == ks and s * u > ks)
-    h_reg = torque_crossing_time(x3, u, s * ks, p.motor_time_constant) if reflecting else math.inf
+    h_reg = math.inf
+    if reflecting and s * u < ks:
+        h_reg = torque_crossing_time(x3, u, s * ks, p.motor_time_constant)
+        if h_reg == math.inf:          # within rounding of ks and heading below it
+            reflecting = False
     h = min(h_end, h_fb, h_reg)
     try:
         if reflecting:
@@ -431,7 +441,9 @@ def _moving(run: _Run, t_end: float) -> None:
         return
     if h == h_fb:
         _end_flyback(run)
-    run.event()   # flyback end or end of the reflection regime
+    else:
+        run.X[X3] = s * ks              # end of the reflection regime: exactly at stiction
+    run.event()
 
 
 def _velocity_zero(run: _Run) -> None:
@@ -497,7 +509,7 @@ def _advance_moving(run: _Run, h: float, *, reflect: bool) -> None:
     if not run.noisy:
         _deterministic_move(run, h)
         return
-    sub = run.opts.substep
+    sub = run.opts.reflect_substep if reflect else run.opts.substep
     remaining = h
     while remaining > 0:
         step = sub if remaining > 1.5 * sub else remaining

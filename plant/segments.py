@@ -25,6 +25,8 @@ def torque_crossing_time(x3: float, u: float, level: float, tau3: float) -> floa
     gap1 = level - u
     if gap0 == 0.0 or gap1 == 0.0 or (gap0 > 0) != (gap1 > 0):
         return math.inf
+    if abs(gap0) >= abs(gap1) * 1e300:
+        return math.inf
     ratio = gap0 / gap1
     if ratio <= 1.0:
         return math.inf

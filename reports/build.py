@@ -29,7 +29,7 @@ import plotly.offline
 
 from reports import claims as _claims
 from reports import figures as _fig
-from reports.inputs import (RESULT_METRICS, ReportInputs, SeriesRun, attribute_series,
+from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
 from reports.limits import PlantLimits, limits_from_config

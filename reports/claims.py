@@ -61,10 +61,11 @@ class Criterion:
             raise ValueError(f"Criterion.tol must be finite and >= 0, got {self.tol!r}")
 
     def holds(self, x: float) -> bool:
-        if self.kind == "rel":
-            return abs(x - self.target) <= self.tol * abs(self.target)
-        if self.kind == "abs":
-            return abs(x - self.target) <= self.tol
+        if self.kind in ("rel", "abs"):
+            dev = abs(x - self.target)
+            allowed = self.tol * abs(self.target) if self.kind == "rel" else self.tol
+            # A value on the stated edge (e.g. 1.4 for 2.0 ± 30 %) is inside despite rounding.
+            return dev <= allowed or math.isclose(dev, allowed, rel_tol=1e-9)
         if self.kind == "at_most":
             return x <= self.target
         if self.kind == "at_least":

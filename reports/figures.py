@@ -51,6 +51,23 @@ def figure_div(fig: go.Figure, div_id: str, height: int = 440) -> str:
                        default_height=f"{height}px")
 
 
+def _hline_log(fig: go.Figure, y: float, text: str, *, colour: str = "#b00", dash: str = "dash",
+               width: float = 2, right: bool = False, below: bool = False) -> None:
+    """Horizontal line on a log y axis with a label: shapes take data values there, while
+    annotations take log10 values (plotly's rule), so the label is placed by hand."""
+    fig.add_hline(y=y, line=dict(color=colour, dash=dash, width=width))
+    fig.add_annotation(x=1 if right else 0, xref="paper", y=math.log10(y), yref="y", text=text,
+                       showarrow=False, xanchor="right" if right else "left",
+                       yanchor="top" if below else "bottom", font=dict(color=colour, size=11))
+
+
+def _vline_log(fig: go.Figure, x: float, text: str) -> None:
+    """Vertical line on a log x axis, labelled at the top (see :func:`_hline_log`)."""
+    fig.add_vline(x=x, line=dict(color="#888", dash="dot", width=1))
+    fig.add_annotation(x=math.log10(x), xref="x", y=1, yref="paper", text=text, showarrow=False,
+                       yanchor="bottom", font=dict(size=10, color="#555"))
+
+
 def decimate_minmax(t: np.ndarray, y: np.ndarray, max_points: int = 6000
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Thin a trace to about ``max_points`` keeping each bucket's min and max, so peaks survive."""
@@ -96,11 +113,8 @@ def peak_vs_current(results: pd.DataFrame, limits: PlantLimits) -> go.Figure | N
                            "%{customdata[1]}<br>peak %{y:.3g} µrad<br>mean |i| %{x:.3g} ozf·in"
                            "<extra></extra>")))
     lim = limits.classical_limit_rad * 1e6
-    fig.add_hline(y=lim, line=dict(color="#b00", dash="dash"),
-                  annotation_text=f"classical limit (2-6): {lim:.3g} µrad",
-                  annotation_position="top left")
-    fig.add_hline(y=lim / 10, line=dict(color="#b00", dash="dot", width=1),
-                  annotation_text="limit / 10", annotation_position="bottom left")
+    _hline_log(fig, lim, f"classical limit (2-6): {lim:.3g} µrad")
+    _hline_log(fig, lim / 10, "limit / 10", dash="dot", width=1, below=True)
     fig.update_layout(
         title="Peak error vs mean |current| (symbol = scenario: " +
               ", ".join(f"{_SYMBOLS[i % len(_SYMBOLS)]} {s}" for i, s in enumerate(scenarios)) +
@@ -236,8 +250,7 @@ def _bound_scatter(bound: pd.DataFrame, x: str, title: str, xtitle: str,
             name=f"unstable / hunting (excluded from verdict)",
             marker=dict(symbol="x", color="#999", size=7), text=un["design"],
             hovertemplate="%{text} (unstable)<extra></extra>"))
-    fig.add_hline(y=1.0, line=dict(color="#b00", dash="dash"),
-                  annotation_text="θ = θb (2-6)", annotation_position="bottom right")
+    _hline_log(fig, 1.0, "θ = θb (2-6)", right=True, below=True)
     fig.update_layout(title=title, xaxis_title=xtitle, yaxis_title="θ / θb [–]",
                       yaxis_type="log", legend=dict(orientation="h", y=-0.25),
                       coloraxis=dict(colorscale="Viridis", colorbar=dict(title=colour_title)))
@@ -268,8 +281,7 @@ def bound_vs_lag(bound: pd.DataFrame | None) -> go.Figure | None:
     for r in sorted(b["ks_over_kc"].dropna().unique()):
         lm = lag_ratio_limit(r)
         if math.isfinite(lm):
-            fig.add_vline(x=lm, line=dict(color="#888", dash="dot", width=1),
-                          annotation_text=f"Lmax({r:g})", annotation_position="top")
+            _vline_log(fig, lm, f"Lmax({r:g})")
     fig.update_xaxes(type="log")
     return fig
 
@@ -316,8 +328,8 @@ def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
                                  marker=dict(size=9, symbol=_SYMBOLS[i % len(_SYMBOLS)]),
                                  hovertemplate=(f"<b>{m}</b> %{{text}}<br>wall %{{x:.3g}} s"
                                                 "<br>error %{y:.3g} rad<extra></extra>")))
-    fig.add_hline(y=1e-6, line=dict(color="#888", dash="dot"),
-                  annotation_text="1e-6 rad (speed-up reference)")
+    _hline_log(fig, 1e-6, "1e-6 rad (speed-up reference)", colour="#888", dash="dot", width=1,
+               right=True)
     fig.update_layout(title="Work-precision: error vs wall time (same command sequence)",
                       xaxis_title="wall time [s]", xaxis_type="log",
                       yaxis_title=f"error [rad] — {speed.get('error_metric', 'error')}",

@@ -26,8 +26,8 @@ shown in the report as "not measured in this run", never as a number):
     ==========================  ================================================================
 
 ``DIR/series/<cell>.parquet``
-    Time series of one solnic run for figures 7-2…7-5; ``<cell>`` is the ``cell`` value of its
-    results row. Rows at every sample instant (events may be added), increasing ``t``.
+    Time series of one solnic run for figures 7-2…7-5 (write it with :func:`write_series`,
+    which checks the column names); ``<cell>`` is the ``cell`` value of its results row. Rows at every sample instant (events may be added), increasing ``t``.
     Only ``t`` is required; every other column is optional and the figure or claim that needs
     it says so when it is missing. Step quantities (estimates, costs) are held between updates;
     NaN means "not yet defined" (e.g. costs before the first cost computation).
@@ -91,10 +91,10 @@ import numpy as np
 import pandas as pd
 
 __all__ = [
-    "RESULT_REQUIRED", "RESULT_METRICS", "SERIES_COLUMNS", "BOUND_COLUMNS", "HUNTING_COLUMNS",
+    "RESULT_REQUIRED", "RESULT_METRICS", "SIZE_PEAK_COLUMNS", "SERIES_COLUMNS", "BOUND_COLUMNS", "HUNTING_COLUMNS",
     "SPEED_ROW_KEYS", "SeriesRun", "ReportInputs", "cell_id", "load_inputs",
     "normalise_results", "normalise_bound", "normalise_hunting", "normalise_speed",
-    "attribute_series",
+    "attribute_series", "write_series",
 ]
 
 RESULT_REQUIRED = ("controller", "scenario", "seed", "status")
@@ -360,3 +360,32 @@ def load_inputs(out_dir: Path | str) -> ReportInputs:
         meta=meta,
         notes=tuple(notes),
     )
+
+
+def write_series(out_dir: Path | str, cell: str, frame: pd.DataFrame) -> Path:
+    """Write one solnic series to ``out_dir/series/<cell>.parquet`` (for the runner).
+
+    Raises
+    ------
+    ValueError
+        If ``t`` is missing or not increasing, or a column is not one of
+        :data:`SERIES_COLUMNS` (catches misspelt names before a report silently omits them).
+    """
+    if not isinstance(frame, pd.DataFrame) or "t" not in frame.columns:
+        raise ValueError(f"series {cell!r} must be a DataFrame with a 't' column")
+    unknown = sorted(set(frame.columns) - set(SERIES_COLUMNS))
+    if unknown:
+        raise ValueError(f"series {cell!r} has unknown column(s) {unknown}; "
+                         f"known: {list(SERIES_COLUMNS)}")
+    t = frame["t"].to_numpy(dtype=float)
+    if t.size and (np.isnan(t).any() or np.any(np.diff(t) < 0)):
+        raise ValueError(f"series {cell!r} column 't' must be finite and non-decreasing")
+    if not cell or "/" in cell or cell.startswith("."):
+        raise ValueError(f"series cell id {cell!r} must be a plain file name")
+    sdir = Path(out_dir) / "series"
+    sdir.mkdir(parents=True, exist_ok=True)
+    path = sdir / f"{cell}.parquet"
+    tmp = sdir / f".{cell}.parquet.tmp"
+    frame.to_parquet(tmp, index=False)
+    tmp.replace(path)
+    return path

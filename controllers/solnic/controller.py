@@ -12,9 +12,28 @@ Every sample the controller
 3. launches the pulse, possibly inside the interval at the predicted trigger time, and resets
    x̂1 and its variance from the prediction, (5-6) and (5-9).
 
-Interpretation of (5-14): the text prints 2·COV[x̂1(t_b), x̂1(t_a)]·(t_b − t_a), which has the
-wrong units; Δc_e = x̂1(t_b) + x̂4(t_b)(t_b − t_a) − x̂1(t_a) with x̂1(t_a) taken as independent
-gives 2·COV[x̂1(t_b), x̂4(t_b)]·(t_b − t_a), which we use.
+Interpretation of (5-14): the printed formula, VAR[x̂1(t_b)] + VAR[x̂1(t_a)] +
+2·COV[x̂1(t_b), x̂1(t_a)]·(t_b − t_a) + VAR[x̂4(t_b)](t_b − t_a)², is garbled (the third term
+has the wrong units and the sign of the x̂1(t_b)–x̂1(t_a) covariance is wrong for a
+difference). The default, ``dce_variance="exact"``, evaluates the variance of
+Δc_e = x̂1(t_b) − x̂1(t_a) + x̂4(t_b)(t_b − t_a) exactly, with the covariances of the
+current errors with the frozen x̂1(t_a) carried by the mode-2 filter; it keeps every term
+the text names. ``dce_variance="independent"`` treats x̂1(t_a) as independent, i.e.
+P11(t_b) + P11(t_a) + 2·P14(t_b)(t_b − t_a) + P44(t_b)(t_b − t_a)².
+
+The significance test is one-sided: the motion must be in the pulse's direction with
+Φ(z) ≥ 0.98, z = sign·Δc_e/σ (z ≥ 2.05, the text's "twice its standard deviation").
+
+Option ``dc_measurement="data-only"`` (off by default) removes the double use of the
+prediction: x̂1 is reset from Δc_p, so Δc_e already leans on Δc_p and the residual
+Δc_e − Δc_p,cond understates the evidence as P_b shrinks. With it the friction filter gets
+the samples' own evidence about Δc (prior divided out of the augmented state d of the
+mode-2 filter); the significance test uses the posterior of d.
+
+The mode-2 filter's prior is x̂1 = x̂4 = 0 with standard deviations ``x1_prior_std`` (diffuse)
+and ``x4_prior_std`` = 15 deg/h, the largest tracking rate of section 2.1; the text gives no
+prior variances. The prior on (k̂c, k̂s) is diagonal with a standard deviation equal to the
+initial estimate (a factor-of-two error is one sigma).
 """
 
 from __future__ import annotations
@@ -198,6 +217,7 @@ class SolnicController(Controller):
         t_a = t + offset
         self.mode2.predict(t_a)
         x1_a, var_x1_a = float(self.mode2.x[0]), float(self.mode2.P[0, 0])
+        self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         p_zero = self.friction.prob_no_motion(pred.peak_torque)
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
@@ -222,8 +242,16 @@ class SolnicController(Controller):
         P = self.mode2.P
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
-        var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2        # (5-14)
+        if self.options["dce_variance"] == "exact":
+            var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
+        else:
+            var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
         var_meas = var_e
+        dc_meas = dc_e
+        if self.options["dc_measurement"] == "data-only":
+            # significance from the posterior of d; the k̂ update from the samples alone
+            dc_e, var_e = self.mode2.motion_mean, self.mode2.motion_var
+            dc_meas, var_meas = self.mode2.motion_likelihood()
         if self.options["friction_noise_in_filter"]:
             p = self.params
             var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
@@ -236,7 +264,8 @@ class SolnicController(Controller):
                      ks_before=self.friction.ks, kc_before=self.friction.kc)
         if significant:
             self.counts["significant_cycles"] += 1
-            upd = self.friction.update(c.H_b, c.sign * dc_e - c.delta_c, var_meas, c.peak_torque)
+        if significant and math.isfinite(var_meas):
+            upd = self.friction.update(c.H_b, c.sign * dc_meas - c.delta_c, var_meas, c.peak_torque)
             self.counts["friction_updates"] += 1
             self.counts["shrinks"] += upd.shrinks
             self.counts["clipped_updates"] += int(upd.clipped)

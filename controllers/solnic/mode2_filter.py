@@ -14,7 +14,10 @@ Over a step h the exact discretisation is x(t+h) = Φ(h) x(t) + N with (3-22) an
 evaluated in closed form without cancellation. (The text's (4-11) keeps only the leading terms
 and prints E11·h/3 for h³/3; SPEC §9.)
 
-The filter is a plain textbook filter (predict, update); what is solnic-specific lives in the
+The filter is a plain textbook filter (predict, update). For (5-14) it also carries the
+cross-covariance of its error with the error of one frozen earlier estimate x̂1(t_a) (a
+"delayed state", :meth:`Mode2Filter.set_anchor`), so the variance of
+Δc_e = x̂1(t_b) − x̂1(t_a) + x̂4(t_b)(t_b − t_a) is exact. What is solnic-specific lives in the
 controller: samples are used only past t_max (5-11), and after each correction the estimate of
 x1 and its variance are reset from the Δc prediction with :meth:`Mode2Filter.add_motion`.
 """
@@ -95,6 +98,13 @@ class Mode2Filter:
         self.P = np.array(P0, dtype=float).reshape(2, 2)
         self.t = float(t0)
         self._cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self.anchor_cov: np.ndarray | None = None   # COV[e(t), e1(t_a)], shape (2,)
+        self.anchor_var = math.nan                  # VAR[e1(t_a)]
+        self.anchor_t = math.nan
+        self.motion_mean = math.nan                 # d̂, estimate of the last correction's Δc
+        self.motion_var = math.nan                  # VAR[e_d]
+        self.motion_cov: np.ndarray | None = None   # COV[e(t), e_d], shape (2,)
+        self.motion_prior = (math.nan, math.nan)    # (Δc_p,cond, its variance)
 
     def _transition(self, h: float) -> tuple[np.ndarray, np.ndarray]:
         hit = self._cache.get(h)
@@ -116,14 +126,47 @@ class Mode2Filter:
 
     def predict(self, t: float) -> None:
         """Time update to ``t``:  x̂ = Φx̂,  P = ΦPΦ' + COV[N]."""
+        h = t - self.t
+        if h > 0 and (self.anchor_cov is not None or self.motion_cov is not None):
+            Phi = self._transition(h)[0]
+            if self.anchor_cov is not None:
+                self.anchor_cov = Phi @ self.anchor_cov
+            if self.motion_cov is not None:
+                self.motion_cov = Phi @ self.motion_cov
         self.x, self.P = self.predicted(t)
         self.t = max(self.t, float(t))
+
+    def set_anchor(self) -> None:
+        """Freeze x̂1 now as x̂1(t_a) and start tracking COV[e(t), e1(t_a)]."""
+        self.anchor_cov = self.P[:, 0].copy()
+        self.anchor_var = float(self.P[0, 0])
+        self.anchor_t = self.t
+
+    def motion_variance(self, t_b: float | None = None) -> float:
+        """Exact VAR of the error of Δc_e = x̂1(t_b) − x̂1(t_a) + x̂4(t_b)(t_b − t_a)  (5-14).
+
+        With a = (1, t_b − t_a, −1) on (e1(t_b), e4(t_b), e1(t_a)): a'Σa, including the
+        covariances of the current errors with the frozen one.
+        """
+        if self.anchor_cov is None:
+            raise ValueError("no anchor: call set_anchor() at the pulse start")
+        dt = (self.t if t_b is None else t_b) - self.anchor_t
+        P, c = self.P, self.anchor_cov
+        return float(P[0, 0] + 2 * dt * P[0, 1] + dt * dt * P[1, 1] + self.anchor_var
+                     - 2.0 * (c[0] + dt * c[1]))
 
     def update(self, y: float) -> float:
         """Measurement update with y = x1 + w1 at the filter's time; returns the innovation."""
         innovation = float(y) - self.x[0]
         S = self.P[0, 0] + self.R
         K = self.P[:, 0] / S
+        if self.anchor_cov is not None:
+            self.anchor_cov = self.anchor_cov - K * self.anchor_cov[0]    # (I − KH)·c
+        if self.motion_cov is not None:                                   # augmented state d
+            k_d = self.motion_cov[0] / S
+            self.motion_mean += k_d * innovation
+            self.motion_var -= k_d * self.motion_cov[0]
+            self.motion_cov = self.motion_cov - K * self.motion_cov[0]
         self.x = self.x + K * innovation
         self.P = self.P - np.outer(K, self.P[0, :])
         self.P = 0.5 * (self.P + self.P.T)
@@ -133,12 +176,34 @@ class Mode2Filter:
         """Reset after a correction: x̂1 += Δc_p,cond (5-6), VAR[x̂1] += (5-9).
 
         The motion's prediction error is independent of the errors in (x̂1, x̂4), so only
-        P11 grows.
+        P11 grows. The motion itself is also carried as an augmented constant state d with
+        prior (Δc_p,cond, variance), so that :meth:`motion_likelihood` can return what the
+        samples alone say about it.
         """
         if not variance >= 0:
             raise ValueError(f"variance must be >= 0, got {variance!r}")
         self.x[0] += float(delta_c)
         self.P[0, 0] += float(variance)
+        self.motion_mean = float(delta_c)
+        self.motion_var = float(variance)
+        self.motion_cov = np.array([float(variance), 0.0])
+        self.motion_prior = (float(delta_c), float(variance))
+
+    def motion_likelihood(self) -> tuple[float, float]:
+        """(m, R): the samples' own Gaussian evidence about the last Δc, prior removed.
+
+        The posterior of d is the product of the prior N(Δc_p, V) and the data likelihood
+        N(m, R); so 1/R = 1/VAR[d] − 1/V and m/R = d̂/VAR[d] − Δc_p/V. R = inf when the
+        samples carry no information (or the prior variance is zero).
+        """
+        prior_mean, prior_var = self.motion_prior
+        if not (self.motion_var > 0 and prior_var > 0):
+            return math.nan, math.inf
+        info = 1.0 / self.motion_var - 1.0 / prior_var
+        if not info > 1e-12 / self.motion_var:
+            return math.nan, math.inf
+        R = 1.0 / info
+        return R * (self.motion_mean / self.motion_var - prior_mean / prior_var), R
 
     def drift_std(self) -> float:
         """√P44, the std of x̂4 [rad/s]."""

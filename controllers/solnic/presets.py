@@ -45,7 +45,9 @@ DEFAULTS: dict[str, Any] = {
     "overshoot_factor": 1.5,           # overshoot errors corrected only beyond 1.5·Δc_p
     "max_correction_fraction": 0.25,   # limit on one k̂ correction, × k̂s (fictitious variance)
     "fd_step": 1e-4,                   # quasipartial step [ozf·in]
+    "dce_variance": "exact",           # (5-14): "exact" or "independent" (see controller)
     # improvements over the text, off by default:
+    "dc_measurement": "faithful",      # or "data-only": k̂ updated from the samples' evidence only
     "friction_noise_in_filter": False,  # add the w2 spread of Δc to VAR[Δc_e] in (5-16)
     "cost_variances": False,           # keep VAR(Δc_p) + VAR[x̂1] in C1 (6-1)
 }
@@ -72,7 +74,13 @@ def resolve_options(preset: str = "thesis", **options: Any) -> dict[str, Any]:
     out = dict(DEFAULTS)
     out.update(PRESETS[preset])
     out.update(options)
+    if out["dce_variance"] not in ("exact", "independent"):
+        raise ValueError(f"option dce_variance must be 'exact' or 'independent', got {out['dce_variance']!r}")
+    if out["dc_measurement"] not in ("faithful", "data-only"):
+        raise ValueError(f"option dc_measurement must be 'faithful' or 'data-only', got {out['dc_measurement']!r}")
     for name, value in out.items():
+        if name in ("dce_variance", "dc_measurement"):
+            continue
         if name in _BOOL:
             if not isinstance(value, bool):
                 raise ValueError(f"option {name} must be a bool, got {value!r}")

@@ -173,8 +173,10 @@ class SizeSchedule:
                 self.dtu_startup = dtu_of_cycle + self.dtu_inc / 4.0
             return
         if not significant and self.size >= SMALL:
+            # restart from the larger of the failed Δt_u and Δt_u,opt, so that repeated
+            # failures of a too-small "small" size ratchet Δt_u,opt upward, never down
             self.size = STARTUP_RAISE
-            self.dtu_startup = dtu_of_cycle
+            self.dtu_startup = max(dtu_of_cycle, self.dtu_opt)
             self.cycles_done = 0
 
     def _new_set(self) -> None:

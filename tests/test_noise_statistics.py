@@ -1,0 +1,96 @@
+"""Stochastic behaviour against Monte-Carlo references and stationary theory.
+
+Tolerances are stated per test in Monte-Carlo standard errors (SE).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from plant import PlantParams, pulse_response
+from plant.drive import DriveCommand
+from plant.multimode import Accumulator, SimOptions, advance, initial_state
+from plant.reference import fixed_step_pulses
+from plant.transition import X1, X4
+
+P0 = PlantParams()
+N_SEEDS = 2000
+DT_U = 1.2e-3
+
+
+@pytest.fixture(scope="module")
+def exact_delta_c():
+    return np.array([pulse_response(P0, DT_U, seed=s).delta_c for s in range(N_SEEDS)])
+
+
+def test_delta_c_distribution_matches_fine_euler_maruyama(exact_delta_c, capsys):
+    """Exact Δc(1.2 ms) vs Euler–Maruyama; EM's stop monitoring is biased by O(√dt).
+
+    The EM mean is extrapolated to dt → 0 in √dt from dt = 0.2 µs and 0.05 µs; the
+    distributions are compared with a two-sample KS test at dt = 0.05 µs.
+    """
+    em_fine = fixed_step_pulses(P0, DT_U, 5e-8, N_SEEDS, seed=10_001)
+    em_coarse = fixed_step_pulses(P0, DT_U, 2e-7, N_SEEDS, seed=10_001)
+    r1, r2 = math.sqrt(5e-8), math.sqrt(2e-7)
+    mean_extrap = em_fine.mean() - (em_coarse.mean() - em_fine.mean()) * r1 / (r2 - r1)
+    ks = stats.ks_2samp(exact_delta_c, em_fine)
+    se = math.hypot(exact_delta_c.std(ddof=1), em_fine.std(ddof=1)) / math.sqrt(N_SEEDS)
+    with capsys.disabled():
+        print(f"\n  Δc(1.2 ms) exact: mean {exact_delta_c.mean()*1e6:.4f} µrad, sd {exact_delta_c.std()*1e6:.4f}; "
+              f"EM 0.05 µs: mean {em_fine.mean()*1e6:.4f}, sd {em_fine.std()*1e6:.4f}; "
+              f"EM extrapolated mean {mean_extrap*1e6:.4f}; KS p = {ks.pvalue:.3f}; SE {se*1e6:.4f} µrad")
+    assert ks.pvalue > 0.01
+    assert abs(exact_delta_c.mean() - em_fine.mean()) < 3 * se
+    assert abs(exact_delta_c.mean() - mean_extrap) < 3 * se * 1.5   # extrapolation inflates the SE
+
+
+def test_newton_option_distribution_is_reported(exact_delta_c, capsys):
+    """The seed's fixed-Z Newton locator (4-38), reported beside the bridge locator."""
+    opts = SimOptions(zero_velocity="newton")
+    newton = np.array([pulse_response(P0, DT_U, seed=s, options=opts).delta_c for s in range(400)])
+    ks = stats.ks_2samp(exact_delta_c, newton)
+    with capsys.disabled():
+        print(f"\n  Δc(1.2 ms) newton (400 seeds): mean {newton.mean()*1e6:.4f} µrad, sd {newton.std()*1e6:.4f}; "
+              f"bridge mean {exact_delta_c.mean()*1e6:.4f}; KS p = {ks.pvalue:.3g}")
+    assert np.all(np.isfinite(newton)) and newton.mean() > 0
+
+
+def _stuck_paths(n, x4_0, horizon, params, seed):
+    """Propagate n stuck paths (no drive) over ``horizon`` seconds in one exact jump each."""
+    ss = np.random.SeedSequence(seed)
+    out = np.empty((n, 2))
+    hold = DriveCommand.hold(0.0)
+    for i, child in enumerate(ss.spawn(n)):
+        rng = np.random.default_rng(child)
+        state = initial_state(params, x4=x4_0[i])
+        state, status, _ = advance(state, hold, horizon, params, rng, acc=Accumulator(active=False))
+        out[i] = state.X[X1], state.X[X4]
+    return out
+
+
+def test_x4_stationary_variance_and_autocorrelation():
+    p = P0
+    n, lag = 4000, 300.0
+    var = p.command_velocity_std**2
+    rng = np.random.default_rng(3)
+    x4_0 = rng.normal(0.0, math.sqrt(var), n)
+    end = _stuck_paths(n, x4_0, lag, p, seed=4)
+    # Sample variance: relative SE √(2/n) ≈ 2.2 %; allow 4 SE.
+    assert end[:, 1].var() == pytest.approx(var, rel=4 * math.sqrt(2 / n))
+    # Autocorrelation e^(−lag/τ4) = 0.741; SE of a correlation ≈ (1 − ρ²)/√n ≈ 0.007; allow 4 SE.
+    rho = np.corrcoef(x4_0, end[:, 1])[0, 1]
+    assert rho == pytest.approx(math.exp(-lag / p.command_velocity_tau), abs=4 * (1 - 0.741**2) / math.sqrt(n))
+
+
+def test_x1_growth_while_stuck():
+    """x1(t) = −∫x4: with x4(0) ~ N(0, v), Var x1(t) = 2v·τ4²·(t/τ4 − 1 + e^(−t/τ4))."""
+    p = P0
+    n, t = 4000, 50.0
+    v, tau = p.command_velocity_std**2, p.command_velocity_tau
+    x4_0 = np.random.default_rng(8).normal(0.0, math.sqrt(v), n)
+    end = _stuck_paths(n, x4_0, t, p, seed=9)
+    theory = 2 * v * tau**2 * (t / tau - 1 + math.exp(-t / tau))
+    assert end[:, 0].var() == pytest.approx(theory, rel=4 * math.sqrt(2 / n))
+    assert abs(end[:, 0].mean()) < 4 * math.sqrt(theory / n)

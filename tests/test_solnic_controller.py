@@ -1,0 +1,126 @@
+"""The solnic controller: options, protocol, and closed-loop behaviour on the exact plant."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers import available_controllers, get_controller
+from controllers.solnic import SolnicController
+from plant import DriveType, PlantParams
+
+INTERNALS = {"ks_hat", "kc_hat", "P_kc_kc", "P_ks_ks", "P_kc_ks", "dtu_opt", "dtu_inc", "cost_small",
+             "cost_medium", "cost_large", "dc_ratio", "cycle_size", "x1_hat", "x4_hat"}
+
+
+def test_registered_on_the_bridge():
+    assert "solnic" in available_controllers()
+    cls = get_controller("solnic")
+    assert cls is SolnicController and cls.drive == DriveType.BRIDGE
+
+
+@pytest.mark.parametrize("kw,match", [
+    (dict(preset="nope"), "preset"),
+    (dict(a_c=-1.0), "a_c"),
+    (dict(a_cov=1.5), "a_cov"),
+    (dict(bogus=1), "bogus"),
+    (dict(motion_confidence=1.2), "motion_confidence"),
+    (dict(dce_variance="maybe"), "dce_variance"),
+    (dict(dc_measurement="x"), "dc_measurement"),
+    (dict(friction_noise_in_filter=1), "friction_noise_in_filter"),
+    (dict(initial_increment_factor=math.nan), "initial_increment_factor"),
+])
+def test_options_are_validated(kw, match):
+    with pytest.raises(ValueError, match=match):
+        SolnicController(**kw)
+
+
+def test_step_commands_and_internals():
+    p = PlantParams()
+    c = SolnicController()
+    c.reset(p, np.random.default_rng(0))
+    assert set(c.internals()) == INTERNALS
+    assert math.isnan(c.internals()["cost_small"])
+    levels = set()
+    for n in range(50):
+        cmd = c.step(-30e-6 * n * p.sample_period)
+        assert cmd.drive == DriveType.BRIDGE
+        levels |= {v for _, v in cmd.segments}
+        assert all(0 <= o < p.sample_period for o, _ in cmd.segments)
+    assert levels <= {0.0, p.u_max, -p.u_max} and p.u_max in levels
+    assert all(isinstance(v, float) for v in c.internals().values())
+    s = c.summary()
+    assert s["pulses"] > 0 and s["ks_hat"] > 0
+
+
+def test_initial_estimates_follow_section_7_3():
+    p = PlantParams()
+    c = SolnicController()
+    c.reset(p, np.random.default_rng(0))
+    i = c.internals()
+    assert i["ks_hat"] == pytest.approx(0.5 * p.stiction) and i["kc_hat"] == pytest.approx(0.5 * p.coulomb)
+    assert i["x1_hat"] == 0.0 and i["x4_hat"] == 0.0 and i["dtu_opt"] == 0.0
+    assert i["dtu_inc"] == pytest.approx(4 * c.summary()["dtu_inc_adjusted"])
+
+
+# ---------------------------------------------------------------- closed loop (exact plant)
+run_closed_loop = pytest.importorskip("bench.runner").run_closed_loop
+NOISE_FREE_FRICTION = PlantParams().replace(friction_noise_psd=0.0, correlated_friction_std=0.0)
+
+
+@pytest.fixture(scope="module")
+def deterministic_run():
+    """No noise at all (runner noise=False), friction noise parameters 0, k̂ from 0.5×."""
+    return run_closed_loop(NOISE_FREE_FRICTION, SolnicController(), duration_s=60.0, seed=0,
+                           noise=False, record=True)
+
+
+@pytest.mark.slow
+def test_identification_without_friction_noise(deterministic_run):
+    r = deterministic_run
+    assert r.status == "ok"
+    ks, kc = r.internals["ks_hat"][-1], r.internals["kc_hat"][-1]
+    ks_true, kc_true = r.samples["ks_true"][-1], r.samples["kc_true"][-1]
+    assert abs(kc / kc_true - 1) < 0.02
+    # started 50 % low; ends on the identification ridge within 10 % (the text: 5.7 % low at 54 s)
+    assert abs(ks / ks_true - 1) < 0.10
+    assert r.internals["ks_hat"][0] == pytest.approx(0.5 * ks_true)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="identification singularity (section 6.2): k̂s settles about 6 % "
+                                       "low at 60 s, as in the text's run (5.7 % low at 54 s)")
+def test_ks_within_two_percent_by_60s(deterministic_run):
+    ks, ks_true = deterministic_run.internals["ks_hat"][-1], deterministic_run.samples["ks_true"][-1]
+    assert abs(ks / ks_true - 1) < 0.02
+
+
+@pytest.mark.slow
+def test_quiet_friction_beats_the_classical_limit_and_uses_less_current():
+    """σ2 = 0, three seeds, 100 s.
+
+    Scored from 40 s, not 20 s: like the text's run (first cost evaluation at 20 s, steady at
+    ~54 s) the start-up from 0.5× estimates and Δt_u,opt = 0 lasts beyond 20 s, and its last
+    large corrections (tens of µrad) fall inside a 20-s window.
+    """
+    p = PlantParams().replace(friction_noise_psd=0.0)
+    bound = p.classical_bound()
+    have_linear = "linear" in available_controllers()
+    for seed in (0, 1, 2):
+        r = run_closed_loop(p, SolnicController(), duration_s=100.0, warmup_s=40.0, seed=seed)
+        assert r.status == "ok", r.message
+        assert r.metrics["peak_error_rad"] < bound
+        if have_linear:
+            lin = run_closed_loop(p, get_controller("linear")(), duration_s=100.0, warmup_s=40.0, seed=seed)
+            assert r.metrics["mean_abs_current"] < lin.metrics["mean_abs_current"]
+    if not have_linear:
+        pytest.skip("controller 'linear' is not registered: current comparison skipped")
+
+
+@pytest.mark.slow
+def test_thesis_scenario_completes():
+    r = run_closed_loop(PlantParams(), SolnicController(), duration_s=100.0, warmup_s=20.0, seed=0)
+    assert r.status == "ok", r.message
+    for key in ("peak_error_rad", "rms_error_rad", "mean_abs_current", "rms_current"):
+        assert math.isfinite(r.metrics[key]) and r.metrics[key] > 0
+    assert r.summary["pulses"] > 100 and r.summary["cost_evaluations"] > 5

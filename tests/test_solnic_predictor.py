@@ -1,0 +1,81 @@
+"""The solnic internal plant model against the plant's own pulse response."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.solnic.predictor import Predictor, peak_torque
+from plant import PlantParams, pulse_response
+
+P = PlantParams()
+
+
+@pytest.mark.parametrize("ks,kc", [(2.1, 1.4), (1.05, 0.7), (1.9, 1.6), (3.0, 1.0)])
+@pytest.mark.parametrize("dt_u", [0.6e-3, 1.0e-3, 1.36e-3, 1.5e-3, 2.5e-3])
+def test_prediction_equals_pulse_response(ks, kc, dt_u):
+    pred = Predictor(P).predict(ks, kc, dt_u)
+    ref = pulse_response(P.replace(stiction=ks, coulomb=kc), dt_u)
+    assert pred.delta_c == ref.delta_c
+    assert pred.t_nominal == ref.t_stop
+    assert pred.t_current_zero == ref.t_current_zero
+    assert pred.t_breakaway == ref.t_breakaway
+
+
+def test_sign_flips_motion_and_partials():
+    pr = Predictor(P)
+    plus, minus = pr.predict(2.1, 1.4, 1.4e-3, 1), pr.predict(2.1, 1.4, 1.4e-3, -1)
+    assert minus.delta_c == -plus.delta_c
+    np.testing.assert_array_equal(minus.H_b, -plus.H_b)
+    assert minus.delta_c == pytest.approx(pulse_response(P, 1.4e-3, sign=-1).delta_c, rel=1e-12)
+
+
+def _central(ks, kc, dt_u, which, h=1e-3):
+    def f(dk):
+        k = [kc, ks]
+        k[which] += dk
+        r = pulse_response(P.replace(stiction=k[1], coulomb=k[0]), dt_u)
+        return np.array([r.delta_c, r.t_stop])
+    return (f(h) - f(-h)) / (2 * h)
+
+
+@pytest.mark.parametrize("ks,kc,dt_u", [(2.1, 1.4, 1.2745e-3), (2.1, 1.4, 1.36e-3), (2.1, 1.4, 1.443e-3),
+                                        (1.7, 1.5, 1.36e-3), (2.1, 1.4, 2.0e-3)])
+def test_quasipartials_match_central_differences(ks, kc, dt_u):
+    pred = Predictor(P).predict(ks, kc, dt_u)
+    for which in (0, 1):
+        ref = _central(ks, kc, dt_u, which)
+        assert pred.H_b[which] == pytest.approx(ref[0], rel=1e-2)
+        assert pred.H_tb[which] == pytest.approx(ref[1], rel=1e-2, abs=1e-9)
+
+
+def test_quasipartials_backward_step_at_ks_equal_kc():
+    pred = Predictor(P).predict(1.5, 1.5, 1.4e-3)          # k̂c + δ would exceed k̂s
+    ref = _central(1.5, 1.5 - 2e-3, 1.4e-3, 0)
+    assert math.isfinite(pred.H_b[0]) and pred.H_b[0] < 0
+    assert pred.H_b[0] == pytest.approx(ref[0], rel=5e-2)
+
+
+def test_no_motion_below_breakaway_and_conditional_prediction():
+    pr = Predictor(P)
+    dt_u = 0.85e-3
+    assert peak_torque(P, dt_u) == pytest.approx(P.u_max * (1 - math.exp(-dt_u / P.motor_time_constant)))
+    pred = pr.predict(2.1, 1.4, dt_u)
+    assert pred.delta_c == 0.0 and not pred.moves
+    np.testing.assert_array_equal(pred.H_b, [0.0, 0.0])
+    cond = pr.conditional(2.1, 1.4, dt_u)
+    # given motion, stiction lies just below the peak torque: the smallest motion Δc_min
+    ref = pulse_response(P.replace(stiction=peak_torque(P, dt_u) * (1 - 1e-6), coulomb=1.4), dt_u)
+    assert cond.delta_c == pytest.approx(ref.delta_c, rel=1e-9) and cond.delta_c > 0
+
+
+def test_invalid_inputs_raise():
+    pr = Predictor(P)
+    with pytest.raises(ValueError, match="sign"):
+        pr.predict(2.1, 1.4, 1e-3, sign=0)
+    with pytest.raises(ValueError, match="dt_u"):
+        pr.predict(2.1, 1.4, -1e-3)
+    with pytest.raises(ValueError, match="kc <= ks"):
+        pr.response(1.0, 1.4, 1e-3)
+    with pytest.raises(ValueError, match="fd_step"):
+        Predictor(P, fd_step=0.0)
