@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HuntingVerdict", "detect_hunting", "slip_episodes"]
+__all__ = ["HuntingVerdict", "detect_hunting", "slip_episodes", "merged_trace"]
 
 
 @dataclass(frozen=True)
@@ -170,3 +170,17 @@ def detect_hunting(t: np.ndarray, x1: np.ndarray, mode: np.ndarray | None = None
         return verdict(False, f"only {reversals:.0%} of consecutive slips reverse direction")
     return verdict(True, f"{len(tail)} slips, period {period:.4g} s, CV {cv:.3g}, "
                          f"reversals {reversals:.0%}")
+
+
+def merged_trace(samples: dict[str, np.ndarray], events: dict[str, np.ndarray] | None = None,
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, x1, mode) of a recorded run: sample instants and plant events, in time order.
+
+    ``samples`` and ``events`` are the ``RunResult`` dicts of ``run_closed_loop(record=True)``.
+    """
+    parts = [samples] + ([events] if events is not None and len(events["t"]) else [])
+    t = np.concatenate([np.asarray(p["t"], dtype=float) for p in parts])
+    x1 = np.concatenate([np.asarray(p["x1"], dtype=float) for p in parts])
+    mode = np.concatenate([np.asarray(p["mode"]).astype(int) for p in parts])
+    order = np.argsort(t, kind="stable")
+    return t[order], x1[order], mode[order]

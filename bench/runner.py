@@ -56,7 +56,8 @@ def spawn_streams(seed: int) -> dict[str, np.random.Generator]:
 
 def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: float,
                     warmup_s: float = 0.0, seed: int = 0, noise: bool = True, record: bool = False,
-                    options: SimOptions | None = None, x5_initial: float | None = None) -> RunResult:
+                    options: SimOptions | None = None, x5_initial: float | None = None,
+                    time_limit_s: float | None = None) -> RunResult:
     """Run ``controller`` on the plant for ``duration_s`` seconds and score from ``warmup_s``.
 
     Parameters
@@ -66,6 +67,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         initial x5 (then 0).
     x5_initial : float, optional
         Override the initial correlated friction x5(0) [ozf·in].
+    time_limit_s : float, optional
+        Wall-clock budget [s]; checked at every sample, a run over budget stops with status
+        ``error``. None (default) means no limit.
 
     Returns
     -------
@@ -79,6 +83,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         raise ValueError(f"duration_s must be at least one sample period ({tau} s), got {duration_s!r}")
     if not (0 <= n_warm < n_samples):
         raise ValueError(f"warmup_s must be in [0, duration_s), got {warmup_s!r}")
+    if time_limit_s is not None and not time_limit_s > 0:
+        raise ValueError(f"time_limit_s must be > 0 or None, got {time_limit_s!r}")
+    deadline = math.inf if time_limit_s is None else time.perf_counter() + time_limit_s
     opts = options or SimOptions(noise=noise)
     if not noise and opts.noise:
         opts = SimOptions(noise=False, zero_velocity=opts.zero_velocity, substep=opts.substep,
@@ -111,6 +118,10 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             state, status, message = advance(state, command, tau, params, plant_rng, options=opts, acc=acc,
                                              recorder=rec.event if record else None)
             if status != Status.OK:
+                break
+            if time.perf_counter() > deadline:
+                status = Status.ERROR
+                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
                 break
         else:
             acc.merge_peak(abs(state.X[X1]))

@@ -80,8 +80,6 @@ class LinearDesign:
         Discrete unit-gain sections; ``compensator = gain · Π sections``.
     compensator : control.TransferFunction
         C(z); the drive level is u(n) = −C(z)·y(n) [ozf·in per rad].
-    state_space : tuple of numpy arrays
-        (A, B, C, D) realization of C(z) as a cascade of the sections.
     open_loop : control.TransferFunction
         C(z)·Pd(z).
     crossover_rad_s, phase_margin_deg : float
@@ -118,7 +116,6 @@ class LinearDesign:
     plant: ct.TransferFunction
     sections: tuple
     compensator: ct.TransferFunction
-    state_space: tuple
     open_loop: ct.TransferFunction
     crossover_rad_s: float
     phase_margin_deg: float
@@ -130,6 +127,11 @@ class LinearDesign:
     stable: bool
     noise_drive_rms: float
     noise_error_rms: float
+
+    @functools.cached_property
+    def state_space(self) -> tuple[np.ndarray, ...]:
+        """(A, B, C, D) realization of C(z) as a cascade of the first-order sections."""
+        return _cascade_ss(self.gain, self.sections)
 
     @property
     def lag_ratio_limit(self) -> float:
@@ -165,6 +167,7 @@ def _eval_tf(sys: ct.TransferFunction, z: complex | np.ndarray) -> complex | np.
     return np.polyval(num, z) / np.polyval(den, z)
 
 
+@functools.lru_cache(maxsize=64)
 def _discrete_plant(params: PlantParams) -> ct.TransferFunction:
     # G(s) = 1/((τ3 s + 1)·J s²), motor lag then pure inertia (figure 2-1)
     plant = ct.tf([1.0], [params.motor_time_constant * params.inertia, params.inertia, 0.0, 0.0])
@@ -329,7 +332,7 @@ def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: boo
         params=params, crossover_target_rad_s=omega_c, lag_ratio=lag_ratio, integral=integral,
         lag_corner_rad_s=omega_z, phase_margin_target_deg=pm_deg, lead_stages=stages,
         lead_ratio=a, gain=gain, plant=plant, sections=sections, compensator=comp,
-        state_space=_cascade_ss(gain, sections), open_loop=open_loop,
+        open_loop=open_loop,
         **margins,
         static_stiffness=stiffness, closed_loop_poles=poles, stable=stable,
         noise_drive_rms=drive_rms, noise_error_rms=error_rms)
@@ -367,7 +370,7 @@ def highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
     args = (lag_ratio, integral, phase_margin_deg, lag_corner_fraction, max_lead_phase_deg,
             min_gain_margin_db)
     nyquist = math.pi / params.sample_period
-    grid = np.geomspace(1.0, 0.99 * nyquist, 40)
+    grid = np.geomspace(1.0, 0.99 * nyquist, 12)
     ok = [_feasible(params, float(w), *args) for w in grid]
     if not any(ok):
         raise ValueError("no feasible crossover: relax phase_margin_deg or min_gain_margin_db")

@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from plant.drive import DriveCommand, DriveType
+from plant._kernels import moving_noisy
 from plant.noise import NoiseFactor, noise_factor
 from plant.params import PlantParams
 from plant.segments import hermite_peak, torque_crossing_time, torque_integrals
@@ -229,6 +230,8 @@ class _Cache:
         self.phis: dict[tuple[int, float], np.ndarray] = {}
         self.factors: dict[tuple[int, float], NoiseFactor] = {}
         self.gains: dict[tuple[int, float], np.ndarray] = {}
+        self.pv = np.array([params.alpha, params.beta3, params.beta4, params.beta5,
+                            params.sigma2_sq, params.sigma4_sq, params.sigma5_sq])
 
     def phi(self, mode: int, h: float) -> np.ndarray:
         key = (mode, h)
@@ -424,7 +427,9 @@ def _moving(run: _Run, t_end: float) -> None:
             reflecting = False
     h = min(h_end, h_fb, h_reg)
     try:
-        if reflecting:
+        if run.noisy and run.sigma_v2 > 0.0 and (reflecting or run.opts.zero_velocity == "bridge"):
+            stopped = _kernel_segment(run, h, reflecting)
+        elif reflecting:
             _advance_moving(run, h, reflect=True)
             stopped = False
         else:
@@ -444,6 +449,26 @@ def _moving(run: _Run, t_end: float) -> None:
     else:
         run.X[X3] = s * ks              # end of the reflection regime: exactly at stiction
     run.event()
+
+
+def _kernel_segment(run: _Run, h: float, reflecting: bool) -> bool:
+    """Noisy moving segment in the compiled kernel (same mathematics as the Python path)."""
+    x3, u = run.X[X3], run.X[U]
+    X = run.X.copy()
+    sub = run.opts.reflect_substep if reflecting else run.opts.substep
+    budget = max(run.opts.max_events - run.count, 1)
+    peak0 = run.acc.peak_abs_error if run.acc.active else 0.0
+    advanced, stopped, peak, n, chattered = moving_noisy(
+        X, run.mode, h, reflecting, sub, run.opts.bisection_tol, run.cache.pv, run.rng, peak0, budget)
+    run.X = X
+    run.torque_metrics(x3, u, advanced)
+    run.acc.merge_peak(peak)
+    run.acc.n_substeps += n
+    run.count += n
+    run.t += advanced
+    if chattered:
+        raise _Stop(Status.CHATTER, f"more than {run.opts.max_events} events in one interval at t={run.t:.6f} s")
+    return stopped
 
 
 def _velocity_zero(run: _Run) -> None:
@@ -652,7 +677,9 @@ def _newton_zero(run: _Run, h: float) -> bool:
     s = 1.0 if mode == 3 else -1.0
     g = h
     found = False
-    for _ in range(20):
+    if s * run.X[X2] <= 0.0:
+        g, found = 0.0, True
+    for _ in range(0 if found else 20):
         v = velocity(g)
         P = run.cache.phi(mode, g)
         Xg = P @ run.X
@@ -669,6 +696,9 @@ def _newton_zero(run: _Run, h: float) -> bool:
             g, found = g_new, True
             break
         g = g_new
+    if not found and s * velocity(h) <= 0.0:
+        # Newton left (0, h] although the fixed-Z path ends on the far side: bracket instead.
+        g, found = brentq(velocity, min(1e-12, h / 2), h, xtol=1e-15, rtol=8.9e-16), True
     run.torque_metrics(x3, u, g if found else h)
     tau = g if found else h
     f = noise_factor(process_noise(mode, tau, run.p))

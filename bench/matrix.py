@@ -1,0 +1,294 @@
+"""The benchmark matrix: a TOML file (parsed with ``tomllib``) → controllers × scenarios × seeds.
+
+Schema (public API, documented in the README)::
+
+    [matrix]
+    controllers = ["linear", "dithered", "solnic"]   # registered names or variants below
+    scenarios = ["thesis", "quiet-friction"]         # built-in names or custom ones below
+    seeds = [0, 1, 2]                                # non-negative integers
+    duration_s = 100          # optional, overrides every scenario's run length [s]
+    warmup_s = 20             # optional, overrides every scenario's warm-up [s]
+    time_limit_s = 600        # optional, wall-clock limit per cell [s] (default 600)
+    plugins = ["my_module"]   # optional, modules imported first (they may register controllers);
+                              # the matrix file's directory is searched before sys.path
+
+    [scenarios.heavy-load]    # optional custom scenario: a base plus PlantParams overrides
+    base = "thesis"           # (also duration_s, warmup_s, description)
+    inertia = 1.0
+
+    [controllers.solnic-hi]   # optional controller variant: a base plus constructor options
+    base = "solnic"
+    preset = "high-error-cost"
+
+Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
+e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from bench.cells import Cell, ControllerSpec, load_plugins
+from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
+
+__all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matrix_path",
+           "DEFAULT_TIME_LIMIT_S"]
+
+DEFAULT_TIME_LIMIT_S = 600.0
+_MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
+                "description")
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+
+
+class MatrixError(ValueError):
+    """A user error in a matrix file; the message names the file, key path and field."""
+
+
+@dataclass(frozen=True)
+class Matrix:
+    """A parsed and validated matrix.
+
+    ``scenarios`` already carry the matrix-level ``duration_s``/``warmup_s`` overrides.
+    """
+
+    source: str
+    controllers: tuple[ControllerSpec, ...]
+    scenarios: tuple[Scenario, ...]
+    seeds: tuple[int, ...]
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S
+    plugins: tuple[str, ...] = ()
+    plugin_dirs: tuple[str, ...] = ()
+    duration_s: float | None = None
+    warmup_s: float | None = None
+    description: str = ""
+    variants: dict[str, ControllerSpec] = field(default_factory=dict)
+
+    def cells(self) -> list[Cell]:
+        """Every cell, in matrix order: controller, then scenario, then seed."""
+        return [Cell(c, s, seed, self.time_limit_s, self.plugins, self.plugin_dirs)
+                for c in self.controllers for s in self.scenarios for seed in self.seeds]
+
+    def to_json(self) -> dict[str, Any]:
+        """The resolved matrix, for ``DIR/config.json``."""
+        return {
+            "source": self.source, "description": self.description,
+            "controllers": [c.name for c in self.controllers],
+            "scenarios": [s.name for s in self.scenarios], "seeds": list(self.seeds),
+            "duration_s": self.duration_s, "warmup_s": self.warmup_s,
+            "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
+        }
+
+
+def builtin_matrix_path(quick: bool = False) -> Path:
+    """``bench/matrices/quick.toml`` or ``default.toml`` (package data)."""
+    name = "quick.toml" if quick else "default.toml"
+    return Path(str(resources.files("bench").joinpath("matrices", name)))
+
+
+def load_matrix(path: str | Path) -> Matrix:
+    """Read and validate a matrix file.
+
+    Raises
+    ------
+    MatrixError
+        For an unreadable file, a TOML syntax error (with its line) or an invalid entry.
+    """
+    path = Path(path)
+    label = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MatrixError(f"{label}: cannot read the matrix file: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        line = re.search(r"line (\d+)", str(exc))
+        where = f"{label}:{line.group(1)}" if line else label
+        raise MatrixError(f"{where}: invalid TOML: {exc}") from None
+    return parse_matrix(data, label, base_dir=path.resolve().parent)
+
+
+def _fail(source: str, key: str, message: str) -> MatrixError:
+    return MatrixError(f"{source}: {key}: {message}")
+
+
+def _number(source: str, key: str, value: Any, *, positive: bool = False, allow_zero: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _fail(source, key, f"must be a finite number, got {value!r}")
+    if positive and not (value > 0 or (allow_zero and value == 0)):
+        raise _fail(source, key, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+    return float(value)
+
+
+def _names(source: str, key: str, value: Any) -> tuple[str, ...]:
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        raise _fail(source, key, f"must be a non-empty list of names, got {value!r}")
+    dup = sorted({v for v in value if value.count(v) > 1})
+    if dup:
+        raise _fail(source, key, f"lists {dup[0]!r} more than once")
+    return tuple(value)
+
+
+def _check_name(source: str, key: str, name: str) -> None:
+    if not _NAME.match(name) or "__" in name:
+        raise _fail(source, key, f"name {name!r} must start with a letter or digit, contain only "
+                                 f"letters, digits and _ . + -, and no '__'")
+
+
+def _field_of(message: str, prefix: str) -> str | None:
+    m = re.search(rf"{prefix}\.(\w+)", message)
+    return m.group(1) if m else None
+
+
+def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Path | None = None) -> Matrix:
+    """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages."""
+    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers"})
+    if unknown:
+        raise _fail(source, unknown[0], "unknown table; expected [matrix], [scenarios.NAME] or "
+                                        "[controllers.NAME]")
+    m = data.get("matrix")
+    if not isinstance(m, dict):
+        raise _fail(source, "matrix", "missing [matrix] table")
+    bad = sorted(set(m) - set(_MATRIX_KEYS))
+    if bad:
+        raise _fail(source, f"matrix.{bad[0]}", f"unknown key; expected one of {list(_MATRIX_KEYS)}")
+    for key in ("controllers", "scenarios", "seeds"):
+        if key not in m:
+            raise _fail(source, f"matrix.{key}", "is required")
+
+    plugins = m.get("plugins", [])
+    if not isinstance(plugins, list) or not all(isinstance(p, str) and p for p in plugins):
+        raise _fail(source, "matrix.plugins", f"must be a list of module names, got {plugins!r}")
+    plugin_dirs = (str(base_dir),) if base_dir is not None and plugins else ()
+    for i, module in enumerate(plugins):
+        try:
+            load_plugins((module,), plugin_dirs)
+        except Exception as exc:
+            raise _fail(source, f"matrix.plugins[{i}]", f"cannot import {module!r}: "
+                                                         f"{type(exc).__name__}: {exc}") from None
+
+    seeds = m["seeds"]
+    if (not isinstance(seeds, list) or not seeds
+            or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)):
+        raise _fail(source, "matrix.seeds", f"must be a non-empty list of integers >= 0, got {seeds!r}")
+    if len(set(seeds)) != len(seeds):
+        raise _fail(source, "matrix.seeds", "lists a seed more than once")
+
+    duration = _number(source, "matrix.duration_s", m["duration_s"], positive=True, allow_zero=False) \
+        if "duration_s" in m else None
+    warmup = _number(source, "matrix.warmup_s", m["warmup_s"], positive=True) if "warmup_s" in m else None
+    limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
+                    positive=True, allow_zero=False)
+    description = m.get("description", "")
+    if not isinstance(description, str):
+        raise _fail(source, "matrix.description", f"must be a string, got {description!r}")
+
+    scenarios = _scenarios(source, data.get("scenarios", {}))
+    variants = _variants(source, data.get("controllers", {}))
+
+    from controllers.base import available_controllers
+    registered = available_controllers()
+    chosen_controllers = []
+    for i, name in enumerate(_names(source, "matrix.controllers", m["controllers"])):
+        if name in variants:
+            chosen_controllers.append(variants[name])
+        elif name in registered:
+            chosen_controllers.append(ControllerSpec(name, name, {}))
+        else:
+            known = sorted(set(registered) | set(variants))
+            raise _fail(source, f"matrix.controllers[{i}]", f"unknown controller {name!r}; known: {known}")
+    chosen_scenarios = []
+    for i, name in enumerate(_names(source, "matrix.scenarios", m["scenarios"])):
+        if name not in scenarios:
+            raise _fail(source, f"matrix.scenarios[{i}]", f"unknown scenario {name!r}; known: {sorted(scenarios)}")
+        try:
+            chosen_scenarios.append(scenarios[name].with_durations(duration, warmup))
+        except ValueError as exc:
+            key = "matrix.warmup_s" if warmup is not None else "matrix.duration_s"
+            raise _fail(source, key, f"scenario {name!r}: {exc}") from None
+    return Matrix(source, tuple(chosen_controllers), tuple(chosen_scenarios), tuple(seeds), limit,
+                  tuple(plugins), plugin_dirs, duration, warmup, description, variants)
+
+
+def _scenarios(source: str, table: Any) -> dict[str, Scenario]:
+    if not isinstance(table, dict):
+        raise _fail(source, "scenarios", "must be a table of [scenarios.NAME] tables")
+    known = builtin_scenarios()
+    pending = dict(table)
+    for name in pending:
+        key = f"scenarios.{name}"
+        _check_name(source, key, name)
+        if name in known:
+            raise _fail(source, key, f"redefines the built-in scenario {name!r}; choose another name")
+        if not isinstance(pending[name], dict):
+            raise _fail(source, key, "must be a table")
+    resolving: list[str] = []
+
+    def resolve(name: str) -> Scenario:
+        if name in known:
+            return known[name]
+        key = f"scenarios.{name}"
+        if name in resolving:
+            raise _fail(source, key, f"base chain loops: {' -> '.join(resolving + [name])}")
+        spec = dict(pending[name])
+        base = spec.pop("base", None)
+        if not isinstance(base, str):
+            raise _fail(source, f"{key}.base", f"is required and must name a scenario, got {base!r}")
+        if base not in known and base not in pending:
+            raise _fail(source, f"{key}.base", f"unknown scenario {base!r}; known: {sorted(set(known) | set(pending))}")
+        resolving.append(name)
+        base_scenario = resolve(base)
+        resolving.pop()
+        try:
+            scenario = derive_scenario(name, base_scenario, spec)
+        except ValueError as exc:
+            msg = str(exc)
+            fld = _field_of(msg, "PlantParams") or _field_of(msg, "Scenario")
+            if "has no field" in msg:
+                fld = re.search(r"no field '(\w+)'", msg).group(1) if re.search(r"no field '(\w+)'", msg) else None
+                msg = f"unknown key {fld!r}; expected {list(SCENARIO_KEYS)} or a PlantParams field " \
+                      f"({msg.split('fields are ', 1)[-1]})"
+            raise _fail(source, f"{key}.{fld}" if fld else key, msg) from None
+        known[name] = scenario
+        return scenario
+
+    for name in list(pending):
+        resolve(name)
+    return known
+
+
+def _variants(source: str, table: Any) -> dict[str, ControllerSpec]:
+    if not isinstance(table, dict):
+        raise _fail(source, "controllers", "must be a table of [controllers.NAME] tables")
+    from controllers.base import available_controllers
+    registered = available_controllers()
+    out: dict[str, ControllerSpec] = {}
+    for name, spec in table.items():
+        key = f"controllers.{name}"
+        _check_name(source, key, name)
+        if not isinstance(spec, dict):
+            raise _fail(source, key, "must be a table")
+        if name in registered:
+            raise _fail(source, key, f"a variant cannot reuse the registered name {name!r}; choose another name")
+        options = dict(spec)
+        base = options.pop("base", None)
+        if base not in registered:
+            raise _fail(source, f"{key}.base", f"must name a registered controller, got {base!r}; "
+                                               f"registered: {sorted(registered)}")
+        cs = ControllerSpec(name, base, options)
+        try:
+            cs.build()
+        except Exception as exc:  # the constructor validates its options (ValueError, TypeError)
+            msg = str(exc)
+            named = [o for o in options if re.search(rf"\b{re.escape(o)}\b", msg)]
+            where = f"{key}.{named[0]}" if named else key
+            raise _fail(source, where, f"{type(exc).__name__}: {msg}" if not isinstance(exc, ValueError)
+                        else msg) from None
+        out[name] = cs
+    return out
