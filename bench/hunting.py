@@ -4,15 +4,17 @@ A slip is a maximal run of trace points where the shaft moves (mode 1 or 3, or |
 tolerance). The trace is *hunting* when, in the tail window of the run,
 
 * at least ``min_cycles`` slips start,
+* the slip starts are roughly periodic: the interquartile range of their spacing is at most
+  ``max_period_spread`` times its median (a robust measure: the noisy plant's hunting cycle
+  has occasional long sticks; a Poisson stream of slips has ln 3/ln 2 ≈ 1.58),
 * the slips keep coming up to the end: the last one ends within ``max_quiet_periods`` median
   slip periods of the end of the trace,
-* the slip starts are roughly periodic: coefficient of variation of their spacing
-  ≤ ``max_period_cv``,
 * and, with ``require_reversals``, most consecutive slips go in opposite directions
   (the back-and-forth hunting of a stationary set-point; a ramp's stick-slip is one-way).
 
 Otherwise it has *settled*. Use the event trace when there is one: slips of a hunting cycle can
-be shorter than a sample period, and samples at 100 Hz can miss them.
+be shorter than a sample period, and samples at 100 Hz can miss them. Slips in the same
+direction separated by a stick shorter than ``min_stick_s`` count as one.
 """
 
 from __future__ import annotations
@@ -37,8 +39,8 @@ class HuntingVerdict:
         Slips that start in the tail window.
     period_s : float
         Median spacing of those slip starts [s] (nan with fewer than two).
-    period_cv : float
-        Coefficient of variation of the spacing (nan with fewer than three slips).
+    period_spread : float
+        Interquartile range / median of the spacing (nan with fewer than three slips).
     reversal_fraction : float
         Fraction of consecutive tail slips with opposite directions (nan with fewer than two).
     amplitude_rad : float
@@ -52,7 +54,7 @@ class HuntingVerdict:
     sustained: bool
     n_slips: int
     period_s: float
-    period_cv: float
+    period_spread: float
     reversal_fraction: float
     amplitude_rad: float
     last_motion_s: float
@@ -75,20 +77,31 @@ def _direction(t: np.ndarray, mode: np.ndarray | None, velocity: np.ndarray | No
     return np.where(v > velocity_tol, 1, np.where(v < -velocity_tol, -1, 0))
 
 
-def slip_episodes(t: np.ndarray, direction: np.ndarray) -> list[tuple[float, float, int]]:
-    """Maximal moving runs as (start time, end time, direction of their first point)."""
+def slip_episodes(t: np.ndarray, direction: np.ndarray, min_stick_s: float = 0.0,
+                  ) -> list[tuple[float, float, int]]:
+    """Moving runs as (start time, end time, direction of their first point).
+
+    Runs in the same direction separated by a stick shorter than ``min_stick_s`` [s] merge.
+    """
     moving = direction != 0
     edges = np.diff(moving.astype(np.int8), prepend=0, append=0)
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1) - 1
-    return [(float(t[a]), float(t[b]), int(direction[a])) for a, b in zip(starts, ends)]
+    out: list[tuple[float, float, int]] = []
+    for a, b in zip(starts, ends):
+        start, end, d = float(t[a]), float(t[b]), int(direction[a])
+        if out and out[-1][2] == d and start - out[-1][1] < min_stick_s:
+            out[-1] = (out[-1][0], end, d)
+        else:
+            out.append((start, end, d))
+    return out
 
 
 def detect_hunting(t: np.ndarray, x1: np.ndarray, mode: np.ndarray | None = None, *,
                    velocity: np.ndarray | None = None, velocity_tol: float = 0.0,
                    tail_fraction: float = 0.5, min_cycles: int = 3,
-                   max_period_cv: float = 0.5, max_quiet_periods: float = 2.0,
-                   require_reversals: bool = False) -> HuntingVerdict:
+                   max_period_spread: float = 1.0, max_quiet_periods: float = 4.0,
+                   min_stick_s: float = 0.05, require_reversals: bool = False) -> HuntingVerdict:
     """Decide whether a trace ends in a sustained stick-slip (hunting) limit cycle.
 
     Parameters
@@ -105,10 +118,12 @@ def detect_hunting(t: np.ndarray, x1: np.ndarray, mode: np.ndarray | None = None
         The tail window is the last ``tail_fraction`` of the time span, in (0, 1].
     min_cycles : int
         Least number of slips starting in the tail window, ≥ 3.
-    max_period_cv : float
-        Largest coefficient of variation of the slip spacing that counts as periodic.
+    max_period_spread : float
+        Largest interquartile-range/median of the slip spacing that counts as periodic.
     max_quiet_periods : float
         The last slip must end within this many median periods of the trace's end.
+    min_stick_s : float
+        Same-direction slips separated by a shorter stick [s] count as one.
     require_reversals : bool
         Also require at least half the consecutive slips to reverse direction.
 
@@ -131,15 +146,17 @@ def detect_hunting(t: np.ndarray, x1: np.ndarray, mode: np.ndarray | None = None
         raise ValueError(f"tail_fraction must be in (0, 1], got {tail_fraction!r}")
     if not (isinstance(min_cycles, int) and min_cycles >= 3):
         raise ValueError(f"min_cycles must be an integer >= 3, got {min_cycles!r}")
-    if not max_period_cv > 0:
-        raise ValueError(f"max_period_cv must be > 0, got {max_period_cv!r}")
+    if not max_period_spread > 0:
+        raise ValueError(f"max_period_spread must be > 0, got {max_period_spread!r}")
+    if not min_stick_s >= 0:
+        raise ValueError(f"min_stick_s must be >= 0, got {min_stick_s!r}")
     if not max_quiet_periods > 0:
         raise ValueError(f"max_quiet_periods must be > 0, got {max_quiet_periods!r}")
     if not velocity_tol >= 0:
         raise ValueError(f"velocity_tol must be >= 0, got {velocity_tol!r}")
 
     direction = _direction(t, mode, velocity, velocity_tol)
-    slips = slip_episodes(t, direction)
+    slips = slip_episodes(t, direction, min_stick_s)
     moving_idx = np.flatnonzero(direction)
     last_motion = float(t[moving_idx[-1]]) if moving_idx.size else math.nan
     t_end = float(t[-1])
@@ -150,25 +167,27 @@ def detect_hunting(t: np.ndarray, x1: np.ndarray, mode: np.ndarray | None = None
     starts = np.array([s[0] for s in tail])
     gaps = np.diff(starts)
     period = float(np.median(gaps)) if gaps.size else math.nan
-    cv = float(np.std(gaps) / np.mean(gaps)) if gaps.size >= 2 and np.mean(gaps) > 0 else math.nan
+    spread = (float(np.subtract(*np.percentile(gaps, [75, 25])) / period)
+              if gaps.size >= 2 and period > 0 else math.nan)
     dirs = np.array([s[2] for s in tail])
     reversals = float(np.mean(dirs[1:] != dirs[:-1])) if dirs.size >= 2 else math.nan
 
     def verdict(sustained: bool, reason: str) -> HuntingVerdict:
-        return HuntingVerdict(sustained, len(tail), period, cv, reversals, amplitude,
+        return HuntingVerdict(sustained, len(tail), period, spread, reversals, amplitude,
                               last_motion, reason)
 
     if len(tail) < min_cycles:
         return verdict(False, f"{len(tail)} slips in the tail window, fewer than {min_cycles}")
+    if not spread <= max_period_spread:
+        return verdict(False, f"slip spacing not periodic: spread {spread:.3g} > "
+                              f"{max_period_spread}")
     quiet = t_end - tail[-1][1]
     if quiet > max_quiet_periods * period:
         return verdict(False, f"no motion for the last {quiet:.4g} s "
                               f"(> {max_quiet_periods} × period {period:.4g} s): settled")
-    if not cv <= max_period_cv:
-        return verdict(False, f"slip spacing not periodic: CV {cv:.3g} > {max_period_cv}")
     if require_reversals and not reversals >= 0.5:
         return verdict(False, f"only {reversals:.0%} of consecutive slips reverse direction")
-    return verdict(True, f"{len(tail)} slips, period {period:.4g} s, CV {cv:.3g}, "
+    return verdict(True, f"{len(tail)} slips, period {period:.4g} s, spread {spread:.3g}, "
                          f"reversals {reversals:.0%}")
 
 

@@ -26,6 +26,7 @@ e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import tomllib
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.cells import Cell, ControllerSpec, load_plugins
+from plant.params import PlantParams
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
 
 __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matrix_path",
@@ -43,6 +45,7 @@ __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matr
 DEFAULT_TIME_LIMIT_S = 600.0
 _MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
                 "description")
+_PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
@@ -242,6 +245,10 @@ def _scenarios(source: str, table: Any) -> dict[str, Scenario]:
             raise _fail(source, f"{key}.base", f"is required and must name a scenario, got {base!r}")
         if base not in known and base not in pending:
             raise _fail(source, f"{key}.base", f"unknown scenario {base!r}; known: {sorted(set(known) | set(pending))}")
+        unknown = sorted(set(spec) - set(SCENARIO_KEYS) - _PLANT_FIELDS)
+        if unknown:
+            raise _fail(source, f"{key}.{unknown[0]}", f"unknown key; expected one of {list(SCENARIO_KEYS)} "
+                                                       f"or a PlantParams field {sorted(_PLANT_FIELDS)}")
         resolving.append(name)
         base_scenario = resolve(base)
         resolving.pop()
@@ -250,10 +257,6 @@ def _scenarios(source: str, table: Any) -> dict[str, Scenario]:
         except ValueError as exc:
             msg = str(exc)
             fld = _field_of(msg, "PlantParams") or _field_of(msg, "Scenario")
-            if "has no field" in msg:
-                fld = re.search(r"no field '(\w+)'", msg).group(1) if re.search(r"no field '(\w+)'", msg) else None
-                msg = f"unknown key {fld!r}; expected {list(SCENARIO_KEYS)} or a PlantParams field " \
-                      f"({msg.split('fields are ', 1)[-1]})"
             raise _fail(source, f"{key}.{fld}" if fld else key, msg) from None
         known[name] = scenario
         return scenario

@@ -48,7 +48,7 @@ from plant._kernels import moving_noisy
 from plant.noise import NoiseFactor, noise_factor
 from plant.params import PlantParams
 from plant.segments import hermite_peak, torque_crossing_time, torque_integrals
-from plant.transition import U, X1, X2, X3, X4, X5, X6, N_STATE, phi, process_noise
+from plant.transition import U, X1, X2, X3, X4, X5, X6, N_STATE, e1, phi, process_noise
 
 __all__ = ["PlantState", "SimOptions", "Accumulator", "Status", "advance", "initial_state"]
 
@@ -382,11 +382,8 @@ def _stuck(run: _Run, t_end: float) -> None:
     h = min(h_end, h_fb, h_up, h_dn)
     x1_before = run.X[X1]
     run.torque_metrics(x3, u, h)
-    Xn = run.cache.phi(2, h) @ run.X
-    if run.noisy and p.sigma4_sq > 0:
-        Xn += _draw(run, 2, h)
-    run.X = Xn
-    run.acc.merge_peak(max(abs(x1_before), abs(Xn[X1])))   # x1 is monotone while stuck
+    _stuck_propagate(run, h)
+    run.acc.merge_peak(max(abs(x1_before), abs(run.X[X1])))   # x1 is monotone while stuck
     if h == h_end:
         run.t = t_end
         return
@@ -399,6 +396,51 @@ def _stuck(run: _Run, t_end: float) -> None:
         run.mode = 3 if h == h_up else 1
         run.acc.n_breakaways += 1
     run.event()
+
+
+def _stuck_propagate(run: _Run, h: float) -> None:
+    """Mode 2 over h: Φ_2 of (3-22) and its (x1, x4) noise (4-11), both in closed form.
+
+    With y = β4·h and E = 1 − e^(−y): COV = σ4²·[[(y − E − E²/2)/β4³, −E²/(2β4²)],
+    [·, E(2 − E)/(2β4)]], the exact integral of (4-8) for the OU command velocity.
+    Drawn as a 2 × 2 Cholesky factor with two unit normals, as the general factor does.
+    """
+    p, X = run.p, run.X
+    b4 = p.beta4
+    y = b4 * h
+    E = e1(y)
+    x4 = X[X4]
+    X[X1] -= x4 * E / b4                                  # q14
+    X[X4] = x4 * (1.0 - E)                                # q44
+    X[X3] = X[U] + (X[X3] - X[U]) * math.exp(-p.beta3 * h)
+    if run.noisy and p.sigma4_sq > 0:
+        s4 = p.sigma4_sq
+        c11 = s4 * _e4(y) / b4**3
+        c14 = -s4 * E * E / (2.0 * b4 * b4)
+        c44 = s4 * E * (2.0 - E) / (2.0 * b4)
+        l11 = math.sqrt(c11)
+        l21 = c14 / l11
+        l22 = math.sqrt(max(c44 - l21 * l21, 0.0))
+        z1, z2 = run.rng.standard_normal(2)
+        X[X1] += l11 * z1
+        X[X4] += l21 * z1 + l22 * z2
+
+
+def _e4(y: float) -> float:
+    """∫₀^y (1 − e^(−s))² ds = y − E − E²/2 with E = 1 − e^(−y), without cancellation."""
+    if y >= 0.5:
+        E = e1(y)
+        return y - E - 0.5 * E * E
+    # Σ_{k≥2} (−1)^k (2^k − 2) y^(k+1)/(k+1)!
+    total, fact, k = 0.0, 6.0, 2
+    power = y**3
+    while k < 30:
+        term = (2.0**k - 2.0) * power / fact
+        total += term if k % 2 == 0 else -term
+        k += 1
+        power *= y
+        fact *= k + 1
+    return total
 
 
 def _draw(run: _Run, mode: int, h: float) -> np.ndarray:

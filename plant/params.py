@@ -68,12 +68,15 @@ class PlantParams:
     command_velocity_initial: float = 30e-6
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"PlantParams.{f.name} must be a real number, got {value!r}")
-            _require(math.isfinite(value), f.name, f"must be finite, got {value!r}")
-            object.__setattr__(self, f.name, float(value))
+        for name in _FIELD_NAMES:
+            value = getattr(self, name)
+            if type(value) is not float:
+                if isinstance(value, bool) or not isinstance(value, (int, float)):
+                    raise ValueError(f"PlantParams.{name} must be a real number, got {value!r}")
+                value = float(value)
+                object.__setattr__(self, name, value)
+            if not math.isfinite(value):
+                raise ValueError(f"PlantParams.{name} must be finite, got {value!r}")
         for name in ("inertia", "motor_time_constant", "u_max", "sample_period",
                      "correlated_friction_tau", "command_velocity_tau"):
             _require(getattr(self, name) > 0, name, f"must be > 0, got {getattr(self, name)!r}")
@@ -156,3 +159,6 @@ class PlantParams:
         """The same plant with every noise source switched off."""
         return self.replace(measurement_noise_std=0.0, friction_noise_psd=0.0,
                             correlated_friction_std=0.0, command_velocity_std=0.0)
+
+
+_FIELD_NAMES = tuple(f.name for f in dataclasses.fields(PlantParams))

@@ -17,7 +17,7 @@ import numpy as np
 from plant.drive import DriveCommand, DriveType
 from plant.multimode import Accumulator, SimOptions, Status, advance, initial_state
 from plant.params import PlantParams
-from plant.transition import X1, X3
+from plant.transition import X1, X3, e1, e2
 
 __all__ = ["PulseResponse", "pulse_response"]
 
@@ -66,6 +66,14 @@ def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int
     dt_u = float(dt_u)
     if dt_u == 0.0:
         return PulseResponse(0.0, None, 0.0, 0.0)
+    if seed is None and options is None:
+        return _closed_form(params, dt_u, sign)
+    return _simulate(params, dt_u, sign, seed, options)
+
+
+def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
+              options: SimOptions | None) -> PulseResponse:
+    """The pulse through the general event-driven simulator (noisy or not)."""
     noisy = seed is not None
     p = params.replace(command_velocity_std=0.0)
     opts = options or SimOptions(noise=noisy)
@@ -77,11 +85,14 @@ def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int
     level = sign * p.u_max
     times: dict[str, float] = {}
 
+    moving = [False]
+
     def recorder(t: float, X: np.ndarray, mode: int) -> None:
         if mode != 2 and "breakaway" not in times:
             times["breakaway"] = t
-        if mode == 2 and "breakaway" in times:
+        if mode == 2 and moving[0]:
             times["stop"] = t
+        moving[0] = mode != 2
         if t > dt_u and X[X3] == 0.0 and "current_zero" not in times:
             times["current_zero"] = t
 
@@ -100,3 +111,70 @@ def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int
     t_cz = times.get("current_zero", dt_u + t_fly)
     t_brk = times.get("breakaway")
     return PulseResponse(float(state.X[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
+
+
+def _move(x1: float, x2: float, x3: float, u: float, kc: float, tau: float, p: PlantParams) -> tuple[float, float, float]:
+    """Mode-3 motion under constant u for tau seconds (closed form of (3-20)/(3-21), x4 = x5 = 0)."""
+    t3, a = p.motor_time_constant, p.alpha
+    y = tau / t3
+    g = x3 - u
+    return (x1 + x2 * tau + a * ((u - kc) * tau * tau / 2.0 + g * t3 * t3 * e2(y)),
+            x2 + a * ((u - kc) * tau + g * t3 * e1(y)),
+            u + g * math.exp(-y))
+
+
+def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
+    """Noise-free pulse by its closed-form phases: stuck, driven, flyback, coasting.
+
+    Breakaway, the end of the reflection regime, the flyback end and the final stop on the
+    coast (ẋ2 = −α·k̄c) are explicit; only a stop during flyback needs a scalar root of the
+    closed-form velocity, found by safeguarded Newton to ~1e-15 s.
+    """
+    p = params
+    U, t3, a, ks, kc = p.u_max, p.motor_time_constant, p.alpha, p.stiction, p.coulomb
+    x3_on = U * e1(dt_u / t3)
+    t_cz = dt_u + t3 * math.log1p(x3_on / U)
+    t_b = p.breakaway_time
+    if not dt_u > t_b:
+        return PulseResponse(0.0, None, t_cz, 0.0)
+    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, p)                # driven, reflecting
+    t = dt_u
+    t_r = t3 * math.log((x3 + U) / (ks + U)) if x3 > ks else 0.0         # flyback down to ks
+    x1, x2, x3 = _move(x1, x2, ks if t_r == 0.0 else x3, -U, kc, t_r, p)
+    x3 = ks if t_r > 0.0 else x3
+    t += t_r
+    t_f = t3 * math.log1p(x3 / U)                                         # to current zero
+    v_end = _move(x1, x2, x3, -U, kc, t_f, p)[1]
+    if v_end <= 0.0:
+        tau = _velocity_root(x1, x2, x3, -U, kc, t_f, p)
+        x1 = _move(x1, x2, x3, -U, kc, tau, p)[0]
+        return PulseResponse(sign * x1, t_b, t_cz, t + tau)
+    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_f, p)
+    t += t_f
+    if kc <= 0.0:
+        raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
+    tau = x2 / (a * kc)                                                   # coast: ẋ2 = −α·k̄c
+    return PulseResponse(sign * (x1 + x2 * x2 / (2.0 * a * kc)), t_b, t_cz, t + tau)
+
+
+def _velocity_root(x1: float, x2: float, x3: float, u: float, kc: float, h: float, p: PlantParams) -> float:
+    """First zero of the closed-form velocity on (0, h], given x2 > 0 at 0 and ≤ 0 at h."""
+    t3 = p.motor_time_constant
+    # x2 rises while x3 > kc and falls after: the zero lies after x3 = kc.
+    lo = t3 * math.log((x3 - u) / (kc - u)) if x3 > kc else 0.0
+    hi = h
+    tau = 0.5 * (lo + hi)
+    for _ in range(200):
+        _, v, x3t = _move(x1, x2, x3, u, kc, tau, p)
+        if v == 0.0:
+            return tau
+        if v > 0.0:
+            lo = tau
+        else:
+            hi = tau
+        if hi - lo <= 1e-15:
+            return hi
+        slope = p.alpha * (x3t - kc)
+        newton = tau - v / slope if slope != 0.0 else math.nan
+        tau = newton if lo < newton < hi else 0.5 * (lo + hi)
+    return tau

@@ -63,3 +63,18 @@ def test_bad_arguments():
         pulse_response(P0, math.nan)
     with pytest.raises(ValueError, match="sign"):
         pulse_response(P0, 1e-3, sign=2)
+
+
+@pytest.mark.parametrize("params", PARAM_SETS)
+def test_closed_form_path_equals_event_loop(params):
+    """The public noise-free fast path and the general event-driven simulator are two
+    independent exact computations; they must agree to round-off, event times included."""
+    from plant.pulse import _closed_form, _simulate
+
+    for frac in np.linspace(1.0001, 8.0, 40):
+        dt_u = frac * params.breakaway_time
+        a, b = _closed_form(params, dt_u, 1), _simulate(params, dt_u, 1, None, None)
+        assert a.delta_c == pytest.approx(b.delta_c, rel=1e-11)
+        assert a.t_stop == pytest.approx(b.t_stop, abs=1e-12)
+        assert a.t_current_zero == pytest.approx(b.t_current_zero, abs=1e-12)
+        assert a.t_breakaway == pytest.approx(b.t_breakaway, abs=1e-12)

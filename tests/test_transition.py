@@ -157,3 +157,17 @@ def test_factor_sample_statistics():
 def test_factor_rejects_bad_matrices(bad, match):
     with pytest.raises(ValueError, match=match):
         noise_factor(bad)
+
+
+def test_stuck_closed_form_matches_general_factor_statistics():
+    """Mode 2's scalar fast path (exact 2 × 2 covariance) against process_noise (quadrature)."""
+    from plant.multimode import _e4
+    from plant.transition import e1
+
+    p = PlantParams(command_velocity_tau=3.0)
+    for h in (1e-5, 1e-2, 0.7, 4.0):
+        y, E, b4, s4 = p.beta4 * h, e1(p.beta4 * h), p.beta4, p.sigma4_sq
+        C = process_noise(2, h, p)
+        assert s4 * _e4(y) / b4**3 == pytest.approx(C[X1, X1], rel=1e-12)
+        assert -s4 * E * E / (2 * b4 * b4) == pytest.approx(C[X1, X4], rel=1e-12)
+        assert s4 * E * (2 - E) / (2 * b4) == pytest.approx(C[X4, X4], rel=1e-12)

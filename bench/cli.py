@@ -1,0 +1,262 @@
+"""``solnic-bench``: the benchmark's command line (typer + rich).
+
+Commands (one function each; a new command is one more ``@app.command`` function):
+
+* ``run`` — run a matrix into ``--out DIR`` (resumes), print the aggregate table, build the report;
+* ``report DIR`` — rebuild ``DIR/report.html`` from stored results;
+* ``list`` — registered controllers and built-in scenarios.
+
+Exit codes: 0 done (cells with status ``error`` are results, not failures of the command);
+1 some cells could not be run (a lost worker) or the report failed; 2 a user error — a malformed
+matrix, an unknown controller or scenario, a bad parameter, an unwritable ``--out`` — reported in
+one line naming the file, line or field, with nothing written to the results; 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import shlex
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import typer
+from rich import box
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+__all__ = ["app", "main", "UserError"]
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Benchmark servo controllers on a plant with stiction and Coulomb friction "
+                       "(Acker 1967).")
+# Wide when not a terminal, so that logs keep whole tables and one-line messages.
+out_console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
+err_console = Console(stderr=True, highlight=False, width=None if sys.stderr.isatty() else 160)
+
+
+class UserError(Exception):
+    """A mistake in the command line or its inputs: one line on stderr, exit code 2."""
+
+
+def _user_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Turn user errors (and the library's validation errors) into exit code 2 and one line."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from bench.executors import ExecutorError
+        from bench.matrix import MatrixError
+        from bench.store import StoreBusy
+        try:
+            return fn(*args, **kwargs)
+        except (UserError, MatrixError, ExecutorError, StoreBusy) as exc:
+            err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
+            raise typer.Exit(2) from None
+
+    return wrapper
+
+
+def _writable_dir(path: Path, flag: str = "--out") -> Path:
+    """Create ``path`` if needed and prove it writable (a probe file, removed again)."""
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{flag} {path}: exists and is not a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".write-probe.", suffix=".tmp", dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise UserError(f"{flag} {path}: cannot write: {exc.strerror or exc}") from None
+    return path
+
+
+def _build_report(out: Path) -> Path | None:
+    """``DIR/report.html`` via reports.build_report_from_dir; None (with a warning) if the
+    reports package is not importable."""
+    try:
+        from reports import build_report_from_dir
+    except ImportError as exc:
+        err_console.print(f"warning: reports is not importable ({escape(str(exc))}); skipped report.html")
+        return None
+    return build_report_from_dir(out)
+
+
+def _fmt(v: float, digits: int = 3) -> str:
+    if v != v:  # NaN
+        return "—"
+    return f"{v:.{digits}g}"
+
+
+def _print_aggregate(results, matrix) -> None:
+    from bench.aggregate import aggregate
+
+    agg = aggregate(results, ([c.name for c in matrix.controllers], [s.name for s in matrix.scenarios]))
+    if agg.empty:
+        out_console.print("no results")
+        return
+    table = Table(title="Over seeds (status ok only): mean, worst and spread (sd). "
+                        "Peak and RMS error in µrad, currents in ozf·in, runtime in s.",
+                  title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
+    columns = [("controller", "left"), ("scenario", "left"), ("ok", "right")]
+    stats = [("peak_error_rad", "peak", ("mean", "worst", "sd")), ("rms_error_rad", "RMS err", ("mean",)),
+             ("mean_abs_current", "mean|i|", ("mean", "worst", "sd")), ("rms_current", "RMS i", ("mean",)),
+             ("runtime_s", "runtime", ("mean", "worst"))]
+    for name, justify in columns:
+        table.add_column(name, justify=justify, overflow="fold")
+    for _, label, kinds in stats:
+        for kind in kinds:
+            table.add_column(f"{label}\n{kind}", justify="right", no_wrap=True)
+    suffix = {"mean": "_mean", "worst": "_worst", "sd": "_spread"}
+    for _, r in agg.iterrows():
+        cells = [escape(r["controller"]), escape(r["scenario"]), f"{r['ok']}/{r['cells']}"]
+        cells += [_fmt(r[col + suffix[k]], 2 if k == "sd" else 3) for col, _, kinds in stats for k in kinds]
+        table.add_row(*cells, style=None if r["ok"] == r["cells"] else "red")
+    out_console.print(table)
+
+
+@app.command("run")
+@_user_errors
+def run(
+    matrix: Optional[Path] = typer.Option(None, "--matrix", help="Matrix TOML file (default: the built-in default matrix)."),
+    quick: bool = typer.Option(False, "--quick", help="The built-in quick matrix (about a minute on 2 cores)."),
+    out: Path = typer.Option(Path("results"), "--out", help="Run directory; a re-run resumes it."),
+    executor: str = typer.Option("local", "--executor", help="local (process pool) or dask."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="dask scheduler address (default: a LocalCluster)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: CPU count)."),
+    no_traces: bool = typer.Option(False, "--no-traces", help="Do not write rerun traces."),
+) -> None:
+    """Run a benchmark matrix: DIR/results.{parquet,csv}, DIR/traces/*.rrd, DIR/report.html."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    from bench.driver import run_matrix
+    from bench.executors import make_executor
+    from bench.matrix import builtin_matrix_path, load_matrix
+
+    if matrix is not None and quick:
+        raise UserError("--matrix and --quick exclude each other")
+    spec = load_matrix(matrix if matrix is not None else builtin_matrix_path(quick))
+    pool = make_executor(executor, workers, scheduler)
+    _writable_dir(out)
+    traces = not no_traces
+
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                        TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(),
+                        console=err_console, transient=False)
+    task = None
+
+    def on_start(to_run: int, done: int) -> None:
+        nonlocal task
+        n = to_run + done
+        how = f" ({pool.kind}, {min(pool.workers, to_run)} workers)" if to_run else ""
+        err_console.print(f"{spec.source}: {n} cells, {done} already in {out}, {to_run} to run{how}")
+        if to_run:
+            task = progress.add_task("cells", total=to_run)
+            progress.start()
+
+    def on_cell(row: dict[str, Any]) -> None:
+        status = row["status"]
+        mark = "" if status == "ok" else f" [red]{escape(status)}[/red]"
+        progress.update(task, advance=1, description=f"{escape(row['cell'])}{mark}")
+
+    try:
+        outcome = run_matrix(spec, out, executor=pool, traces=traces, on_start=on_start, on_cell=on_cell,
+                             command=shlex.join(["solnic-bench", *sys.argv[1:]]))
+    finally:
+        progress.stop()
+
+    results = outcome.results
+    _print_aggregate(results, spec)
+    bad = results[results["status"] != "ok"] if len(results) else results
+    for _, r in bad.iterrows():
+        err_console.print(f"{escape(r['cell'])}: {escape(r['status'])}: {escape(str(r['message']))}", soft_wrap=True)
+    out_console.print(f"{len(results)} cells in {out / 'results.parquet'} ({len(results) - len(bad)} ok, "
+                      f"{len(outcome.computed)} computed, {outcome.skipped} resumed) in {outcome.elapsed_s:.1f} s")
+    for cell, why in outcome.lost:
+        err_console.print(f"{escape(cell)}: not run: {escape(why)}", soft_wrap=True)
+    if outcome.interrupted:
+        err_console.print(f"interrupted: {len(outcome.computed)} cells stored; run again with --out {out} to resume")
+        raise typer.Exit(130)
+    try:
+        path = _build_report(out)
+    except (ValueError, OSError) as exc:
+        err_console.print(f"error: report: {escape(str(exc))}", soft_wrap=True)
+        raise typer.Exit(1) from None
+    if path is not None:
+        out_console.print(f"report: {path}")
+    if outcome.lost:
+        err_console.print(f"{len(outcome.lost)} cells were not run; run again with --out {out} to resume")
+        raise typer.Exit(1)
+
+
+@app.command("report")
+@_user_errors
+def report(run_dir: Path = typer.Argument(..., help="A run directory written by `solnic-bench run`.")) -> None:
+    """Rebuild DIR/report.html from the results stored in DIR."""
+    if not run_dir.is_dir():
+        raise UserError(f"{run_dir}: no such run directory")
+    try:
+        from reports import build_report_from_dir
+    except ImportError as exc:
+        err_console.print(f"error: reports is not importable: {escape(str(exc))}")
+        raise typer.Exit(1) from None
+    try:
+        path = build_report_from_dir(run_dir)
+    except ValueError as exc:   # a malformed input file; the message names it
+        raise UserError(f"{run_dir}: {exc}") from None
+    out_console.print(f"report: {path}")
+
+
+@app.command("list")
+@_user_errors
+def list_(
+    matrix: Optional[Path] = typer.Option(None, "--matrix", help="Also list a matrix file's variants and scenarios."),
+) -> None:
+    """Registered controllers, built-in scenarios and matrices."""
+    from controllers.base import available_controllers
+
+    from bench.matrix import builtin_matrix_path, load_matrix
+    from bench.scenarios import builtin_scenarios
+
+    spec = load_matrix(matrix) if matrix is not None else None
+    table = Table(title="controllers", title_justify="left")
+    for col in ("name", "drive", "description"):
+        table.add_column(escape(col))
+    for name, cls in available_controllers().items():
+        table.add_row(escape(name), cls.drive.value, escape(cls.description or (cls.__doc__ or "").split("\n")[0]))
+    for name, cs in (spec.variants.items() if spec else ()):
+        table.add_row(escape(name), _drive(cs.base), escape(f"variant of {cs.base}: {cs.options}"))
+    out_console.print(table)
+
+    table = Table(title="scenarios", title_justify="left")
+    for col in ("name", "duration [s]", "warm-up [s]", "description"):
+        table.add_column(escape(col))
+    scenarios = dict(builtin_scenarios())
+    if spec:
+        scenarios.update({s.name: s for s in spec.scenarios})
+    for name, s in scenarios.items():
+        table.add_row(escape(name), f"{s.duration_s:g}", f"{s.warmup_s:g}", escape(s.description))
+    out_console.print(table)
+    for quick in (False, True):
+        m = load_matrix(builtin_matrix_path(quick))
+        n = len(m.cells())
+        out_console.print(f"{'--quick' if quick else 'default'} matrix: {n} cells = "
+                          f"{len(m.controllers)} controllers × {len(m.scenarios)} scenarios × "
+                          f"{len(m.seeds)} seeds ({escape(m.source)})")
+
+
+def _drive(base: str) -> str:
+    from controllers.base import get_controller
+    return get_controller(base).drive.value
+
+
+def main() -> None:
+    """Entry point for ``python -m bench.cli``."""
+    app()
+
+
+if __name__ == "__main__":
+    main()

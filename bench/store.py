@@ -1,0 +1,175 @@
+"""The results store of a run directory.
+
+Layout of ``DIR``:
+
+* ``cells/<cell>.json`` — one finished cell's results row, written atomically (temporary file,
+  fsync, ``os.replace``) as soon as the cell finishes. This is the source of truth: a killed run
+  loses at most the cells in flight.
+* ``results.parquet``, ``results.csv`` — one row per cell of the current matrix, rebuilt
+  atomically from the cell files after a run (and on resume). Never appended to, so never
+  duplicated.
+* ``.lock`` — held (``flock``) while a run writes, so two runs cannot share a directory.
+
+A cell counts as done when its file holds the same ``config_hash`` (and, when traces are wanted,
+its trace exists); anything else — missing, unreadable, another configuration — is recomputed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from bench.cells import LEADING_COLUMNS, Cell
+
+__all__ = ["ResultsStore", "StoreBusy", "write_atomic", "results_frame"]
+
+
+class StoreBusy(RuntimeError):
+    """Another run holds the directory's lock."""
+
+
+def write_atomic(path: Path, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` via a temporary file in the same directory and ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _column(values: pd.Series) -> pd.Series:
+    """One consistent type per column so parquet accepts it: bool, float or string."""
+    present = [v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    if not present:
+        return values.astype(float)
+    if all(isinstance(v, bool) for v in present):
+        return values.map(lambda v: v if isinstance(v, bool) else pd.NA).astype("boolean")
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+        return values.map(lambda v: v if isinstance(v, int) else pd.NA).astype("Int64")
+    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
+        return pd.to_numeric(values, errors="coerce").astype(float)
+    return values.map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)
+                      ).astype("string")
+
+
+def results_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """Rows → DataFrame: the leading columns first, the rest (``ctl_*`` ...) sorted."""
+    df = pd.DataFrame(rows)
+    if df.empty:
+        return pd.DataFrame(columns=list(LEADING_COLUMNS))
+    lead = [c for c in LEADING_COLUMNS if c in df.columns]
+    rest = sorted(c for c in df.columns if c not in LEADING_COLUMNS)
+    df = df[lead + rest]
+    for col in df.columns:
+        if col == "seed":
+            df[col] = df[col].astype("int64")
+        elif col in ("cell", "controller", "scenario", "status", "message", "controller_base",
+                     "scenario_base", "config_hash", "code_version"):
+            df[col] = df[col].fillna("").astype(str)
+        else:
+            df[col] = _column(df[col])
+    return df
+
+
+class ResultsStore:
+    """Cell files and rebuilt tables of one run directory."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.cells_dir = self.root / "cells"
+
+    def cell_path(self, cell_id: str) -> Path:
+        return self.cells_dir / f"{cell_id}.json"
+
+    def trace_path(self, cell_id: str) -> Path:
+        return self.root / "traces" / f"{cell_id}.rrd"
+
+    def load(self, cell: Cell) -> dict[str, Any] | None:
+        """The stored row of ``cell`` if it has the same config hash, else None."""
+        try:
+            row = json.loads(self.cell_path(cell.cell_id).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        if not isinstance(row, dict) or row.get("config_hash") != cell.config_hash:
+            return None
+        return row
+
+    def is_done(self, cell: Cell, traces: bool) -> bool:
+        return self.load(cell) is not None and (not traces or self.trace_path(cell.cell_id).is_file())
+
+    def save(self, row: dict[str, Any]) -> Path:
+        """Store one finished cell atomically."""
+        path = self.cell_path(row["cell"])
+        write_atomic(path, json.dumps(row, sort_keys=True, allow_nan=True, indent=1))
+        return path
+
+    def rows(self, cells: Iterable[Cell]) -> list[dict[str, Any]]:
+        """Stored rows of ``cells`` (in their order), skipping cells not done."""
+        return [row for row in (self.load(c) for c in cells) if row is not None]
+
+    def rebuild(self, cells: Iterable[Cell]) -> pd.DataFrame:
+        """Rewrite ``results.parquet`` and ``results.csv`` from the cell files of ``cells``."""
+        df = results_frame(self.rows(cells))
+        self.root.mkdir(parents=True, exist_ok=True)
+        with _scratch(self.root, "results.parquet") as tmp:
+            df.to_parquet(tmp, index=False)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, self.root / "results.parquet")
+        write_atomic(self.root / "results.csv", df.to_csv(index=False))
+        return df
+
+    def write_json(self, name: str, obj: Any) -> Path:
+        path = self.root / name
+        write_atomic(path, json.dumps(obj, indent=2, sort_keys=False, allow_nan=True, default=str) + "\n")
+        return path
+
+    def clean_temporaries(self) -> int:
+        """Remove temporary files left by a killed run (only call while holding the lock)."""
+        removed = 0
+        for sub in (self.root, self.cells_dir, self.root / "traces", self.root / "series"):
+            if sub.is_dir():
+                for p in sub.glob(".*.tmp"):
+                    p.unlink(missing_ok=True)
+                    removed += 1
+        return removed
+
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold ``DIR/.lock`` for the duration; :class:`StoreBusy` if another run holds it."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        fh = open(self.root / ".lock", "a+")
+        try:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise StoreBusy(f"{self.root}: another solnic-bench run is using this directory") from None
+            yield
+        finally:
+            fh.close()
+
+
+@contextlib.contextmanager
+def _scratch(directory: Path, name: str) -> Iterator[Path]:
+    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
