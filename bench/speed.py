@@ -602,7 +602,7 @@ def _technology() -> dict[str, str]:
         "fixed_step": "numba-compiled Euler loop (plant.reference.fixed_step)",
         "fixed_step_python": "the same Euler kernel uncompiled (NUMBA_DISABLE_JIT=1), CPython",
         "solve_ivp": "SciPy DOP853 with a Python right-hand side and terminal events",
-        "caveat": ("Not the same implementation technology: fixed-step is compiled machine code, the exact "
+        "caveat": ("Not the same implementation technology: fixed-step is numba-compiled machine code, the exact "
                    "simulator's noise-free path is CPython + NumPy. The dissertation compared FORTRAN with "
                    "FORTRAN. The mismatch favours fixed-step, so speedup_vs_fixed_step_at_1e-6 understates the "
                    "algorithmic advantage; speedup_vs_fixed_step_python_at_1e-6 compares CPython with CPython. "

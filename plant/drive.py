@@ -47,14 +47,15 @@ class DriveCommand:
             raise ValueError("DriveCommand.segments must not be empty")
         if segs[0][0] != 0.0:
             raise ValueError(f"DriveCommand.segments must start at offset 0, got {segs[0][0]!r}")
-        for (o0, _), (o1, _) in zip(segs, segs[1:]):
-            if not o1 > o0:
-                raise ValueError(f"DriveCommand.segments offsets must increase, got {o0!r} then {o1!r}")
+        prev = -1.0
         for o, v in segs:
-            if not (math.isfinite(o) and math.isfinite(v)):
-                raise ValueError(f"DriveCommand.segments must be finite, got ({o!r}, {v!r})")
+            if not (o > prev and math.isfinite(o) and math.isfinite(v)):
+                raise ValueError(f"DriveCommand.segments offsets must increase and levels be finite, "
+                                 f"got ({o!r}, {v!r}) after offset {prev!r}")
+            prev = o
         object.__setattr__(self, "segments", segs)
-        object.__setattr__(self, "drive", DriveType(self.drive))
+        if type(self.drive) is not DriveType:
+            object.__setattr__(self, "drive", DriveType(self.drive))
 
     @classmethod
     def hold(cls, level: float, drive: DriveType = DriveType.LINEAR) -> "DriveCommand":
