@@ -28,6 +28,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from bench.errors import UserError
+
 __all__ = ["app", "main", "UserError"]
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -38,21 +40,14 @@ out_console = Console(highlight=False, width=None if sys.stdout.isatty() else 16
 err_console = Console(stderr=True, highlight=False, width=None if sys.stderr.isatty() else 160)
 
 
-class UserError(Exception):
-    """A mistake in the command line or its inputs: one line on stderr, exit code 2."""
-
-
 def _user_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn user errors (and the library's validation errors) into exit code 2 and one line."""
+    """Turn user errors into one line on stderr and exit code 2 (no traceback)."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        from bench.executors import ExecutorError
-        from bench.matrix import MatrixError
-        from bench.store import StoreBusy
         try:
             return fn(*args, **kwargs)
-        except (UserError, MatrixError, ExecutorError, StoreBusy) as exc:
+        except UserError as exc:
             err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
             raise typer.Exit(2) from None
 
@@ -129,18 +124,19 @@ def run(
     no_traces: bool = typer.Option(False, "--no-traces", help="Do not write rerun traces."),
 ) -> None:
     """Run a benchmark matrix: DIR/results.{parquet,csv}, DIR/traces/*.rrd, DIR/report.html."""
+    from bench.executors import make_executor   # light: the flags are checked before the simulator loads
+
+    if matrix is not None and quick:
+        raise UserError("--matrix and --quick exclude each other")
+    pool = make_executor(executor, workers, scheduler)
+    from bench.matrix import builtin_matrix_path, load_matrix
+    spec = load_matrix(matrix if matrix is not None else builtin_matrix_path(quick))
+    _writable_dir(out)
+
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
     from bench.driver import run_matrix
-    from bench.executors import make_executor
-    from bench.matrix import builtin_matrix_path, load_matrix
-
-    if matrix is not None and quick:
-        raise UserError("--matrix and --quick exclude each other")
-    spec = load_matrix(matrix if matrix is not None else builtin_matrix_path(quick))
-    pool = make_executor(executor, workers, scheduler)
-    _writable_dir(out)
     traces = not no_traces
 
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),

@@ -22,6 +22,8 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from bench.errors import UserError
+
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "ExecutorError", "make_executor", "EXECUTORS"]
 
 EXECUTORS = ("local", "dask")
@@ -29,7 +31,7 @@ EXECUTORS = ("local", "dask")
 _PRELOAD = ["bench.cells", "bench.runner", "bench.series", "bench.traces", "controllers"]
 
 
-class ExecutorError(ValueError):
+class ExecutorError(UserError):
     """A bad executor setting, or a scheduler that cannot be reached (a user error)."""
 
 
@@ -119,7 +121,7 @@ class DaskExecutor(Executor):
         from distributed import as_completed as dask_as_completed
 
         futures = {self._client.submit(fn, *args, pure=False): i for i, args in enumerate(calls)}
-        for fut in dask_as_completed(list(futures)):
+        for fut in dask_as_completed(list(futures), loop=self._client.loop):
             try:
                 yield futures[fut], fut.result(), None
             except Exception as exc:  # a lost worker; the cell is left for the next run

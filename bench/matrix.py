@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.cells import Cell, ControllerSpec, load_plugins
+from bench.errors import UserError
 from plant.params import PlantParams
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
 
@@ -49,7 +50,7 @@ _PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
-class MatrixError(ValueError):
+class MatrixError(UserError):
     """A user error in a matrix file; the message names the file, key path and field."""
 
 
@@ -112,7 +113,12 @@ def load_matrix(path: str | Path) -> Matrix:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         line = re.search(r"line (\d+)", str(exc))
-        where = f"{label}:{line.group(1)}" if line else label
+        if line:
+            where = f"{label}:{line.group(1)}"
+        elif "end of document" in str(exc):
+            where = f"{label}:{max(1, len(text.splitlines()))}"
+        else:
+            where = label
         raise MatrixError(f"{where}: invalid TOML: {exc}") from None
     return parse_matrix(data, label, base_dir=path.resolve().parent)
 

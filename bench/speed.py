@@ -38,6 +38,15 @@ measures that claim:
    accurate points when it never gets there — flagged, with the observed order) divided by the
    exact simulator's wall time.
 
+   Euler's Δc error is dominated by where the pulse edges fall on its grid (each edge moves by
+   up to one step), a sawtooth in the edge offset whose envelope is O(h); the max over hundreds
+   of pulses follows the envelope. A **per-pulse probe** checks it below the finest full step:
+   a spread of the window's moving pulses, each run alone over its own one or two sample
+   intervals from its exact start state, at 1e-8 s and 1e-9 s. The probe also
+   gives a **measured lower bound**, ``speedup_vs_fixed_step_at_1e-6_lower_bound``: at the
+   finest step whose error still misses 1e-6, fixed-step would need at least the whole window
+   at that step (its cost per step measured on the full run) — no extrapolation.
+
 Timing: JIT compilation is excluded (every kernel is warmed up on another sequence first). The
 exact simulator is timed in a fresh process: the recording run fills its per-process cache of
 transition matrices with this very sequence's step lengths, which a replay in the same process
@@ -109,6 +118,10 @@ class SpeedConfig:
         Step sizes [s] also run with the Euler kernel uncompiled (CPython).
     noisy_fixed_steps : tuple of float
         Step sizes [s] of the noisy Euler–Maruyama real-time-factor runs.
+    probe_pulses : int
+        Moving pulses in the per-pulse probe (spread evenly over the window).
+    probe_steps : tuple of float
+        Step sizes [s] of the probe, below the finest of ``fixed_steps``.
     exact_processes : int
         Fresh processes timing the exact simulator; the best cold time is kept.
     linear_sequence : bool
@@ -122,6 +135,8 @@ class SpeedConfig:
     reference_rtol: float = 1e-13
     python_fixed_steps: tuple[float, ...] = (1e-4,)
     noisy_fixed_steps: tuple[float, ...] = (1e-5, 1e-6)
+    probe_pulses: int = 20
+    probe_steps: tuple[float, ...] = (1e-8,)
     exact_processes: int = 1
     linear_sequence: bool = False
 
@@ -132,13 +147,16 @@ class SpeedConfig:
             raise ValueError(f"SpeedConfig.fixed_steps must be steps in (0, 1e-3] s, got {self.fixed_steps!r}")
         if not self.rtols or any(not (0 < r < 1) for r in self.rtols):
             raise ValueError(f"SpeedConfig.rtols must be in (0, 1), got {self.rtols!r}")
+        if self.probe_pulses < 0:
+            raise ValueError(f"SpeedConfig.probe_pulses must be >= 0, got {self.probe_pulses!r}")
         if self.exact_processes < 1:
             raise ValueError(f"SpeedConfig.exact_processes must be >= 1, got {self.exact_processes!r}")
 
 
-QUICK = SpeedConfig(record_s=50.0, window_s=10.0, rtols=(1e-3, 1e-5, 1e-7, 1e-9, 1e-12))
+QUICK = SpeedConfig(record_s=50.0, window_s=10.0, rtols=(1e-3, 1e-5, 1e-7, 1e-9, 1e-12), probe_pulses=12,
+                    probe_steps=(1e-8, 1e-9))
 FULL = SpeedConfig(record_s=100.0, window_s=100.0, rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12),
-                   exact_processes=2, linear_sequence=True)
+                   probe_pulses=40, probe_steps=(1e-8, 1e-9), exact_processes=2, linear_sequence=True)
 
 
 # --- the command sequence -----------------------------------------------------------------
@@ -222,7 +240,8 @@ class _Sequence:
         tau = self.params.sample_period
         self.schedule = schedule_from_commands(self.commands, tau, t0=self.state0.t)
         self.sample_times = self.state0.t + np.arange(len(self.commands) + 1) * tau
-        pulses = [k for k, c in enumerate(self.commands) if any(level != 0.0 for _, level in c.segments)]
+        bridge = self.commands[0].drive is DriveType.BRIDGE      # held linear levels are not pulses
+        pulses = [k for k, c in enumerate(self.commands) if bridge and any(level != 0.0 for _, level in c.segments)]
         self.pulse_bounds = np.array(pulses + [len(self.commands)], dtype=int)
 
     @property
@@ -511,6 +530,8 @@ def _compare(seq: _Sequence, cfg: SpeedConfig, seed: int, say: Progress, *, nois
 
     fixed_need = _fixed_step_at(fixed_rows, TARGET_ERROR)
     ivp_need = _tolerance_at(ivp_rows, TARGET_ERROR)
+    probe_out = _probe(seq, cfg, say) if seq.n_pulses and cfg.probe_pulses and cfg.probe_steps else None
+    lower = _lower_bound(fixed_rows, probe_out, exact_wall, T)
     by_metric = {}
     for metric in ("error_x1", "error_dc"):
         f = _fixed_step_at([{**r, "error": r[metric]} for r in fixed_rows], TARGET_ERROR)
@@ -528,16 +549,81 @@ def _compare(seq: _Sequence, cfg: SpeedConfig, seed: int, say: Progress, *, nois
         "rows": rows,
         "exact_wall_s": exact_wall,
         f"speedup_vs_fixed_step_at_{_AT}": _ratio(fixed_need["wall_s"], exact_wall),
+        f"speedup_vs_fixed_step_at_{_AT}_lower_bound": lower["speedup"],
         f"speedup_vs_solve_ivp_at_{_AT}": _ratio(ivp_need["wall_s"], exact_wall),
         f"speedup_vs_fixed_step_python_at_{_AT}": _ratio(python_need["wall_s"], exact_wall),
-        "equal_accuracy": {"fixed_step": fixed_need, "solve_ivp": ivp_need, "fixed_step_python": python_need},
+        "equal_accuracy": {"fixed_step": fixed_need, "solve_ivp": ivp_need, "fixed_step_python": python_need,
+                           "fixed_step_lower_bound": lower},
         "speedup_at_1e-6_by_metric": by_metric,
         "reference_disagreement": {"solve_ivp_rtol": cfg.reference_rtol, **agreement},
+        "fixed_step_probe": probe_out,
         "sequence": _describe(seq, ref_x1),
     }
     if noisy:
         out["noisy"] = _noisy(seq, cfg, exact, seed, say)
     return out
+
+
+def _probe(seq: _Sequence, cfg: SpeedConfig, say: Progress) -> dict[str, Any]:
+    """Euler below the finest full step, pulse by pulse (module docstring, item 4)."""
+    p, tau = seq.params, seq.params.sample_period
+    states = [seq.state0]
+    opts = SimOptions(noise=False)
+    for command in seq.commands:
+        state, status, message = advance(states[-1], command, tau, p, None, options=opts,
+                                         acc=Accumulator(active=False))
+        if status != Status.OK:
+            raise RuntimeError(f"exact replay for the probe failed: {status}: {message}")
+        states.append(state)
+    r = seq.command_motion()
+    candidates = []
+    for a, b in zip(seq.pulse_bounds[:-1], seq.pulse_bounds[1:]):
+        start = states[a]
+        if not (start.mode == 2 and not start.flyback and start.X[X3] == 0.0):
+            continue                            # Euler's start state has no flyback flag
+        end = next((e for e in range(a + 1, b + 1) if states[e].mode == 2 and not states[e].flyback), None)
+        if end is None:
+            continue
+        dc_ref = (states[end].X[X1] + r[end]) - (start.X[X1] + r[a])
+        if abs(dc_ref) > _MOVING_DC_RAD:
+            candidates.append((a, end, dc_ref))
+    if not candidates:
+        return {"rows": [], "n_pulses": 0}
+    pick = np.unique(np.linspace(0, len(candidates) - 1, min(cfg.probe_pulses, len(candidates))).round().astype(int))
+    chosen = [candidates[i] for i in pick]
+    rows = []
+    for h in cfg.probe_steps:
+        say(f"[probe] fixed-step Euler h={h:g} s on {len(chosen)} pulses")
+        rel, steps, wall = [], 0, 0.0
+        for a, end, dc_ref in chosen:
+            st = states[a]
+            sched = schedule_from_commands(seq.commands[a:end], tau)
+            x0 = np.array([st.X[X1], st.X[X2], st.X[X3], st.X[X4], st.X[X5], float(st.mode)])
+            w, res = _timed(lambda: fixed_step(p, sched, h, x0=x0))
+            dc = (res.final[0, 0] + r[end]) - (st.X[X1] + r[a])
+            rel.append(abs(dc - dc_ref) / abs(dc_ref))
+            steps, wall = steps + res.n_steps, wall + w
+        rows.append({"step_s": h, "error_dc": max(rel), "error_dc_median": float(np.median(rel)),
+                     "n_steps": steps, "wall_s": wall})
+    return {"rows": rows, "n_pulses": len(chosen), "pulse_starts_s": [seq.state0.t + a * tau for a, _, _ in chosen]}
+
+
+def _lower_bound(fixed_rows: list[dict[str, Any]], probe: dict[str, Any] | None, exact_wall: float,
+                 T: float) -> dict[str, Any]:
+    """No extrapolation: the finest measured step that still misses the target, costed over the window."""
+    finest = fixed_rows[-1]
+    per_step = finest["wall_s"] / finest["n_steps"]
+    misses = [(r["step_s"], r["error_dc"] if r.get("error_dc") is not None else r["error"], "full window")
+              for r in fixed_rows]
+    misses += [(r["step_s"], r["error_dc"], f"probe, {probe['n_pulses']} pulses") for r in (probe or {}).get("rows", [])]
+    misses = [m for m in misses if m[1] is not None and m[1] > TARGET_ERROR]
+    if not misses:
+        return {"speedup": None, "how": "every measured step reaches the target"}
+    h, e, where = min(misses)
+    wall = per_step * T / h
+    return {"speedup": wall / exact_wall, "wall_s": wall, "step_s": h, "error": e, "where": where,
+            "how": f"at h={h:g} s the error is still {e:.3g} ({where}), so fixed-step needs a smaller step: "
+                   f"at least {T / h:.3g} steps at the full run's {per_step * 1e9:.3g} ns per step"}
 
 
 def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:
@@ -657,6 +743,7 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
     result: dict[str, Any] = {
         "rows": main.pop("rows"),
         "speedup_vs_fixed_step_at_1e-6": main.pop("speedup_vs_fixed_step_at_1e-6"),
+        "speedup_vs_fixed_step_at_1e-6_lower_bound": main.pop("speedup_vs_fixed_step_at_1e-6_lower_bound"),
         "speedup_vs_solve_ivp_at_1e-6": main.pop("speedup_vs_solve_ivp_at_1e-6"),
         "speedup_vs_fixed_step_python_at_1e-6": main.pop("speedup_vs_fixed_step_python_at_1e-6"),
         "target_error": TARGET_ERROR,
@@ -753,6 +840,12 @@ def _print_table(result: dict[str, Any], console: Any) -> None:
             sp = block.get(f"speedup_vs_{k}_at_1e-6")
             how = block["equal_accuracy"][k].get("how", "")
             console.print(f"speed-up at equal accuracy 1e-6 vs {label}{key}: [bold]{_fmt(sp)}×[/bold]  ({how})")
+        probe = block.get("fixed_step_probe")
+        if probe and probe["rows"]:
+            steps = ", ".join(f"h={r['step_s']:g}: {_fmt(r['error_dc'])}" for r in probe["rows"])
+            console.print(f"per-pulse probe ({probe['n_pulses']} pulses), max Δc error {steps}")
+        lb = block["equal_accuracy"]["fixed_step_lower_bound"]
+        console.print(f"measured lower bound vs fixed-step (numba){key}: [bold]{_fmt(lb['speedup'])}×[/bold]  ({lb['how']})")
         d = block["reference_disagreement"]
         console.print(f"reference check: exact vs solve_ivp rtol={d['solve_ivp_rtol']:g}: "
                       f"x1 {_fmt(d['error_x1'])}, Δc {_fmt(d['error_dc'])} (relative)")

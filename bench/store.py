@@ -29,11 +29,12 @@ from typing import Any
 import pandas as pd
 
 from bench.cells import LEADING_COLUMNS, Cell
+from bench.errors import UserError
 
 __all__ = ["ResultsStore", "StoreBusy", "write_atomic", "results_frame"]
 
 
-class StoreBusy(RuntimeError):
+class StoreBusy(UserError):
     """Another run holds the directory's lock."""
 
 
@@ -54,38 +55,42 @@ def write_atomic(path: Path, data: bytes | str) -> None:
         raise
 
 
-def _column(values: pd.Series) -> pd.Series:
-    """One consistent type per column so parquet accepts it: bool, float or string."""
-    present = [v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
-    if not present:
-        return values.astype(float)
-    if all(isinstance(v, bool) for v in present):
-        return values.map(lambda v: v if isinstance(v, bool) else pd.NA).astype("boolean")
-    if all(isinstance(v, int) and not isinstance(v, bool) for v in present):
-        return values.map(lambda v: v if isinstance(v, int) else pd.NA).astype("Int64")
+def _missing(v: Any) -> bool:
+    return v is None or (isinstance(v, float) and math.isnan(v))
+
+
+def _column(values: list[Any]) -> pd.Series:
+    """One consistent type per column so parquet accepts it: bool, Int64, float or string."""
+    present = [v for v in values if not _missing(v)]
+    if all(isinstance(v, bool) for v in present) and present:
+        return pd.Series([pd.NA if _missing(v) else v for v in values], dtype="boolean")
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in present) and present:
+        return pd.Series([pd.NA if _missing(v) else v for v in values], dtype="Int64")
     if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
-        return pd.to_numeric(values, errors="coerce").astype(float)
-    return values.map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v)
-                      ).astype("string")
+        return pd.Series([math.nan if _missing(v) else float(v) for v in values], dtype=float)
+    return pd.Series([None if _missing(v) else str(v) for v in values], dtype="string")
+
+
+_TEXT = ("cell", "controller", "scenario", "status", "message", "controller_base", "scenario_base",
+         "config_hash", "code_version")
 
 
 def results_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows → DataFrame: the leading columns first, the rest (``ctl_*`` ...) sorted."""
-    df = pd.DataFrame(rows)
-    if df.empty:
+    if not rows:
         return pd.DataFrame(columns=list(LEADING_COLUMNS))
-    lead = [c for c in LEADING_COLUMNS if c in df.columns]
-    rest = sorted(c for c in df.columns if c not in LEADING_COLUMNS)
-    df = df[lead + rest]
-    for col in df.columns:
+    names = {k for row in rows for k in row}
+    order = [c for c in LEADING_COLUMNS if c in names] + sorted(names - set(LEADING_COLUMNS))
+    data: dict[str, pd.Series] = {}
+    for col in order:
+        values = [row.get(col) for row in rows]
         if col == "seed":
-            df[col] = df[col].astype("int64")
-        elif col in ("cell", "controller", "scenario", "status", "message", "controller_base",
-                     "scenario_base", "config_hash", "code_version"):
-            df[col] = df[col].fillna("").astype(str)
+            data[col] = pd.Series(values, dtype="int64")
+        elif col in _TEXT:
+            data[col] = pd.Series(["" if _missing(v) else str(v) for v in values], dtype=str)
         else:
-            df[col] = _column(df[col])
-    return df
+            data[col] = _column(values)
+    return pd.DataFrame(data)
 
 
 class ResultsStore:

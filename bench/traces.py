@@ -44,6 +44,12 @@ PLANT_ENTITIES = {
 }
 
 
+def _ns(t: np.ndarray) -> np.ndarray:
+    """Seconds → the timeline's nanoseconds, rounded to nearest (0.3 s is 300000000 ns, not
+    299999999 from a truncated 0.30000000000000004)."""
+    return np.round(np.asarray(t, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+
+
 def _merged(samples: dict[str, np.ndarray], events: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Time order of samples followed by events: (times, permutation)."""
     t = np.concatenate([samples["t"], events["t"]]) if len(events.get("t", ())) else np.asarray(samples["t"])
@@ -74,12 +80,12 @@ def write_trace(path: str | Path, result: RunResult, *, recording_id: str) -> Pa
     try:
         rec.save(tmp)
         t, order = _merged(samples, events)
-        index = [rr.TimeColumn(TIMELINE, duration=t)]
+        index = [rr.TimeColumn(TIMELINE, duration=_ns(t))]
         for entity, (skey, ekey) in PLANT_ENTITIES.items():
             values = np.concatenate([np.asarray(samples[skey], float)[:n],
                                      np.asarray(events.get(ekey, ()), float)])[order]
             rec.send_columns(entity, indexes=index, columns=rr.Scalars.columns(scalars=values))
-        sample_t = np.asarray(samples["t"], dtype=float)
+        sample_t = _ns(samples["t"])
         rec.send_columns("sensor/y", indexes=[rr.TimeColumn(TIMELINE, duration=sample_t)],
                          columns=rr.Scalars.columns(scalars=np.asarray(samples["y"], float)))
         for key, values in sorted(internals.items()):

@@ -140,12 +140,13 @@ _CHUNK = 4096
 
 def fixed_step(params: PlantParams, schedule: Schedule, dt: float, *, x0: np.ndarray | None = None,
                n_paths: int = 1, rng: np.random.Generator | None = None,
-               sample_every: float | None = None) -> FixedStepResult:
+               sample_every: float | None = None, stop_at_rest: bool = False) -> FixedStepResult:
     """Euler–Maruyama with the plant's mode logic, fixed step ``dt`` [s].
 
     ``x0`` is (x1, x2, x3, x4, x5, mode) for every path (default: rest, mode 2, x4 =
     command_velocity_initial). ``rng=None`` runs noise-free. ``sample_every`` [s] records x1
-    at multiples of it (e.g. the sample period).
+    at multiples of it (e.g. the sample period). ``stop_at_rest`` ends the run early, after
+    the last schedule change, once every path is stuck with zero drive and current.
     """
     if not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a finite positive step in seconds, got {dt!r}")
@@ -176,6 +177,9 @@ def fixed_step(params: PlantParams, schedule: Schedule, dt: float, *, x0: np.nda
         if done % every == 0:
             samples.append(S[:, 0].copy())
             stimes.append(t0 + done * dt)
+        if (stop_at_rest and t0 + done * dt > schedule.times[-1]
+                and np.all(S[:, 6] == 2.0) and np.all(S[:, 5] == 0.0) and np.all(S[:, 2] == 0.0)):
+            break
     return FixedStepResult(S[:, :7].copy(), np.array(stimes), np.array(samples), peak, n_total)
 
 
@@ -185,7 +189,8 @@ def fixed_step_pulses(params: PlantParams, dt_u: float, dt: float, n_paths: int,
     p = params.replace(command_velocity_std=0.0, command_velocity_initial=0.0)
     sched = Schedule(np.array([0.0, dt_u]), np.array([sign * p.u_max, 0.0]), DriveType.BRIDGE, horizon)
     x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 2.0])
-    res = fixed_step(p, sched, dt, x0=x0, n_paths=n_paths, rng=np.random.default_rng(np.random.SeedSequence(seed)))
+    res = fixed_step(p, sched, dt, x0=x0, n_paths=n_paths, rng=np.random.default_rng(np.random.SeedSequence(seed)),
+                     stop_at_rest=True)
     moving = res.final[:, 6] != 2.0
     if np.any(moving):
         raise RuntimeError(f"{int(moving.sum())} paths still moving at the horizon {horizon} s")

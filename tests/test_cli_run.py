@@ -147,6 +147,7 @@ def _snapshot(directory: Path) -> dict[str, tuple[int, int]]:
             for p in directory.rglob("*") if p.is_file()}
 
 
+# The user errors of the issue, each through the real CLI (more cases in-process: test_cli_errors.py).
 USER_ERRORS = {
     # name: (matrix text or None, extra args, expected message fragments)
     "toml-syntax": ("[matrix]\ncontrollers = [\"linear\"]\nseeds = [0,, 1]\n", (),
@@ -161,12 +162,7 @@ USER_ERRORS = {
     "bad-controller-option": ("[matrix]\ncontrollers = [\"solnic-x\"]\nscenarios = [\"thesis\"]\nseeds = [0]\n"
                               "[controllers.solnic-x]\nbase = \"solnic\"\npreset = \"nope\"\n", (),
                               ["bad.toml: controllers.solnic-x.preset: preset must be one of"]),
-    "bad-seeds": ("[matrix]\ncontrollers = [\"linear\"]\nscenarios = [\"thesis\"]\nseeds = [-1]\n", (),
-                  ["bad.toml: matrix.seeds: must be a non-empty list of integers >= 0"]),
     "bad-workers": (None, ("--quick", "--workers", "0"), ["--workers must be an integer >= 1, got 0"]),
-    "scheduler-without-dask": (None, ("--quick", "--scheduler", "tcp://127.0.0.1:1"),
-                               ["--scheduler needs --executor dask"]),
-    "missing-matrix": (None, ("--matrix", "no/such/file.toml"), ["no/such/file.toml: cannot read the matrix file"]),
 }
 
 

@@ -221,7 +221,8 @@ def test_frictionless_ramp_matches_forced_response() -> None:
     res = run_closed_loop(p, ctrl, duration_s=4.0, seed=0, noise=False, record=True)
     assert res.status == "ok"
     d = ctrl.design
-    t = res.samples["t"]
+    t = np.arange(res.samples["t"].size) * p.sample_period
+    np.testing.assert_allclose(res.samples["t"], t, rtol=0, atol=1e-9)
     # closed loop from python-control: continuous plant sampled with ZOH, compensator sections
     G = ct.ss([[0, 1, 0], [0, 0, 1 / p.inertia], [0, 0, -1 / p.motor_time_constant]],
               [[0], [0], [1 / p.motor_time_constant]], [[1, 0, 0]], [[0]])

@@ -7,7 +7,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from bench.speed import SpeedConfig, _fixed_step_at, _tolerance_at, speed_command
+from bench.speed import SpeedConfig, _fixed_step_at, _lower_bound, _tolerance_at, speed_command
 from reports.inputs import normalise_speed
 
 
@@ -123,7 +123,28 @@ def test_no_convergence_gives_no_speedup():
     ({"record_s": 10.0, "window_s": 5.0, "fixed_steps": (1e-2,)}, "fixed_steps"),
     ({"record_s": 10.0, "window_s": 5.0, "rtols": (0.0,)}, "rtols"),
     ({"record_s": 10.0, "window_s": 5.0, "exact_processes": 0}, "exact_processes"),
+    ({"record_s": 10.0, "window_s": 5.0, "probe_pulses": -1}, "probe_pulses"),
 ])
 def test_config_validation_names_the_field(kwargs, field):
     with pytest.raises(ValueError, match=f"SpeedConfig.{field}"):
         SpeedConfig(**kwargs)
+
+
+def test_probe_goes_below_the_finest_full_step_and_bounds_the_speedup(quick):
+    data, _ = quick
+    full = min((r for r in data["rows"] if r["method"] == "fixed_step"), key=lambda r: r["step_s"])
+    probe = data["fixed_step_probe"]["rows"]
+    assert probe and probe[-1]["step_s"] < full["step_s"]
+    assert probe[-1]["error_dc"] < full["error_dc"]
+    bound = data["speedup_vs_fixed_step_at_1e-6_lower_bound"]
+    assert bound is not None and 0 < bound < math.inf
+
+
+def test_lower_bound_uses_the_finest_missing_step():
+    rows = [{"step_s": 1e-5, "error": 1e-3, "error_dc": 1e-3, "wall_s": 1.0, "n_steps": 1_000_000},
+            {"step_s": 1e-6, "error": 1e-4, "error_dc": 1e-4, "wall_s": 10.0, "n_steps": 10_000_000}]
+    probe = {"n_pulses": 3, "rows": [{"step_s": 1e-7, "error_dc": 2e-6}, {"step_s": 1e-8, "error_dc": 5e-7}]}
+    bound = _lower_bound(rows, probe, exact_wall=0.5, T=10.0)
+    assert bound["step_s"] == 1e-7                       # 1e-8 already meets 1e-6
+    assert bound["wall_s"] == pytest.approx(1e-6 * 10.0 / 1e-7)   # 1 µs per step × 1e8 steps
+    assert bound["speedup"] == pytest.approx(bound["wall_s"] / 0.5)

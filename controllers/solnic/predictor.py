@@ -183,13 +183,20 @@ class Predictor:
         motion, if any, happens with a stiction just below the peak torque, so we predict
         with k̂s' = peak·(1 − shrink) (and k̂c' = min(k̂c, k̂s')): Δc_min of that Δt_u.
         """
+        key = (float(ks), float(kc), float(dt_u), sign, shrink)
+        memo = self.__dict__.setdefault("_conditional_memo", {})
+        hit = memo.get(key)
+        if hit is not None:
+            return hit
         pred = self.predict(ks, kc, dt_u, sign)
-        if pred.moves:
-            return pred
-        ks_c = pred.peak_torque * (1.0 - shrink)
-        if not ks_c > 0:
-            return pred
-        return self.predict(ks_c, min(kc, ks_c), dt_u, sign)
+        if not pred.moves:
+            ks_c = pred.peak_torque * (1.0 - shrink)
+            if ks_c > 0:
+                pred = self.predict(ks_c, min(kc, ks_c), dt_u, sign)
+        if len(memo) > 256:
+            memo.clear()
+        memo[key] = pred
+        return pred
 
     def predicted_motion(self, ks: float, kc: float, dt_u: float) -> float:
         """|Δc_p| only (no partials), for cost curves."""

@@ -1,0 +1,47 @@
+"""Executors: settings are validated; the process pool reproduces an in-process run bit for bit."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bench.cells import RUNTIME_COLUMNS, Cell, ControllerSpec, run_cell
+from bench.executors import DaskExecutor, ExecutorError, LocalExecutor, make_executor
+from bench.scenarios import builtin_scenarios
+
+
+@pytest.mark.parametrize("kind, workers, scheduler, message", [
+    ("threads", None, None, r"--executor must be one of \['local', 'dask'\], got 'threads'"),
+    ("local", 0, None, r"--workers must be an integer >= 1, got 0"),
+    ("dask", -2, None, r"--workers must be an integer >= 1, got -2"),
+    ("local", 2, "tcp://127.0.0.1:8786", r"--scheduler needs --executor dask"),
+])
+def test_bad_settings_are_user_errors(kind, workers, scheduler, message):
+    with pytest.raises(ExecutorError, match=message):
+        make_executor(kind, workers, scheduler)
+
+
+def test_defaults():
+    import os
+    assert isinstance(make_executor("local"), LocalExecutor) and make_executor("local").workers == os.cpu_count()
+    ex = make_executor("dask", 3, "tcp://h:1")
+    assert isinstance(ex, DaskExecutor) and ex.address == "tcp://h:1" and ex.workers == 3
+
+
+def _strip(row: dict) -> str:
+    return json.dumps({k: v for k, v in row.items() if k not in RUNTIME_COLUMNS}, sort_keys=True)
+
+
+def test_process_pool_reproduces_in_process_rows(tmp_path):
+    base = builtin_scenarios()["ratio-2"].with_durations(duration_s=1.0, warmup_s=0.2)
+    cells = [Cell(ControllerSpec(c, c), base, seed) for c in ("solnic", "dithered") for seed in (0, 1)]
+    here = [run_cell(c, tmp_path / "here", False) for c in cells]
+    with make_executor("local", 2) as pool:
+        there = {i: (row, exc) for i, row, exc in pool.map_unordered(run_cell, [(c, str(tmp_path / "pool"), False)
+                                                                                  for c in cells])}
+    assert sorted(there) == list(range(len(cells)))
+    for i, row in enumerate(here):
+        other, exc = there[i]
+        assert exc is None and row["status"] == "ok"
+        assert _strip(other) == _strip(row)
