@@ -19,6 +19,7 @@ import hashlib
 import importlib
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -101,7 +102,8 @@ class ControllerSpec:
 class Cell:
     """A controller × scenario × seed, with the run length and warm-up of its scenario.
 
-    ``time_limit_s`` (wall clock) and the plugin search directories do not enter the hash.
+    ``time_limit_s`` (wall clock) and the plugin search directories do not enter the hash;
+    ``code_version`` is taken where the cell is made (the process that plans the matrix).
     """
 
     controller: ControllerSpec
@@ -110,6 +112,7 @@ class Cell:
     time_limit_s: float | None = None
     plugins: tuple[str, ...] = ()
     plugin_dirs: tuple[str, ...] = ()
+    code_version: str = field(default_factory=lambda: code_version())
 
     @property
     def cell_id(self) -> str:
@@ -131,7 +134,7 @@ class Cell:
             "scenario": {"name": self.scenario.name, "base": self.scenario.base,
                          "plant": dataclasses.asdict(self.scenario.params)},
             "seed": self.seed, "duration_s": self.duration_s, "warmup_s": self.warmup_s,
-            "plugins": list(self.plugins), "code_version": code_version(),
+            "plugins": list(self.plugins), "code_version": self.code_version,
         }
 
     @cached_property
@@ -199,7 +202,7 @@ def _base_row(cell: Cell) -> dict[str, Any]:
                 *SIZE_PEAK_COLUMNS):
         row[col] = math.nan
     row["config_hash"] = cell.config_hash
-    row["code_version"] = code_version()
+    row["code_version"] = cell.code_version
     return row
 
 
@@ -260,5 +263,4 @@ def _write_parquet(frame, path: Path) -> None:
 
 
 def _token() -> str:
-    import os
     return f"{os.getpid()}-{threading.get_ident()}"

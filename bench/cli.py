@@ -178,8 +178,9 @@ def run(
         raise typer.Exit(130)
     try:
         path = _build_report(out)
-    except (ValueError, OSError) as exc:
-        err_console.print(f"error: report: {escape(str(exc))}", soft_wrap=True)
+    except Exception as exc:  # the results are stored; say what failed, exit 1
+        err_console.print(f"error: report: {type(exc).__name__}: {escape(str(exc))} "
+                          f"(results are stored; retry with `solnic-bench report {out}`)", soft_wrap=True)
         raise typer.Exit(1) from None
     if path is not None:
         out_console.print(f"report: {path}")
@@ -250,8 +251,12 @@ def _drive(base: str) -> str:
 
 
 def main() -> None:
-    """Entry point for ``python -m bench.cli``."""
-    app()
+    """Entry point for ``python -m bench.cli`` (the console script calls ``app`` directly)."""
+    try:
+        app()
+    except UserError as exc:  # raised outside a command body; commands handle their own
+        err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
+        sys.exit(2)
 
 
 if __name__ == "__main__":

@@ -37,8 +37,8 @@ from typing import Any
 
 from bench.cells import Cell, ControllerSpec, load_plugins
 from bench.errors import UserError
-from plant.params import PlantParams
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
+from plant.params import PlantParams
 
 __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matrix_path",
            "DEFAULT_TIME_LIMIT_S"]

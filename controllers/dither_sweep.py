@@ -15,6 +15,7 @@ from typing import Any, Iterable
 
 import pandas as pd
 
+from bench.runner import run_closed_loop
 from controllers.dithered import DitheredController
 from controllers.linear import design_linear
 from plant.params import PlantParams
@@ -26,8 +27,6 @@ _COLUMNS = ("peak_error_rad", "rms_error_rad", "mean_abs_current", "rms_current"
 
 
 def _cell(args: tuple) -> dict[str, Any]:
-    from bench.runner import run_closed_loop  # deferred: the runner imports the controllers
-
     params, amplitude, frequency, seed, duration_s, warmup_s, noise, options = args
     ctrl = DitheredController(dither_amplitude=amplitude, dither_frequency=frequency, **options)
     res = run_closed_loop(params, ctrl, duration_s=duration_s, warmup_s=warmup_s, seed=seed,
