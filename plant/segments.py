@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from plant._kernels import _hermite_peak
 from plant.transition import e1
 
 __all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
@@ -56,28 +57,7 @@ def hermite_peak(h: float, ya: float, da: float, yb: float, db: float) -> float:
     """Largest |y| at interior critical points of the cubic Hermite interpolant on [0, h].
 
     Used for the peak of x1 inside a noisy sub-step, where x1 is C¹ with slope ẋ1 = x2 − x4
-    known at both ends. Returns 0 when the cubic has no interior extremum.
+    known at both ends. Returns 0 when the cubic has no interior extremum. (One
+    implementation, shared with the compiled kernel.)
     """
-    if h <= 0:
-        return 0.0
-    # y(s) = ya + da·h·s + c2·s² + c3·s³ on s ∈ [0, 1]
-    c2 = 3 * (yb - ya) - (2 * da + db) * h
-    c3 = -2 * (yb - ya) + (da + db) * h
-    # y'(s)/h = da + (2c2/h)s + (3c3/h)s²  → solve 3c3 s² + 2c2 s + da·h = 0
-    A, B, C = 3 * c3, 2 * c2, da * h
-    roots: list[float] = []
-    if A == 0.0:
-        if B != 0.0:
-            roots.append(-C / B)
-    else:
-        disc = B * B - 4 * A * C
-        if disc >= 0:
-            sq = math.sqrt(disc)
-            q = -0.5 * (B + math.copysign(sq, B))
-            if q != 0.0:
-                roots.extend((q / A, C / q))
-    best = 0.0
-    for s in roots:
-        if 0.0 < s < 1.0:
-            best = max(best, abs(ya + da * h * s + c2 * s * s + c3 * s**3))
-    return best
+    return float(_hermite_peak(h, ya, da, yb, db))

@@ -78,3 +78,22 @@ def test_closed_form_path_equals_event_loop(params):
         assert a.t_stop == pytest.approx(b.t_stop, abs=1e-12)
         assert a.t_current_zero == pytest.approx(b.t_current_zero, abs=1e-12)
         assert a.t_breakaway == pytest.approx(b.t_breakaway, abs=1e-12)
+
+
+def test_hermite_peak_matches_dense_evaluation():
+    """Interior extremum of the cubic Hermite interpolant vs a dense evaluation of the cubic."""
+    from plant.segments import hermite_peak
+
+    rng = np.random.default_rng(2)
+    s = np.linspace(0, 1, 200001)
+    for _ in range(200):
+        h = 10 ** rng.uniform(-6, -3)
+        ya, yb = rng.normal(0, 1e-6, 2)
+        da, db = rng.normal(0, 1e-3, 2)
+        c2 = 3 * (yb - ya) - (2 * da + db) * h
+        c3 = -2 * (yb - ya) + (da + db) * h
+        y = ya + da * h * s + c2 * s**2 + c3 * s**3
+        dy = np.diff(y)
+        turns = np.flatnonzero(np.sign(dy[1:]) != np.sign(dy[:-1])) + 1
+        dense = np.abs(y[turns]).max() if turns.size else 0.0
+        assert hermite_peak(h, ya, da, yb, db) == pytest.approx(dense, rel=1e-6, abs=1e-18)
