@@ -33,7 +33,7 @@ check-bound: $(STAMP)
 	$(VENV)/bin/solnic-bench check-bound --out $(OUT)
 
 speed: $(STAMP)
-	$(VENV)/bin/solnic-bench speed
+	$(VENV)/bin/solnic-bench speed --out $(OUT)
 
 clean:
 	rm -rf $(VENV) $(OUT) $(OUT)-quick *.egg-info

@@ -87,11 +87,11 @@ def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, trace
         store.clean_temporaries()
         todo: list[Cell] = [c for c in cells if not store.is_done(c, traces)]
         outcome = RunOutcome(pd.DataFrame(), len(cells), len(cells) - len(todo))
-        if on_start:
-            on_start(len(todo), outcome.skipped)
         if todo:
             executor.workers = max(1, min(executor.workers, len(todo)))
             executor.start()    # an unreachable scheduler fails here, before anything is written
+        if on_start:
+            on_start(len(todo), outcome.skipped)
         meta = run_metadata(command=command, executor=executor.describe() if todo else {"executor": None},
                             cells=len(cells), to_run=len(todo))
         try:

@@ -418,8 +418,8 @@ def _stuck_propagate(run: _Run, h: float) -> None:
         c11 = s4 * _e4(y) / b4**3
         c14 = -s4 * E * E / (2.0 * b4 * b4)
         c44 = s4 * E * (2.0 - E) / (2.0 * b4)
-        l11 = math.sqrt(c11)
-        l21 = c14 / l11
+        l11 = math.sqrt(max(c11, 0.0))
+        l21 = c14 / l11 if l11 > 0.0 else 0.0      # zero-length step (breakaway at once)
         l22 = math.sqrt(max(c44 - l21 * l21, 0.0))
         z1, z2 = run.rng.standard_normal(2)
         X[X1] += l11 * z1

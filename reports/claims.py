@@ -572,7 +572,7 @@ def _m_speedup(ctx: _Context) -> Measurement:
     if v is None or math.isnan(v):
         return _not_measured("no speed.json or no speedup_vs_fixed_step_at_1e-6")
     metric = sp.get("error_metric", "error")
-    return Measurement(float(v), f"{_g(v)}× at equal accuracy 1e-6 rad",
+    return Measurement(float(v), f"{_g(v)}× at equal accuracy 1e-6 (relative Δc error)",
                        f"speed.json ({metric}); work-precision interpolation")
 
 

@@ -328,10 +328,10 @@ def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
                                  marker=dict(size=9, symbol=_SYMBOLS[i % len(_SYMBOLS)]),
                                  hovertemplate=(f"<b>{m}</b> %{{text}}<br>wall %{{x:.3g}} s"
                                                 "<br>error %{y:.3g} rad<extra></extra>")))
-    _hline_log(fig, 1e-6, "1e-6 rad (speed-up reference)", colour="#888", dash="dot", width=1,
+    _hline_log(fig, 1e-6, "1e-6 relative (speed-up reference)", colour="#888", dash="dot", width=1,
                right=True)
     fig.update_layout(title="Work-precision: error vs wall time (same command sequence)",
                       xaxis_title="wall time [s]", xaxis_type="log",
-                      yaxis_title=f"error [rad] — {speed.get('error_metric', 'error')}",
+                      yaxis_title=f"error (relative) — {speed.get('error_metric', 'error')}",
                       yaxis_type="log")
     return fig

@@ -119,8 +119,9 @@ _FALSE = {"false", "0", "no", "off", "n", "f", ""}
 
 
 def cell_id(controller: str, scenario: str, seed: int) -> str:
-    """Default cell id ``controller__scenario__seed``, used when results carry no ``cell``."""
-    return f"{controller}__{scenario}__{int(seed)}"
+    """Default cell id ``controller__scenario__s<seed>`` (as bench.cells writes it), used
+    when results carry no ``cell`` column."""
+    return f"{controller}__{scenario}__s{int(seed)}"
 
 
 @dataclass(frozen=True)

@@ -157,3 +157,52 @@ def test_peak_error_falls_once_dither_breaks_stiction(dither_runs: dict) -> None
         elif ripple > p.stiction:
             assert runs["n_stick_slip"] > 100
             assert runs["peak_error_rad"] < dither_runs[0.0]["peak_error_rad"] / 4
+
+
+# --- the sweep ----------------------------------------------------------------------------------
+
+def test_sweep_table_and_best_choice() -> None:
+    import pandas as pd
+
+    from controllers.dither_sweep import best_dither, dither_sweep
+
+    df = dither_sweep(amplitudes=(0.0, 12.0), frequencies_hz=(5.0, 125.0), duration_s=1.5,
+                      warmup_s=0.5, noise=False)
+    assert len(df) == 4 and set(df["status"]) == {"ok"}
+    for col in ("peak_error_rad", "mean_abs_current", "rms_current", "above_crossover",
+                "above_nyquist", "crossover_hz"):
+        assert col in df.columns
+    assert list(df.loc[df["frequency_hz"] == 5.0, "above_crossover"]) == [False, False]  # 5 Hz < ωc/2π
+    assert list(df.loc[df["frequency_hz"] == 125.0, "above_nyquist"]) == [True, True]
+    synthetic = pd.DataFrame({
+        "amplitude": [2.0, 4.0, 4.0, 8.0], "frequency_hz": [25.0, 125.0, 125.0, 250.0],
+        "seed": [0, 0, 1, 0], "status": ["ok"] * 4, "peak_error_rad": [1e-6, 3e-5, 1e-5, 4e-5],
+        "above_crossover": [True] * 4, "above_nyquist": [False, True, True, True]})
+    assert best_dither(synthetic) == (4.0, 125.0)  # seed mean 2e-5 beats 4e-5
+    assert best_dither(synthetic, above="above_crossover") == (2.0, 25.0)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"amplitudes": (-1.0,)}, "amplitudes"),
+    ({"amplitudes": (20.0,)}, "amplitudes"),
+    ({"frequencies_hz": (0.0,)}, "frequencies_hz"),
+    ({"workers": 0}, "workers"),
+])
+def test_sweep_errors(kwargs: dict, match: str) -> None:
+    from controllers.dither_sweep import dither_sweep
+
+    with pytest.raises(ValueError, match=match):
+        dither_sweep(**kwargs)
+
+
+def test_best_dither_errors() -> None:
+    import pandas as pd
+
+    from controllers.dither_sweep import best_dither
+
+    empty = pd.DataFrame({"amplitude": [0.0], "frequency_hz": [250.0], "seed": [0], "status": ["ok"],
+                          "peak_error_rad": [1e-5], "above_crossover": [True], "above_nyquist": [True]})
+    with pytest.raises(ValueError, match="no ok cell"):
+        best_dither(empty)
+    with pytest.raises(ValueError, match="above"):
+        best_dither(empty, above="sideways")
