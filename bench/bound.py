@@ -34,8 +34,9 @@ Durations
     stick-slip cycle; ``n_slips_window`` and the peaks of the window's two halves are reported so that a
     reader can check this. A cell whose transient alone would exceed the sweep's cap is not run
     (status ``skipped``); when only the window does not fit, it is shortened to the cap.
-    Because t_s ∝ 1/ωc², the lowest crossover swept is 20 rad/s (30 in ``--quick``): at
-    10 rad/s one stick-slip cycle takes ~25 simulated minutes.
+    Because t_s ∝ 1/ωc², the lowest crossover swept on every plant is 20 rad/s (30 in
+    ``--quick``); 10 rad/s is probed on the heavy (J = 1) plants only, where one stick-slip
+    cycle still takes 10–30 simulated minutes.
 
 Hunting runs
     A perfectly quiet set-point starting at x1 = 0 never moves. Each run instead starts from an
@@ -126,6 +127,12 @@ class SweepPlan:
         Also run the pure integral at the set-point.
     hunting_inertia : float
         J of the hunting sweep [ozf·in·s²].
+    warmup_ts, window_ts : float
+        Warm-up beyond the first breakaway, and scoring window, in units of t_s (module
+        docstring).
+    probes : tuple of (omega_c, ks_over_kc, inertia)
+        Extra low-crossover cells on plants where t_s is affordable (heavy J), with the
+        ``lag_multiples`` lags and the integral only.
     """
 
     mode: str
@@ -144,6 +151,7 @@ class SweepPlan:
     hunting_inertia: float = 0.5
     warmup_ts: float = 0.5
     window_ts: float = 1.5
+    probes: tuple[tuple[float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
@@ -168,6 +176,10 @@ class SweepPlan:
         for name in ("cap_s", "hunting_crossover", "hunting_inertia", "window_ts"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"SweepPlan.{name} must be > 0, got {getattr(self, name)!r}")
+        for omega, ratio, inertia in self.probes:
+            if not (omega > 0 and ratio > 1 and inertia > 0):
+                raise ValueError(f"SweepPlan.probes entries must be (omega_c > 0, ks_over_kc > 1, "
+                                 f"inertia > 0), got {(omega, ratio, inertia)!r}")
         if not self.warmup_ts >= 0:
             raise ValueError(f"SweepPlan.warmup_ts must be >= 0, got {self.warmup_ts!r}")
 
@@ -234,7 +246,8 @@ def sweep_plan(mode: str = "full") -> SweepPlan:
             noise=(False, True), cap_s=1200.0,
             hunting_ratios=(1.1, 1.25, 1.5, 2.0), hunting_crossover=feasible,
             hunting_multiples=(0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0),
-            hunting_offsets=(0.4, 0.6, 0.8, 1.0, 1.3, 1.7))
+            hunting_offsets=(0.4, 0.6, 0.8, 1.0, 1.3, 1.7),
+            probes=((10.0, 1.1, 1.0), (10.0, 2.0, 1.0)))
     if mode == "quick":
         return SweepPlan(
             mode, crossovers=(30.0, feasible, top), lag_absolute=(1.0,),
@@ -321,19 +334,23 @@ class HuntingCell:
 
 
 def bound_cells(plan: SweepPlan) -> list[BoundCell]:
-    """Every (plant, crossover, lag, noise) cell of the bound sweep."""
-    cells = []
-    for ratio, inertia in plan.plants:
+    """Every (plant, crossover, lag, noise) cell of the bound sweep, then the probes."""
+    def lag_specs(ratio: float, absolute: tuple[float, ...]) -> list[tuple[float, bool]]:
         lmax = 2 * ratio / (ratio - 1)                      # (2-1) with k̄s = ratio·k̄c
-        lags = sorted({float(x) for x in plan.lag_absolute} | {m * lmax for m in plan.lag_multiples})
-        specs = [(lag, False) for lag in lags] + ([(math.inf, True)] if plan.integral else [])
-        for omega in plan.crossovers:
-            for lag, integral in specs:
-                for noise in plan.noise:
-                    key = (ratio, inertia, omega, lag, integral, noise)
-                    cells.append(BoundCell(ratio, inertia, float(omega), lag, integral, noise,
-                                           plan.cap_s, _seed("bound", *key), plan.warmup_ts,
-                                           plan.window_ts))
+        lags = sorted({float(x) for x in absolute} | {m * lmax for m in plan.lag_multiples})
+        return [(lag, False) for lag in lags] + ([(math.inf, True)] if plan.integral else [])
+
+    runs = [(ratio, inertia, omega, lag_specs(ratio, plan.lag_absolute))
+            for ratio, inertia in plan.plants for omega in plan.crossovers]
+    runs += [(ratio, inertia, omega, lag_specs(ratio, ())) for omega, ratio, inertia in plan.probes]
+    cells = []
+    for ratio, inertia, omega, specs in runs:
+        for lag, integral in specs:
+            for noise in plan.noise:
+                key = (ratio, inertia, omega, lag, integral, noise)
+                cells.append(BoundCell(ratio, inertia, float(omega), lag, integral, noise,
+                                       plan.cap_s, _seed("bound", *key), plan.warmup_ts,
+                                       plan.window_ts))
     return cells
 
 
@@ -557,6 +574,13 @@ def bound_verdict(bound: pd.DataFrame) -> dict[str, Any]:
                                                    "ks_over_kc": float(r["ks_over_kc"]),
                                                    "inertia": float(r["inertia"])}
         out["min_ratio_by_noise"] = per_noise
+        out["min_ratio_by_crossover"] = {f"{w:g}": float(g["ratio"].min())
+                                         for w, g in scored.groupby("omega_c")}
+        finite = scored[np.isfinite(scored["lag_over_lmax"])] if "lag_over_lmax" in scored else scored
+        out["min_ratio_by_lag_over_lmax"] = {
+            **{f"{k:.3g}": float(g["ratio"].min()) for k, g in finite.groupby(finite["lag_over_lmax"].round(3))},
+            **({"integral": float(scored.loc[~np.isfinite(scored["lag_ratio"]), "ratio"].min())}
+               if (~np.isfinite(scored["lag_ratio"])).any() else {})}
         out["n_fewer_than_2_slips"] = int((scored["n_slips_window"] < 2).sum())
     else:
         out["min_ratio"] = math.nan

@@ -120,7 +120,7 @@ def test_in_memory_series_and_typical_cell(tmp_path):
     d = synthetic_inputs(series_seeds=(0, 1))
     d["config"]["report"] = {"typical_cell": cell_id("solnic", "thesis", 1)}
     html = build_report(tmp_path, **d).read_text(encoding="utf-8")
-    assert "solnic__thesis__1</code>" in html
+    assert "solnic__thesis__s1</code>" in html
     d["config"]["report"] = {"typical_cell": "nope"}
     with pytest.raises(ValueError, match="typical_cell 'nope'"):
         build_report(tmp_path, **d)
