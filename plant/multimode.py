@@ -230,6 +230,7 @@ class _Cache:
         self.phis: dict[tuple[int, float], np.ndarray] = {}
         self.factors: dict[tuple[int, float], NoiseFactor] = {}
         self.gains: dict[tuple[int, float], np.ndarray] = {}
+        self.b3_b4_s4 = (params.beta3, params.beta4, params.sigma4_sq)
         self.pv = np.array([params.alpha, params.beta3, params.beta4, params.beta5,
                             params.sigma2_sq, params.sigma4_sq, params.sigma5_sq])
 
@@ -373,8 +374,11 @@ def _stuck(run: _Run, t_end: float) -> None:
     ks = run.ks()
     h_end = t_end - run.t
     h_fb = _flyback_time(run)
-    h_up = torque_crossing_time(x3, u, ks, p.motor_time_constant)
-    h_dn = torque_crossing_time(x3, u, -ks, p.motor_time_constant)
+    if -ks < u < ks and -ks <= x3 <= ks:
+        h_up = h_dn = math.inf          # x3 heads to u inside (−ks, ks): no breakaway possible
+    else:
+        h_up = torque_crossing_time(x3, u, ks, p.motor_time_constant)
+        h_dn = torque_crossing_time(x3, u, -ks, p.motor_time_constant)
     if x3 > ks or (x3 == ks and u > ks):
         h_up = 0.0      # already at (or past) stiction and rising: breaks away now
     elif x3 < -ks or (x3 == -ks and u < -ks):
@@ -405,16 +409,15 @@ def _stuck_propagate(run: _Run, h: float) -> None:
     [·, E(2 − E)/(2β4)]], the exact integral of (4-8) for the OU command velocity.
     Drawn as a 2 × 2 Cholesky factor with two unit normals, as the general factor does.
     """
-    p, X = run.p, run.X
-    b4 = p.beta4
+    X = run.X
+    b3, b4, s4 = run.cache.b3_b4_s4
     y = b4 * h
-    E = e1(y)
+    E = -math.expm1(-y)
     x4 = X[X4]
     X[X1] -= x4 * E / b4                                  # q14
     X[X4] = x4 * (1.0 - E)                                # q44
-    X[X3] = X[U] + (X[X3] - X[U]) * math.exp(-p.beta3 * h)
-    if run.noisy and p.sigma4_sq > 0:
-        s4 = p.sigma4_sq
+    X[X3] = X[U] + (X[X3] - X[U]) * math.exp(-b3 * h)
+    if run.noisy and s4 > 0:
         c11 = s4 * _e4(y) / b4**3
         c14 = -s4 * E * E / (2.0 * b4 * b4)
         c44 = s4 * E * (2.0 - E) / (2.0 * b4)
@@ -434,9 +437,11 @@ def _e4(y: float) -> float:
     # Σ_{k≥2} (−1)^k (2^k − 2) y^(k+1)/(k+1)!
     total, fact, k = 0.0, 6.0, 2
     power = y**3
-    while k < 30:
+    while k < 40:
         term = (2.0**k - 2.0) * power / fact
         total += term if k % 2 == 0 else -term
+        if term <= 1e-17 * total:
+            break
         k += 1
         power *= y
         fact *= k + 1
