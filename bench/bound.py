@@ -29,14 +29,15 @@ Durations
     * t_first = k̄s/(S·v), S = |C(1)| the static stiffness: a stuck lag (type-0) loop first
       breaks away when the wound-up lag torque reaches k̄s (0 for the pure integral).
 
-    warm-up = t_first + 0.5·t_s + 5 s and window = 1.5·t_s + 10 s (:class:`SweepPlan`), so the
-    window starts after the first breakaway and its aftermath and normally holds a full
-    stick-slip cycle; ``n_slips_window`` and the peaks of the window's two halves are reported so that a
-    reader can check this. A cell whose transient alone would exceed the sweep's cap is not run
-    (status ``skipped``); when only the window does not fit, it is shortened to the cap.
-    Because t_s ∝ 1/ωc², the lowest crossover swept on every plant is 20 rad/s (30 in
-    ``--quick``); 10 rad/s is probed on the heavy (J = 1) plants only, where one stick-slip
-    cycle still takes 10–30 simulated minutes.
+    warm-up = t_first + 0.5·t_s + 5 s and window = 1.5·t_s + t_first + 10 s (:class:`SweepPlan`):
+    the window starts after the first breakaway and its aftermath, and a stick-slip cycle of a
+    lag loop (at most ~2·t_first long) normally fits in it. A run is never cut short: a cell that
+    does not fit the sweep's cap is not run (status ``skipped``). A run whose window holds no
+    breakaway and no steady sliding has a peak that is still rising; it is not scored (status
+    ``unsteady``, its window peak kept in ``theta_window_rad``). ``n_slips_window`` and the peaks
+    of the window's two halves let a reader check the rest. Because t_s ∝ 1/ωc², the lowest
+    crossover swept on every plant is 20 rad/s (30 in ``--quick``); 10 rad/s is probed on two
+    heavy (J = 1) plants only, where one stick-slip cycle still takes 10–30 simulated minutes.
 
 Hunting runs
     A perfectly quiet set-point starting at x1 = 0 never moves. Each run instead starts from an
@@ -89,7 +90,8 @@ HUNTING_COLUMNS = ("ks_over_kc", "lmax", "onset_L", "onset_over_lmax", "highest_
                    "hunting_L", "integral_hunts")
 
 _MODES = ("full", "quick", "tiny")
-_MIN_WINDOW_S = 20.0
+#: Fraction of window samples in motion above which a run counts as steadily sliding.
+_SLIDING_FRACTION = 0.99
 
 
 # --- the plan ------------------------------------------------------------------------------
@@ -128,12 +130,14 @@ class SweepPlan:
         Also run the pure integral at the set-point.
     hunting_inertia : float
         J of the hunting sweep [ozf·in·s²].
-    warmup_ts, window_ts : float
-        Warm-up beyond the first breakaway, and scoring window, in units of t_s (module
-        docstring).
+    warmup_ts, window_ts, window_tf : float
+        Warm-up beyond the first breakaway in units of t_s; scoring window in units of t_s
+        plus ``window_tf``·t_first (module docstring).
     probes : tuple of (omega_c, ks_over_kc, inertia)
         Extra low-crossover cells on plants where t_s is affordable (heavy J), with the
         ``lag_multiples`` lags and the integral only.
+    probe_cap_s : float
+        Longest simulated run of a probe [s].
     """
 
     mode: str
@@ -152,7 +156,9 @@ class SweepPlan:
     hunting_inertia: float = 0.5
     warmup_ts: float = 0.5
     window_ts: float = 1.5
+    window_tf: float = 1.0
     probes: tuple[tuple[float, float, float], ...] = ()
+    probe_cap_s: float = 2500.0
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
@@ -174,15 +180,16 @@ class SweepPlan:
             raise ValueError(f"SweepPlan.hunting_ratios must be > 1, got {self.hunting_ratios!r}")
         if not self.noise or any(not isinstance(n, bool) for n in self.noise):
             raise ValueError(f"SweepPlan.noise must be a non-empty tuple of bools, got {self.noise!r}")
-        for name in ("cap_s", "hunting_crossover", "hunting_inertia", "window_ts"):
+        for name in ("cap_s", "probe_cap_s", "hunting_crossover", "hunting_inertia", "window_ts"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"SweepPlan.{name} must be > 0, got {getattr(self, name)!r}")
         for omega, ratio, inertia in self.probes:
             if not (omega > 0 and ratio > 1 and inertia > 0):
                 raise ValueError(f"SweepPlan.probes entries must be (omega_c > 0, ks_over_kc > 1, "
                                  f"inertia > 0), got {(omega, ratio, inertia)!r}")
-        if not self.warmup_ts >= 0:
-            raise ValueError(f"SweepPlan.warmup_ts must be >= 0, got {self.warmup_ts!r}")
+        for name in ("warmup_ts", "window_tf"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"SweepPlan.{name} must be >= 0, got {getattr(self, name)!r}")
 
 
 def _positive_tuple(name: str, values: tuple, *, allow_empty: bool = False) -> None:
@@ -299,6 +306,7 @@ class BoundCell:
     seed: int
     warmup_ts: float = 0.5
     window_ts: float = 1.5
+    window_tf: float = 1.0
 
     def params(self) -> PlantParams:
         return PlantParams(inertia=self.inertia, coulomb=COULOMB, stiction=COULOMB * self.ks_over_kc,
@@ -312,7 +320,8 @@ class BoundCell:
     def cost(self) -> float:
         """A rough relative cost for scheduling (simulated seconds)."""
         lag = 0.0 if self.integral else 5.0 / self.lag_ratio   # t_first ≈ 5·t_s/L
-        return min((self.warmup_ts + self.window_ts + lag) * self.time_scale(), self.cap_s)
+        return min((self.warmup_ts + self.window_ts + (1 + self.window_tf) * lag)
+                   * self.time_scale(), self.cap_s)
 
 
 @dataclass(frozen=True)
@@ -343,17 +352,18 @@ def bound_cells(plan: SweepPlan) -> list[BoundCell]:
         lags = sorted({float(x) for x in absolute} | {m * lmax for m in plan.lag_multiples})
         return [(lag, False) for lag in lags] + ([(math.inf, True)] if plan.integral else [])
 
-    runs = [(ratio, inertia, omega, lag_specs(ratio, plan.lag_absolute))
+    runs = [(ratio, inertia, omega, lag_specs(ratio, plan.lag_absolute), plan.cap_s)
             for ratio, inertia in plan.plants for omega in plan.crossovers]
-    runs += [(ratio, inertia, omega, lag_specs(ratio, ())) for omega, ratio, inertia in plan.probes]
+    runs += [(ratio, inertia, omega, lag_specs(ratio, ()), plan.probe_cap_s)
+             for omega, ratio, inertia in plan.probes]
     cells = []
-    for ratio, inertia, omega, specs in runs:
+    for ratio, inertia, omega, specs, cap in runs:
         for lag, integral in specs:
             for noise in plan.noise:
                 key = (ratio, inertia, omega, lag, integral, noise)
-                cells.append(BoundCell(ratio, inertia, float(omega), lag, integral, noise,
-                                       plan.cap_s, _seed("bound", *key), plan.warmup_ts,
-                                       plan.window_ts))
+                cells.append(BoundCell(ratio, inertia, float(omega), lag, integral, noise, cap,
+                                       _seed("bound", *key), plan.warmup_ts, plan.window_ts,
+                                       plan.window_tf))
     return cells
 
 
@@ -404,20 +414,20 @@ class _Observed(Controller):
 
 
 def _durations(cell: BoundCell, static_stiffness: float) -> tuple[float, float, str]:
-    """(warm-up, duration, note) of a ramp run; duration 0 means the cell does not fit the cap."""
+    """(warm-up, duration, note) of a ramp run; duration 0: the run does not fit the cap.
+
+    A run is never cut short to fit: a window shorter than one stick-slip cycle can miss the
+    breakaway and under-state θ.
+    """
     ks = COULOMB * cell.ks_over_kc
     t_s = cell.time_scale()
     t_first = ks / (static_stiffness * RAMP_VELOCITY) if math.isfinite(static_stiffness) else 0.0
     warmup = t_first + cell.warmup_ts * t_s + 5.0
-    window = cell.window_ts * t_s + 10.0
-    if warmup + _MIN_WINDOW_S > cell.cap_s:
-        return warmup, 0.0, (f"transient {warmup:.0f} s exceeds the cap {cell.cap_s:.0f} s "
-                             f"(first breakaway after ~{t_first:.0f} s)")
-    note = ""
+    window = cell.window_ts * t_s + 10.0 + cell.window_tf * t_first
     if warmup + window > cell.cap_s:
-        window = cell.cap_s - warmup
-        note = f"window shortened to {window:.0f} s by the cap"
-    return warmup, warmup + window, note
+        return warmup, 0.0, (f"needs {warmup + window:.0f} s (first breakaway after ~{t_first:.0f} s),"
+                             f" more than the cap {cell.cap_s:.0f} s")
+    return warmup, warmup + window, ""
 
 
 def run_bound_cell(cell: BoundCell) -> dict[str, Any]:
@@ -437,7 +447,8 @@ def run_bound_cell(cell: BoundCell) -> dict[str, Any]:
         "phase_margin_deg": math.nan, "gain_margin_db": math.nan, "static_stiffness": math.nan,
         "quasi_static_rad": math.nan, "noise_drive_rms": math.nan, "warmup_s": math.nan,
         "duration_s": math.nan, "n_slips_window": math.nan, "moving_fraction": math.nan,
-        "peak_first_half_rad": math.nan, "peak_second_half_rad": math.nan, "seed": cell.seed,
+        "theta_window_rad": math.nan, "peak_first_half_rad": math.nan,
+        "peak_second_half_rad": math.nan, "seed": cell.seed,
         "runtime_s": 0.0, "message": "",
     }
     lag = None if cell.integral else cell.lag_ratio
@@ -468,17 +479,24 @@ def run_bound_cell(cell: BoundCell) -> dict[str, Any]:
         row["message"] = "; ".join(m for m in (note, result.message) if m)
     if result.status != "ok":
         return row
-    theta = float(result.metrics["peak_error_rad"])
+    peak = float(result.metrics["peak_error_rad"])
     t, x1, mode = merged_trace(result.samples, result.events)
     in_win = t >= warmup
     moving = mode[in_win] != 2
     starts = np.flatnonzero(np.diff(moving.astype(np.int8), prepend=np.int8(moving[0])) == 1)
+    sliding = float(np.mean(result.samples["mode"][result.samples["t"] >= warmup] != 2))
     half = warmup + 0.5 * (duration - warmup)
     first, second = in_win & (t < half), t >= half
-    row.update(theta_rad=theta, ratio=theta / theta_b, n_slips_window=int(starts.size),
-               moving_fraction=float(np.mean(result.samples["mode"][result.samples["t"] >= warmup] != 2)),
+    row.update(theta_window_rad=peak, n_slips_window=int(starts.size), moving_fraction=sliding,
                peak_first_half_rad=float(np.max(np.abs(x1[first]), initial=0.0)),
                peak_second_half_rad=float(np.max(np.abs(x1[second]), initial=0.0)))
+    if starts.size == 0 and sliding < _SLIDING_FRACTION:
+        # stuck through the whole window: the error is still ramping towards a breakaway that
+        # the window does not reach, so its peak is not the cycle's
+        row.update(status="unsteady", message="no breakaway in the scoring window; "
+                                              "theta_window_rad is a lower bound of θ")
+        return row
+    row.update(theta_rad=peak, ratio=peak / theta_b)
     return row
 
 
@@ -559,7 +577,8 @@ def bound_verdict(bound: pd.DataFrame) -> dict[str, Any]:
         "n_unstable": int((bound["status"] == "unstable").sum()),
         "n_no_design": int((bound["status"] == "no_design").sum()),
         "n_skipped": int((bound["status"] == "skipped").sum()),
-        "n_failed": int((bound["stable"] & ~bound["status"].isin(["ok", "skipped"])).sum()),
+        "n_unsteady": int((bound["status"] == "unsteady").sum()),
+        "n_failed": int((bound["stable"] & ~bound["status"].isin(["ok", "skipped", "unsteady"])).sum()),
         "n_violations": int((scored["ratio"] < 1.0).sum()),
     }
     out["holds"] = bool(len(scored) > 0 and out["n_violations"] == 0)
@@ -781,7 +800,8 @@ def _verdict_lines(result: BoundResult) -> list[str]:
                  f"noise {'on' if d['noise'] else 'off'} (θ = {d['theta_rad'] * 1e6:.4g} µrad, "
                  f"θb = {d['theta_b_rad'] * 1e6:.4g} µrad)")
     lines.append(f"not scored: {v['n_unstable']} unstable, {v['n_no_design']} without a design, "
-                 f"{v['n_skipped']} over the time cap, {v['n_failed']} failed runs")
+                 f"{v['n_skipped']} over the time cap, {v['n_unsteady']} without a breakaway in "
+                 f"the window, {v['n_failed']} failed runs")
     lines.append(f"wall time {result.wall_s:.1f} s on {v['workers']} worker(s); files: "
                  + ", ".join(str(p) for p in result.paths.values()))
     return lines
