@@ -158,7 +158,7 @@ class SweepPlan:
     window_ts: float = 1.5
     window_tf: float = 1.0
     probes: tuple[tuple[float, float, float], ...] = ()
-    probe_cap_s: float = 2500.0
+    probe_cap_s: float = 3000.0
 
     def __post_init__(self) -> None:
         if self.mode not in _MODES:
@@ -757,7 +757,7 @@ def _tables(result: BoundResult) -> Iterable[Any]:
     scored = b[b["stable"] & (b["status"] == "ok")]
     t = Table(title="Inequality (2-6): θ/θb per plant and noise (stable designs, status ok)",
               title_justify="left", box=box.SIMPLE_HEAD)
-    for name in ("ks/kc", "J", "noise", "runs", "stable", "min θ/θb", "at design", "θ µrad",
+    for name in ("ks/kc", "J", "noise", "runs", "stable", "scored", "min θ/θb", "at design", "θ µrad",
                  "θb µrad", "max θ/θb"):
         t.add_column(name, justify="left" if name == "at design" else "right")
     for (ratio, inertia, noise), g in b.groupby(["ks_over_kc", "inertia", "noise"], sort=True):
@@ -770,7 +770,7 @@ def _tables(result: BoundResult) -> Iterable[Any]:
         else:
             best = ["—"] * 5
         t.add_row(_g(ratio), _g(inertia), "on" if noise else "off", str(len(g)),
-                  str(int(g["stable"].sum())), *best,
+                  str(int(g["stable"].sum())), str(len(s)), *best,
                   style="red" if len(s) and s["ratio"].min() < 1 else None)
     yield t
     h = Table(title="Lag limit (2-1): onset of hunting at a stationary set-point (noise off)",

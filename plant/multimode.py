@@ -137,7 +137,8 @@ class SimOptions:
 
 @dataclass
 class Accumulator:
-    """Exact running integrals for the metrics of SPEC §3 (only while ``active``)."""
+    """Exact running integrals and counts for the metrics of SPEC §3 (only while ``active``,
+    i.e. inside the scoring window)."""
 
     active: bool = True
     duration: float = 0.0
@@ -192,7 +193,8 @@ class _Run:
             raise _Stop(Status.CHATTER, f"more than {self.opts.max_events} events in one interval at t={self.t:.6f} s")
 
     def event(self) -> None:
-        self.acc.n_events += 1
+        if self.acc.active:
+            self.acc.n_events += 1
         self.tick()
         if self.rec is not None:
             self.rec(self.t, self.X, self.mode)
@@ -398,7 +400,7 @@ def _stuck(run: _Run, t_end: float) -> None:
         run.X[X3] = ks if h == h_up else -ks
         run.X[X2] = 0.0
         run.mode = 3 if h == h_up else 1
-        run.acc.n_breakaways += 1
+        run.acc.n_breakaways += run.acc.active
     run.event()
 
 
@@ -510,7 +512,7 @@ def _kernel_segment(run: _Run, h: float, reflecting: bool) -> bool:
     run.X = X
     run.torque_metrics(x3, u, advanced)
     run.acc.merge_peak(peak)
-    run.acc.n_substeps += n
+    run.acc.n_substeps += n if run.acc.active else 0
     run.count += n
     run.t += advanced
     if chattered:
@@ -527,10 +529,10 @@ def _velocity_zero(run: _Run) -> None:
         return                                   # torque still breaks stiction forward
     if -s * x3 > ks:
         run.mode = 1 if run.mode == 3 else 3     # breaks stiction the other way
-        run.acc.n_breakaways += 1
+        run.acc.n_breakaways += run.acc.active
         return
     run.mode = 2
-    run.acc.n_sticks += 1
+    run.acc.n_sticks += run.acc.active
 
 
 def _mean_velocity(run: _Run, tau: float) -> float:
@@ -593,7 +595,7 @@ def _advance_moving(run: _Run, h: float, *, reflect: bool) -> None:
         run.X = Xb
         run.t += step
         remaining -= step
-        run.acc.n_substeps += 1
+        run.acc.n_substeps += run.acc.active
         run.tick()
 
 
@@ -663,7 +665,7 @@ def _bridge_zero(run: _Run, h: float) -> bool:
         step = sub if remaining > 1.5 * sub else remaining
         Xa = run.X
         Xb = run.cache.phi(run.mode, step) @ Xa + _draw(run, run.mode, step)
-        run.acc.n_substeps += 1
+        run.acc.n_substeps += run.acc.active
         run.tick()
         p = _cross_prob(run, Xa[X2], Xb[X2], step)
         if p >= 1.0 or run.rng.random() < p:
@@ -754,7 +756,7 @@ def _newton_zero(run: _Run, h: float) -> bool:
     _substep_peak(run, Xa, Xb, tau)
     run.X = Xb
     run.t += tau
-    run.acc.n_substeps += 1
+    run.acc.n_substeps += run.acc.active
     if found:
         run.X[X2] = 0.0
     return found

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from bench.bound import (BOUND_COLUMNS, BoundCell, SweepPlan, _durations, bound_verdict,
-                         check_bound_command, hunting_onsets)
+                         check_bound_command, hunting_onsets, run_bound_cell)
 from controllers.linear import design_linear
 from plant import PlantParams
 
@@ -54,33 +54,44 @@ def test_no_hunting_at_the_largest_L_gives_no_onset():
 def _bound_rows():
     base = dict(omega_c=50.0, lag_ratio=6.0, ks_over_kc=1.5, inertia=0.5, theta_b_rad=1e-4,
                 n_slips_window=3)
-    return pd.DataFrame([
-        {**base, "design": "a", "noise": False, "theta_rad": 3e-4, "ratio": 3.0, "stable": True, "status": "ok"},
-        {**base, "design": "b", "noise": True, "theta_rad": 8e-5, "ratio": 0.8, "stable": True, "status": "ok"},
-        {**base, "design": "c", "noise": False, "theta_rad": np.nan, "ratio": np.nan, "stable": False,
-         "status": "unstable"},
-        {**base, "design": "d", "noise": False, "theta_rad": 1e-6, "ratio": 0.01, "stable": True,
-         "status": "diverged"},
-    ])
+    rows = [("a", False, 3e-4, True, "ok"), ("b", True, 8e-5, True, "ok"),
+            ("c", False, np.nan, False, "unstable"), ("d", False, 1e-6, True, "diverged")]
+    return pd.DataFrame([{**base, "design": d, "noise": noise, "theta_rad": theta,
+                          "ratio": theta / base["theta_b_rad"], "stable": stable, "status": status}
+                         for d, noise, theta, stable, status in rows])
 
 
 def test_verdict_reports_a_violation_with_its_design():
     v = bound_verdict(_bound_rows())
     assert v["holds"] is False and v["n_violations"] == 1
-    assert v["min_ratio"] == 0.8 and v["min_ratio_design"]["design"] == "b"
+    assert v["min_ratio"] == pytest.approx(0.8) and v["min_ratio_design"]["design"] == "b"
     assert v["n_scored"] == 2 and v["n_unstable"] == 1 and v["n_failed"] == 1
 
 
 def test_verdict_holds_when_every_scored_ratio_is_at_least_one():
     v = bound_verdict(_bound_rows().drop(index=1))
-    assert v["holds"] is True and v["min_ratio"] == 3.0
+    assert v["holds"] is True and v["min_ratio"] == pytest.approx(3.0)
 
 
-def test_a_transient_longer_than_the_cap_is_skipped_not_truncated():
+def test_a_run_longer_than_the_cap_is_skipped_not_truncated():
     cell = BoundCell(1.5, 0.5, 48.7, 1.0, False, False, cap_s=100.0, seed=0)
     warmup, duration, note = _durations(cell, static_stiffness=300.0)
     # first breakaway at ks/(S·v) = 2.1/(300·30e-6) = 233 s > cap
-    assert duration == 0.0 and warmup > 2.1 / (300.0 * 30e-6) and "exceeds the cap" in note
+    assert duration == 0.0 and warmup > 2.1 / (300.0 * 30e-6) and "more than the cap" in note
+    roomy = BoundCell(1.5, 0.5, 48.7, 1.0, False, False, cap_s=1e5, seed=0)
+    warmup, duration, _ = _durations(roomy, static_stiffness=300.0)
+    assert warmup > 2.1 / (300.0 * 30e-6) and duration - warmup > 2.1 / (300.0 * 30e-6)
+
+
+def test_a_window_without_a_breakaway_is_not_scored():
+    # L = 1 at 110.7 rad/s: first breakaway near ks/(S·v) (~54 s); with no window margins the
+    # 10 s window after it holds no second breakaway (the cycle is tens of seconds long).
+    cell = BoundCell(1.5, 1.0, 110.7, 1.0, False, False, cap_s=1e4, seed=0, warmup_ts=0.0,
+                     window_ts=0.0, window_tf=0.0)
+    row = run_bound_cell(cell)
+    assert row["status"] == "unsteady" and row["n_slips_window"] == 0
+    assert math.isnan(row["theta_rad"]) and math.isnan(row["ratio"])
+    assert 0 < row["theta_window_rad"] < 1.4 * 1.5 / row["static_stiffness"]
 
 
 @pytest.mark.parametrize("changes, match", [
