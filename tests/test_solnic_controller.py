@@ -95,26 +95,39 @@ def test_ks_within_two_percent_by_60s(deterministic_run):
     assert abs(ks / ks_true - 1) < 0.02
 
 
-@pytest.mark.slow
-def test_quiet_friction_beats_the_classical_limit_and_uses_less_current():
-    """σ2 = 0, three seeds, 100 s.
-
-    Scored from 40 s, not 20 s: like the text's run (first cost evaluation at 20 s, steady at
-    ~54 s) the start-up from 0.5× estimates and Δt_u,opt = 0 lasts beyond 20 s, and its last
-    large corrections (tens of µrad) fall inside a 20-s window.
-    """
+def _quiet_friction(warmup_s):
     p = PlantParams().replace(friction_noise_psd=0.0)
-    bound = p.classical_bound()
-    have_linear = "linear" in available_controllers()
+    out = []
     for seed in (0, 1, 2):
-        r = run_closed_loop(p, SolnicController(), duration_s=100.0, warmup_s=40.0, seed=seed)
-        assert r.status == "ok", r.message
-        assert r.metrics["peak_error_rad"] < bound
-        if have_linear:
-            lin = run_closed_loop(p, get_controller("linear")(), duration_s=100.0, warmup_s=40.0, seed=seed)
-            assert r.metrics["mean_abs_current"] < lin.metrics["mean_abs_current"]
-    if not have_linear:
-        pytest.skip("controller 'linear' is not registered: current comparison skipped")
+        r = run_closed_loop(p, SolnicController(), duration_s=100.0, warmup_s=warmup_s, seed=seed)
+        lin = run_closed_loop(p, get_controller("linear")(), duration_s=100.0, warmup_s=warmup_s, seed=seed)
+        assert r.status == "ok" and lin.status == "ok", (r.message, lin.message)
+        out.append((r.metrics, lin.metrics))
+    return p.classical_bound(), out
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="not reproduced as specified: scored from 20 s, seed 1's start-up "
+                                       "(which, as in the text's run, lasts past 20 s) leaves a 36.1 µrad "
+                                       "peak, above the 7.09 µrad limit (seeds 0, 2: 4.45, 4.68 µrad)")
+def test_quiet_friction_beats_the_classical_limit_scored_from_20s():
+    """The issue's criterion as written: σ2 = 0, three seeds, 100 s, scored from 20 s."""
+    bound, runs = _quiet_friction(20.0)
+    assert all(m["peak_error_rad"] < bound for m, _ in runs)
+
+
+@pytest.mark.slow
+def test_quiet_friction_beats_the_classical_limit_after_start_up_and_uses_less_current():
+    """σ2 = 0, three seeds, 100 s, scored from 40 s — after the start-up transient.
+
+    Like the text's run (first cost evaluation at 20 s, steady at ~54 s), the start-up from
+    0.5× estimates and Δt_u,opt = 0 lasts beyond 20 s. Mean |current| is compared with the
+    linear controller on the same seeds and window.
+    """
+    bound, runs = _quiet_friction(40.0)
+    for solnic, linear in runs:
+        assert solnic["peak_error_rad"] < bound
+        assert solnic["mean_abs_current"] < linear["mean_abs_current"]
 
 
 @pytest.mark.slow
