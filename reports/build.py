@@ -13,9 +13,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
-import os
 import platform
-import tempfile
 from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
@@ -33,6 +31,7 @@ from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
 from reports.limits import PlantLimits, limits_from_config
+from bench.store import write_atomic
 
 __all__ = ["build_report", "build_report_from_dir", "render_html", "REPORT_NAME"]
 
@@ -357,20 +356,6 @@ def render_html(inputs: ReportInputs) -> str:
     return _environment().get_template("report.html.j2").render(**context)
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def build_report(out_dir: Path | str, *, results: pd.DataFrame | None,
                  series: Mapping[str, Any] | None = None, bound: pd.DataFrame | None = None,
                  hunting: pd.DataFrame | None = None, speed: Mapping[str, Any] | None = None,
@@ -407,7 +392,7 @@ def build_report(out_dir: Path | str, *, results: pd.DataFrame | None,
                           speed=normalise_speed(speed), config=dict(config or {}),
                           meta=dict(meta or {}), notes=notes)
     path = out / REPORT_NAME
-    _write_atomic(path, render_html(inputs))
+    write_atomic(path, render_html(inputs))
     return path
 
 
@@ -420,5 +405,5 @@ def build_report_from_dir(out_dir: Path | str) -> Path:
     out = Path(out_dir)
     inputs = load_inputs(out)
     path = out / REPORT_NAME
-    _write_atomic(path, render_html(inputs))
+    write_atomic(path, render_html(inputs))
     return path
