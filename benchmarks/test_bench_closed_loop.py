@@ -5,7 +5,6 @@ Slow bodies use ``benchmark.pedantic`` with few rounds so ``make benchmark`` sta
 ``--benchmark-disable`` each body runs once.
 """
 
-import importlib.util
 
 import pytest
 
@@ -31,8 +30,6 @@ def test_thesis_cell(benchmark, controller):
 
 
 def test_quick_matrix(benchmark, tmp_path):
-    if importlib.util.find_spec("bench.cli") is None:
-        pytest.skip("bench/cli.py (solnic-bench run --quick) does not exist yet")
     from typer.testing import CliRunner
 
     from bench.cli import app
