@@ -65,6 +65,7 @@ import numpy as np
 import pandas as pd
 import typer
 
+from bench.errors import UserError
 from bench.hunting import detect_hunting, merged_trace
 from bench.store import write_atomic
 from controllers.base import Controller
@@ -704,7 +705,12 @@ def check_bound(quick: bool, out_dir: Path, workers: int | None = None,
         raise ValueError(f"workers must be >= 1, got {workers!r}")
     workers = workers or os.cpu_count() or 1
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"--out {out_dir}: exists and is not a directory")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--out {out_dir}: cannot create it ({exc.strerror or exc})") from None
     plan = sweep_plan("tiny" if tiny else "quick" if quick else "full")
     bcells, hcells = bound_cells(plan), hunting_cells(plan)
     bound_rows, hunting_rows = _execute([*bcells, *hcells], workers, progress)

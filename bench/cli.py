@@ -204,7 +204,7 @@ def report(run_dir: Path = typer.Argument(..., help="A run directory written by 
         raise typer.Exit(1) from None
     try:
         path = build_report_from_dir(run_dir)
-    except ValueError as exc:   # a malformed input file; the message names it
+    except (ValueError, OSError) as exc:   # a malformed or unreadable input file; the message names it
         raise UserError(f"{run_dir}: {exc}") from None
     out_console.print(f"report: {path}")
 

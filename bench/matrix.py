@@ -184,8 +184,8 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
 
     seeds = m["seeds"]
     if (not isinstance(seeds, list) or not seeds
-            or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)):
-        raise _fail(source, "matrix.seeds", f"must be a non-empty list of integers >= 0, got {seeds!r}")
+            or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in seeds)):
+        raise _fail(source, "matrix.seeds", f"must be a non-empty list of integers in [0, 2**63), got {seeds!r}")
     if len(set(seeds)) != len(seeds):
         raise _fail(source, "matrix.seeds", "lists a seed more than once")
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,8 +89,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     deadline = math.inf if time_limit_s is None else time.perf_counter() + time_limit_s
     opts = options or SimOptions(noise=noise)
     if not noise and opts.noise:
-        opts = SimOptions(noise=False, zero_velocity=opts.zero_velocity, substep=opts.substep,
-                          bisection_tol=opts.bisection_tol, max_events=opts.max_events)
+        opts = dataclasses.replace(opts, noise=False)
     streams = spawn_streams(seed)
     if x5_initial is None:
         x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0

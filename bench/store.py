@@ -117,7 +117,12 @@ class ResultsStore:
         return row
 
     def is_done(self, cell: Cell, traces: bool) -> bool:
-        return self.load(cell) is not None and (not traces or self.trace_path(cell.cell_id).is_file())
+        """Stored with the same hash (and its trace, if wanted). A cell stopped by the wall-clock
+        limit is not done: that outcome depends on machine load, so a resume runs it again."""
+        row = self.load(cell)
+        if row is None or (traces and not self.trace_path(cell.cell_id).is_file()):
+            return False
+        return not (row.get("status") == "error" and "time limit" in str(row.get("message", "")))
 
     def save(self, row: dict[str, Any]) -> Path:
         """Store one finished cell atomically."""

@@ -10,6 +10,7 @@ and the figure every solnic correction is built from.
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,8 +79,7 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
     p = params.replace(command_velocity_std=0.0)
     opts = options or SimOptions(noise=noisy)
     if not noisy:
-        opts = SimOptions(noise=False, zero_velocity=opts.zero_velocity, substep=opts.substep,
-                          bisection_tol=opts.bisection_tol, max_events=opts.max_events)
+        opts = dataclasses.replace(opts, noise=False)
     rng = np.random.default_rng(np.random.SeedSequence(seed)) if noisy else None
     state = initial_state(p, x5=0.0, x4=0.0)
     level = sign * p.u_max
@@ -140,8 +140,8 @@ def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
     x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, p)                # driven, reflecting
     t = dt_u
     t_r = t3 * math.log((x3 + U) / (ks + U)) if x3 > ks else 0.0         # flyback down to ks
-    x1, x2, x3 = _move(x1, x2, ks if t_r == 0.0 else x3, -U, kc, t_r, p)
-    x3 = ks if t_r > 0.0 else x3
+    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_r, p)
+    x3 = ks                                                               # exactly at stiction
     t += t_r
     t_f = t3 * math.log1p(x3 / U)                                         # to current zero
     v_end = _move(x1, x2, x3, -U, kc, t_f, p)[1]

@@ -95,7 +95,7 @@ def test_config_hash_is_stable_and_follows_what_determines_the_numbers(tmp_path)
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\nseeds = [0, 0]\n',
      r"matrix\.toml: matrix\.seeds: lists a seed more than once"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\nseeds = [true]\n',
-     r"matrix\.toml: matrix\.seeds: must be a non-empty list of integers >= 0"),
+     r"matrix\.toml: matrix\.seeds: must be a non-empty list of integers in \[0, 2\*\*63\)"),
     ('[matrix]\ncontrollers = ["pid"]\nscenarios = ["thesis"]\nseeds = [0]\n',
      r"matrix\.toml: matrix\.controllers\[0\]: unknown controller 'pid'; known: \[.*'linear'.*'solnic'"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["mars"]\nseeds = [0]\n',

@@ -84,3 +84,14 @@ def test_a_failing_cell_is_a_row_not_an_exception(tmp_path, cell):
     slow = dataclasses.replace(cell, scenario=cell.scenario.with_durations(duration_s=30.0), time_limit_s=0.05)
     row = run_cell(slow, tmp_path, traces=False)
     assert row["status"] == "error" and "time limit of 0.05 s exceeded" in row["message"]
+
+
+def test_a_cell_stopped_by_the_time_limit_is_run_again_on_resume(tmp_path, cell):
+    """A wall-clock stop depends on machine load, not on the inputs: it must not be final."""
+    store = ResultsStore(tmp_path)
+    row = {"cell": cell.cell_id, "config_hash": cell.config_hash, "status": "error",
+           "message": "time limit of 600 s exceeded at t = 12.00 s"}
+    store.save(row)
+    assert not store.is_done(cell, traces=False)
+    store.save({**row, "message": "ZeroDivisionError: float division by zero"})
+    assert store.is_done(cell, traces=False)
