@@ -44,7 +44,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from plant.drive import DriveCommand, DriveType
-from plant._kernels import moving_noisy
+from plant._kernels import chol_psd, moving_noisy, phi_moving, q_moving
 from plant.noise import NoiseFactor, noise_factor
 from plant.params import PlantParams
 from plant.segments import hermite_peak, torque_crossing_time, torque_integrals
@@ -240,7 +240,11 @@ class _Cache:
         key = (mode, h)
         P = self.phis.get(key)
         if P is None:
-            P = phi(mode, h, self.p)
+            if mode == 2:
+                P = phi(mode, h, self.p)
+            else:                       # the same closed forms, compiled (tested equal)
+                P = np.empty((N_STATE, N_STATE))
+                phi_moving(mode, h, self.pv, P)
             if len(self.phis) < 20000:
                 self.phis[key] = P
         return P
@@ -249,7 +253,14 @@ class _Cache:
         key = (mode, h)
         f = self.factors.get(key)
         if f is None:
-            f = noise_factor(process_noise(mode, h, self.p))
+            if mode == 2:
+                f = noise_factor(process_noise(mode, h, self.p))
+            else:                       # compiled quadrature of (4-8) and PSD Cholesky (tested equal)
+                Q = np.empty((4, 4))
+                L = np.empty((4, 4))
+                q_moving(mode, h, self.pv, Q)
+                chol_psd(Q, L)
+                f = NoiseFactor(_NOISY_MOVING, L, N_STATE)
             if len(self.factors) < 20000:
                 self.factors[key] = f
         return f
@@ -583,6 +594,14 @@ def _advance_moving(run: _Run, h: float, *, reflect: bool) -> None:
     if not run.noisy:
         _deterministic_move(run, h)
         return
+    if run.sigma_v2 == 0.0:
+        # No white noise on x2 (σ2 = 0): the path is the mean path plus the slow x4/x5
+        # diffusions, so one exact Gaussian jump replaces the sub-steps; the peak comes from the
+        # mean path's exact interior extrema (the noise there is ~1e-15 rad over a segment).
+        _deterministic_move(run, h)
+        run.X = run.X + _draw(run, run.mode, h)
+        run.acc.merge_peak(abs(run.X[X1]))
+        return
     sub = run.opts.reflect_substep if reflect else run.opts.substep
     remaining = h
     while remaining > 0:
@@ -720,7 +739,7 @@ def _newton_zero(run: _Run, h: float) -> bool:
     z = run.rng.standard_normal(f_full.m)
 
     def velocity(tau: float) -> float:
-        f = noise_factor(process_noise(mode, tau, run.p))
+        f = run.cache.factor(mode, tau)
         return float(run.cache.phi(mode, tau)[X2] @ run.X + f.sample(z)[X2])
 
     s = 1.0 if mode == 3 else -1.0
@@ -750,7 +769,7 @@ def _newton_zero(run: _Run, h: float) -> bool:
         g, found = brentq(velocity, min(1e-12, h / 2), h, xtol=1e-15, rtol=8.9e-16), True
     run.torque_metrics(x3, u, g if found else h)
     tau = g if found else h
-    f = noise_factor(process_noise(mode, tau, run.p))
+    f = run.cache.factor(mode, tau)
     Xa = run.X
     Xb = run.cache.phi(mode, tau) @ Xa + f.sample(z)
     _substep_peak(run, Xa, Xb, tau)

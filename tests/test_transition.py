@@ -171,3 +171,25 @@ def test_stuck_closed_form_matches_general_factor_statistics():
         assert s4 * _e4(y) / b4**3 == pytest.approx(C[X1, X1], rel=1e-12)
         assert -s4 * E * E / (2 * b4 * b4) == pytest.approx(C[X1, X4], rel=1e-12)
         assert s4 * E * (2 - E) / (2 * b4) == pytest.approx(C[X4, X4], rel=1e-12)
+
+
+@pytest.mark.parametrize("params", PARAMS)
+@pytest.mark.parametrize("mode", [1, 3])
+def test_compiled_closed_forms_equal_the_python_ones(params, mode):
+    """plant._kernels restates Φ and Q in scalar form for numba; both must agree."""
+    from plant._kernels import chol_psd, phi_moving, q_moving
+
+    pv = np.array([params.alpha, params.beta3, params.beta4, params.beta5,
+                   params.sigma2_sq, params.sigma4_sq, params.sigma5_sq])
+    idx = np.array(_NOISY)
+    for h in (1e-7, 3e-5, 1e-3, 0.4, 7.0):
+        P = np.empty((7, 7))
+        phi_moving(mode, h, pv, P)
+        assert np.allclose(P, phi(mode, h, params), rtol=1e-14, atol=0)
+        Q, L = np.empty((4, 4)), np.empty((4, 4))
+        q_moving(mode, h, pv, Q)
+        Qref = process_noise(mode, h, params)[np.ix_(idx, idx)]
+        d = np.sqrt(np.diag(Qref))
+        assert np.allclose(Q / np.outer(d, d), Qref / np.outer(d, d), rtol=0, atol=1e-12)
+        chol_psd(Q, L)
+        assert np.allclose((L @ L.T) / np.outer(d, d), Q / np.outer(d, d), atol=1e-12)
