@@ -37,7 +37,7 @@ the segment runs with kc = 0 (a 4.7σ event for Table 2-1).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -53,8 +53,6 @@ from plant.transition import U, X1, X2, X3, X4, X5, X6, N_STATE, e1, phi, proces
 __all__ = ["PlantState", "SimOptions", "Accumulator", "Status", "advance", "initial_state"]
 
 _NOISY_MOVING = np.array([X1, X2, X4, X5])
-# Rejection draws per bisection level; expected 1/P(cross | ends), capped for safety.
-_MAX_BRIDGE_TRIES = 200
 
 
 class Status:
@@ -231,7 +229,6 @@ class _Cache:
         self.p = params
         self.phis: dict[tuple[int, float], np.ndarray] = {}
         self.factors: dict[tuple[int, float], NoiseFactor] = {}
-        self.gains: dict[tuple[int, float], np.ndarray] = {}
         self.b3_b4_s4 = (params.beta3, params.beta4, params.sigma4_sq)
         self.pv = np.array([params.alpha, params.beta3, params.beta4, params.beta5,
                             params.sigma2_sq, params.sigma4_sq, params.sigma5_sq])
@@ -264,24 +261,6 @@ class _Cache:
             if len(self.factors) < 20000:
                 self.factors[key] = f
         return f
-
-    def bridge_gain(self, mode: int, h: float) -> np.ndarray:
-        """G = Q(h/2)·Φ(h/2)ᵀ·Q(h)⁻¹ on the noisy block (Matheron's rule for the midpoint)."""
-        key = (mode, h)
-        G = self.gains.get(key)
-        if G is None:
-            idx = _NOISY_MOVING
-            Q1 = process_noise(mode, h / 2, self.p)[np.ix_(idx, idx)]
-            P2 = phi(mode, h / 2, self.p)[np.ix_(idx, idx)]
-            Qh = process_noise(mode, h, self.p)[np.ix_(idx, idx)]
-            d = np.sqrt(np.diag(Qh))
-            d[d == 0] = 1.0
-            # Solve in diagonally scaled coordinates: Q(h) spans ~20 decades.
-            Qs = Qh / np.outer(d, d)
-            rhs = (Q1 @ P2.T) / d[None, :]
-            G = np.linalg.lstsq(Qs, rhs.T, rcond=1e-13)[0].T / d[None, :]
-            self.gains[key] = G
-        return G
 
 
 _CACHES: dict[PlantParams, _Cache] = {}
@@ -490,8 +469,10 @@ def _moving(run: _Run, t_end: float) -> None:
         if run.noisy and run.sigma_v2 > 0.0 and (reflecting or run.opts.zero_velocity == "bridge"):
             stopped = _kernel_segment(run, h, reflecting)
         elif reflecting:
-            _advance_moving(run, h, reflect=True)
+            _advance_moving(run, h)
             stopped = False
+        elif run.noisy and run.sigma_v2 > 0.0:
+            stopped = _newton_zero(run, h)
         else:
             stopped = _advance_to_zero_or(run, h)
     finally:
@@ -568,54 +549,33 @@ def _first_zero_deterministic(run: _Run, h: float) -> float:
 
 
 def _advance_to_zero_or(run: _Run, h: float) -> bool:
-    """Advance a non-reflecting moving segment by h, or to its first velocity zero.
+    """Advance a non-reflecting moving segment without white velocity noise by h, or to the
+    first zero of its mean velocity. True when it ended at a velocity zero (x2 = 0)."""
+    tau = _first_zero_deterministic(run, h)
+    if tau <= h:
+        _advance_moving(run, tau)
+        run.X[X2] = 0.0
+        return True
+    _advance_moving(run, h)
+    return False
 
-    Returns True when the segment ended at a velocity zero (state at the zero, x2 = 0).
+
+def _advance_moving(run: _Run, h: float) -> None:
+    """Exact propagation over h of a moving segment without white velocity noise, with metrics.
+
+    (Segments with σ2 > 0 go through the compiled kernel, plant._kernels.moving_noisy.)
     """
-    if not run.noisy or run.sigma_v2 == 0.0:
-        tau = _first_zero_deterministic(run, h)
-        if tau <= h:
-            _advance_moving(run, tau, reflect=False)
-            run.X[X2] = 0.0
-            return True
-        _advance_moving(run, h, reflect=False)
-        return False
-    if run.opts.zero_velocity == "newton":
-        return _newton_zero(run, h)
-    return _bridge_zero(run, h)
-
-
-def _advance_moving(run: _Run, h: float, *, reflect: bool) -> None:
-    """Exact (Gaussian) propagation over h in the current moving mode, with metrics."""
     if h <= 0:
         return
     x3, u = run.X[X3], run.X[U]
     run.torque_metrics(x3, u, h)
-    if not run.noisy:
-        _deterministic_move(run, h)
-        return
-    if run.sigma_v2 == 0.0:
-        # No white noise on x2 (σ2 = 0): the path is the mean path plus the slow x4/x5
-        # diffusions, so one exact Gaussian jump replaces the sub-steps; the peak comes from the
-        # mean path's exact interior extrema (the noise there is ~1e-15 rad over a segment).
-        _deterministic_move(run, h)
+    _deterministic_move(run, h)
+    if run.noisy:
+        # σ2 = 0: the path is the mean path plus the slow x4/x5 diffusions, so one exact
+        # Gaussian jump suffices; the peak comes from the mean path's exact interior extrema
+        # (the noise there is ~1e-15 rad over a segment).
         run.X = run.X + _draw(run, run.mode, h)
         run.acc.merge_peak(abs(run.X[X1]))
-        return
-    sub = run.opts.reflect_substep if reflect else run.opts.substep
-    remaining = h
-    while remaining > 0:
-        step = sub if remaining > 1.5 * sub else remaining
-        Xa = run.X
-        Xb = run.cache.phi(run.mode, step) @ Xa + _draw(run, run.mode, step)
-        if reflect:
-            _skorokhod(run, Xa, Xb, step)
-        _substep_peak(run, Xa, Xb, step)
-        run.X = Xb
-        run.t += step
-        remaining -= step
-        run.acc.n_substeps += run.acc.active
-        run.tick()
 
 
 def _deterministic_move(run: _Run, h: float) -> None:
@@ -651,84 +611,6 @@ def _substep_peak(run: _Run, Xa: np.ndarray, Xb: np.ndarray, h: float) -> None:
     if (Xa[X2] - Xa[X4]) * (Xb[X2] - Xb[X4]) < 0:
         peak = max(peak, hermite_peak(h, Xa[X1], Xa[X2] - Xa[X4], Xb[X1], Xb[X2] - Xb[X4]))
     run.acc.merge_peak(peak)
-
-
-def _skorokhod(run: _Run, Xa: np.ndarray, Xb: np.ndarray, h: float) -> None:
-    """Reflect x2 at 0 over one sub-step (see module docstring). Modifies Xb in place."""
-    s = 1.0 if run.mode == 3 else -1.0
-    va, vb = s * Xa[X2], s * Xb[X2]
-    if run.sigma_v2 > 0:
-        uniform = run.rng.random()
-        disc = (vb - va) ** 2 - 2.0 * run.sigma_v2 * h * math.log(uniform)
-        low = 0.5 * (va + vb - math.sqrt(disc))     # bridge minimum (exact law)
-    else:
-        low = min(va, vb)
-    if low < 0.0:
-        Xb[X2] += s * (-low)
-        Xb[X1] += s * (-low) * h / 2.0
-
-
-def _cross_prob(run: _Run, va: float, vb: float, h: float) -> float:
-    """P(bridge of x2 from va to vb over h touches 0); 1 on a sign change."""
-    if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
-        return 1.0
-    return math.exp(-2.0 * va * vb / (run.sigma_v2 * h))
-
-
-def _bridge_zero(run: _Run, h: float) -> bool:
-    remaining = h
-    sub = run.opts.substep
-    x3, u = run.X[X3], run.X[U]
-    t0 = run.t
-    while remaining > 0:
-        step = sub if remaining > 1.5 * sub else remaining
-        Xa = run.X
-        Xb = run.cache.phi(run.mode, step) @ Xa + _draw(run, run.mode, step)
-        run.acc.n_substeps += run.acc.active
-        run.tick()
-        p = _cross_prob(run, Xa[X2], Xb[X2], step)
-        if p >= 1.0 or run.rng.random() < p:
-            tc, Xc = _bisect(run, Xa, Xb, step)
-            run.torque_metrics(x3, u, (run.t + tc) - t0)
-            _substep_peak(run, Xa, Xc, tc)
-            run.X = Xc
-            run.X[X2] = 0.0
-            run.t += tc
-            return True
-        _substep_peak(run, Xa, Xb, step)
-        run.X = Xb
-        run.t += step
-        remaining -= step
-    run.torque_metrics(x3, u, run.t - t0)
-    return False
-
-
-def _bisect(run: _Run, Xa: np.ndarray, Xb: np.ndarray, h: float) -> tuple[float, np.ndarray]:
-    """Locate the first zero of x2 in a bridge known to cross; returns (offset, state)."""
-    mode = run.mode
-    idx = _NOISY_MOVING
-    ta, tb = 0.0, h
-    while tb - ta > run.opts.bisection_tol:
-        w = tb - ta
-        half = w / 2
-        P_half = run.cache.phi(mode, half)
-        G = run.cache.bridge_gain(mode, w)
-        for _ in range(_MAX_BRIDGE_TRIES):
-            Xm_free = P_half @ Xa + _draw(run, mode, half)
-            Xb_free = P_half @ Xm_free + _draw(run, mode, half)
-            Xm = Xm_free.copy()
-            Xm[idx] += G @ (Xb - Xb_free)[idx]
-            pl = _cross_prob(run, Xa[X2], Xm[X2], half)
-            pr = _cross_prob(run, Xm[X2], Xb[X2], half)
-            p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
-            if p_any >= 1.0 or run.rng.random() < p_any:
-                break
-        if pl >= 1.0 or run.rng.random() * p_any < pl:
-            tb, Xb = ta + half, Xm
-        else:
-            ta, Xa = ta + half, Xm
-        run.tick()
-    return tb, Xb
 
 
 def _newton_zero(run: _Run, h: float) -> bool:

@@ -247,7 +247,7 @@ def _bound_scatter(bound: pd.DataFrame, x: str, title: str, xtitle: str,
     if not un.empty and un["ratio"].notna().any():
         fig.add_trace(go.Scatter(
             x=un[x], y=un["ratio"], mode="markers",
-            name=f"unstable / hunting (excluded from verdict)",
+            name="unstable / hunting (excluded from verdict)",
             marker=dict(symbol="x", color="#999", size=7), text=un["design"],
             hovertemplate="%{text} (unstable)<extra></extra>"))
     _hline_log(fig, 1.0, "θ = θb (2-6)", right=True, below=True)

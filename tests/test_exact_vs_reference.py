@@ -1,7 +1,6 @@
 """The exact simulator against solve_ivp with terminal events on random command sequences."""
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
