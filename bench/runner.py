@@ -1,40 +1,52 @@
 """The closed loop: sensor → controller → exact plant, one sample interval at a time.
 
 At every sample instant n·τs the sensor returns y(n) = x1(n·τs) + w1(n); the controller
-returns the drive command for [n·τs, (n+1)·τs); the plant advances exactly over that interval.
+returns the drive command for [n·τs, (n+1)·τs); the plant's pure step
+(:func:`plant.advance`) returns the state at the next instant with the interval's exact
+integrals, which the scoring window sums (:class:`bench.metrics.WindowTotals`).
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
 plant noise, sensor noise, controller, and the initial draw of x5 from N(0, VAR(x5)).
+
+Recording: a *recorder* receives the run as it happens, in time order — ``sample(row)`` at
+every sample instant (keys :data:`SAMPLE_FIELDS`), ``events(ev)`` once per interval with that
+interval's plant events (keys :data:`plant.state.EVENT_FIELDS`), ``internals(values)`` after
+every controller step, and ``close()`` at the end. ``record=True`` collects everything in
+memory (:class:`MemoryRecorder`) and returns it as arrays in the :class:`RunResult`; a
+streaming recorder (``bench.traces``) writes it to disk instead.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import traceback
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from bench.metrics import run_metrics
+from bench.metrics import WindowTotals, run_metrics
 from controllers.base import Controller
-from plant.multimode import Accumulator, SimOptions, Status, advance, initial_state
+from plant.interval import advance
 from plant.params import PlantParams
-from plant.transition import U, X1, X2, X3, X4, X5
+from plant.randomness import NoiseStream
+from plant.state import EVENT_FIELDS, SimOptions, Status, X1, X2, X3, X4, X5, U, initial_state
 
-__all__ = ["RunResult", "run_closed_loop", "spawn_streams"]
+__all__ = ["RunResult", "run_closed_loop", "spawn_streams", "Recorder", "MemoryRecorder", "SAMPLE_FIELDS"]
+
+SAMPLE_FIELDS = ("t", "y", "x1", "x2", "x3", "x4", "x5", "mode", "u", "ks_true", "kc_true")
 
 
 @dataclass
 class RunResult:
     """Outcome of one closed-loop run.
 
-    ``samples`` (with ``record=True``): arrays at the sample instants — t, y, x1, x2, x3, x4,
-    x5, mode, u (u is the level in force just before the instant), ks_true, kc_true.
-    ``events``: t, x1, x2, x3, mode, u at every plant event. ``internals``: the controller's
-    ``internals()`` after each step, as arrays.
+    ``samples`` (with ``record=True``): arrays at the sample instants — :data:`SAMPLE_FIELDS`
+    (u is the level in force just before the instant; ks_true, kc_true the effective friction).
+    ``events``: :data:`plant.state.EVENT_FIELDS` at every plant event. ``internals``: the
+    controller's ``internals()`` after each step, as arrays.
     """
 
     status: str
@@ -48,6 +60,52 @@ class RunResult:
     simulated_s: float = 0.0
 
 
+class Recorder(Protocol):
+    """What the runner streams a run into (see the module docstring)."""
+
+    def sample(self, row: dict[str, float]) -> None: ...
+    def events(self, ev: dict[str, np.ndarray]) -> None: ...
+    def internals(self, values: dict[str, float]) -> None: ...
+    def close(self) -> None: ...
+
+
+class MemoryRecorder:
+    """Collects samples, events and controller internals as lists; ``arrays()`` at the end."""
+
+    def __init__(self) -> None:
+        self.s: dict[str, list[float]] = {k: [] for k in SAMPLE_FIELDS}
+        self.e: list[dict[str, np.ndarray]] = []
+        self.i: dict[str, list[float]] = {}
+        self.n_steps = 0
+
+    def sample(self, row: dict[str, float]) -> None:
+        for k, v in row.items():
+            self.s[k].append(v)
+
+    def events(self, ev: dict[str, np.ndarray]) -> None:
+        if len(ev["t"]):
+            self.e.append(ev)
+
+    def internals(self, values: dict[str, float]) -> None:
+        for k, v in values.items():
+            self.i.setdefault(k, [math.nan] * self.n_steps).append(float(v))
+        self.n_steps += 1
+        for lst in self.i.values():
+            if len(lst) < self.n_steps:
+                lst.append(math.nan)
+
+    def close(self) -> None:
+        pass
+
+    def arrays(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray]]:
+        samples = {k: np.asarray(v, dtype=float) for k, v in self.s.items()}
+        if self.e:
+            events = {k: np.concatenate([e[k] for e in self.e]) for k in EVENT_FIELDS}
+        else:
+            events = {k: np.empty(0) for k in EVENT_FIELDS}
+        return samples, events, {k: np.asarray(v) for k, v in self.i.items()}
+
+
 def spawn_streams(seed: int) -> dict[str, np.random.Generator]:
     """The run's four generators, spawned from ``SeedSequence(seed)``."""
     children = np.random.SeedSequence(seed).spawn(4)
@@ -58,7 +116,7 @@ def spawn_streams(seed: int) -> dict[str, np.random.Generator]:
 def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: float,
                     warmup_s: float = 0.0, seed: int = 0, noise: bool = True, record: bool = False,
                     options: SimOptions | None = None, x5_initial: float | None = None,
-                    time_limit_s: float | None = None) -> RunResult:
+                    time_limit_s: float | None = None, recorder: Recorder | None = None) -> RunResult:
     """Run ``controller`` on the plant for ``duration_s`` seconds and score from ``warmup_s``.
 
     Parameters
@@ -66,6 +124,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     noise : bool
         False switches off every noise source: process noise, sensor noise and the random
         initial x5 (then 0).
+    record : bool
+        Keep samples, events and internals in memory and return them as arrays.
+    recorder : Recorder, optional
+        Receives the same data as it happens instead (e.g. a trace written to disk); closed
+        at the end of the run, also when it fails.
     x5_initial : float, optional
         Override the initial correlated friction x5(0) [ozf·in].
     time_limit_s : float, optional
@@ -75,17 +138,21 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     Returns
     -------
     RunResult
-        Never raises for a failing run: a controller exception gives status ``error``.
+        Never raises for a failing run: a controller or plant exception gives status ``error``.
     """
     tau = params.sample_period
+    if not math.isfinite(duration_s):
+        raise ValueError(f"duration_s must be finite, got {duration_s!r}")
     n_samples = int(round(duration_s / tau))
     n_warm = int(round(warmup_s / tau))
-    if n_samples <= 0 or not math.isfinite(duration_s):
+    if n_samples <= 0:
         raise ValueError(f"duration_s must be at least one sample period ({tau} s), got {duration_s!r}")
     if not (0 <= n_warm < n_samples):
-        raise ValueError(f"warmup_s must be in [0, duration_s), got {warmup_s!r}")
-    if time_limit_s is not None and not time_limit_s > 0:
-        raise ValueError(f"time_limit_s must be > 0 or None, got {time_limit_s!r}")
+        raise ValueError(f"warmup_s must be in [0, duration_s) in whole samples, got {warmup_s!r}")
+    if time_limit_s is not None and not (time_limit_s > 0 and math.isfinite(time_limit_s)):
+        raise ValueError(f"time_limit_s must be a finite number > 0 or None, got {time_limit_s!r}")
+    if record and recorder is not None:
+        raise ValueError("record=True and a recorder are exclusive")
     deadline = math.inf if time_limit_s is None else time.perf_counter() + time_limit_s
     opts = options or SimOptions(noise=noise)
     if not noise and opts.noise:
@@ -94,94 +161,72 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     if x5_initial is None:
         x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
     state = initial_state(params, x5=x5_initial)
-    plant_rng = streams["plant"] if noise else None
-    sigma1 = params.measurement_noise_std if noise else 0.0
-    acc = Accumulator(active=(n_warm == 0))
-
-    rec = _Recording(record)
+    plant_noise = NoiseStream(streams["plant"]) if noise else None
+    sensor = streams["sensor"].standard_normal(n_samples) * params.measurement_noise_std if noise \
+        else np.zeros(n_samples)
+    memory = MemoryRecorder() if record else None
+    rec = memory if record else recorder
+    totals = WindowTotals()
+    x1_window = np.empty(n_samples - n_warm + 1)
+    n_window = 0
     status, message = Status.OK, ""
-    x1_window: list[float] = []
     wall0 = time.perf_counter()
     try:
         controller.reset(params, streams["controller"])
         for n in range(n_samples):
-            if n == n_warm:
-                acc.active = True
-            X = state.X
-            y = X[X1] + sigma1 * streams["sensor"].standard_normal()
+            x = state.x
+            x1 = x[X1]
+            y = float(x1 + sensor[n])
             if n >= n_warm:
-                x1_window.append(X[X1])
-            rec.sample(state.t, y, X, state.mode, params)
-            command = controller.step(float(y))
-            if record:
+                x1_window[n_window] = x1
+                n_window += 1
+            if rec is not None:
+                rec.sample(_sample_row(state.t, y, x, state.mode, params))
+            command = controller.step(y)
+            if rec is not None:
                 rec.internals(controller.internals())
-            state, status, message = advance(state, command, tau, params, plant_rng, options=opts, acc=acc,
-                                             recorder=rec.event if record else None)
-            if status != Status.OK:
+            step = advance(state, command, params, plant_noise, opts, record=rec is not None)
+            if rec is not None:
+                rec.events(step.events)
+            if n >= n_warm:
+                totals.add(step)
+            state = step.state
+            if step.status is not Status.OK:
+                status, message = step.status, step.message
                 break
             if time.perf_counter() > deadline:
                 status = Status.ERROR
                 message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
                 break
         else:
-            acc.merge_peak(abs(state.X[X1]))
-            x1_window.append(state.X[X1])
+            x1_window[n_window] = state.x[X1]
+            n_window += 1
     except Exception as exc:  # a failing controller is a result, not a crash (STYLE §8)
         status = Status.ERROR
         message = f"{type(exc).__name__}: {exc}"
         tb = traceback.extract_tb(exc.__traceback__)
         if tb:
             message += f" (at {tb[-1].filename.split('/')[-1]}:{tb[-1].lineno})"
+    finally:
+        if rec is not None:
+            rec.close()
     wall = time.perf_counter() - wall0
-    metrics = run_metrics(acc, np.asarray(x1_window))
+    metrics = run_metrics(totals, x1_window[:n_window])
+    if status is not Status.OK:
+        metrics = {k: (math.nan if isinstance(v, float) else v) for k, v in metrics.items()}
     metrics["runtime_s"] = wall
     metrics["realtime_factor"] = state.t / wall if wall > 0 else math.inf
     try:
         summary = dict(controller.summary())
     except Exception as exc:
         summary = {"summary_error": f"{type(exc).__name__}: {exc}"}
-    return RunResult(status, message, metrics, summary, rec.samples_arrays(), rec.events_arrays(),
-                     rec.internals_arrays(), wall, state.t)
+    samples = events = internals = None
+    if memory is not None:
+        samples, events, internals = memory.arrays()
+    return RunResult(str(status), message, metrics, summary, samples, events, internals, wall, state.t)
 
 
-class _Recording:
-    """Collects samples, events and controller internals when recording is on."""
-
-    def __init__(self, on: bool) -> None:
-        self.on = on
-        self.s: dict[str, list[float]] = {k: [] for k in ("t", "y", "x1", "x2", "x3", "x4", "x5", "mode", "u",
-                                                          "ks_true", "kc_true")}
-        self.e: dict[str, list[float]] = {k: [] for k in ("t", "x1", "x2", "x3", "mode", "u")}
-        self.i: dict[str, list[float]] = {}
-        self.n_steps = 0
-
-    def sample(self, t: float, y: float, X: np.ndarray, mode: int, p: PlantParams) -> None:
-        if not self.on:
-            return
-        s = self.s
-        for key, val in (("t", t), ("y", y), ("x1", X[X1]), ("x2", X[X2]), ("x3", X[X3]), ("x4", X[X4]),
-                         ("x5", X[X5]), ("mode", mode), ("u", X[U]),
-                         ("ks_true", max(p.stiction + X[X5], 0.0)), ("kc_true", max(p.coulomb + X[X5], 0.0))):
-            s[key].append(float(val))
-
-    def event(self, t: float, X: np.ndarray, mode: int) -> None:
-        e = self.e
-        e["t"].append(t); e["x1"].append(X[X1]); e["x2"].append(X[X2]); e["x3"].append(X[X3])
-        e["mode"].append(mode); e["u"].append(X[U])
-
-    def internals(self, values: dict[str, float]) -> None:
-        for k, v in values.items():
-            self.i.setdefault(k, [math.nan] * self.n_steps).append(float(v))
-        self.n_steps += 1
-        for k, lst in self.i.items():
-            if len(lst) < self.n_steps:
-                lst.append(math.nan)
-
-    def samples_arrays(self) -> dict[str, np.ndarray] | None:
-        return {k: np.asarray(v) for k, v in self.s.items()} if self.on else None
-
-    def events_arrays(self) -> dict[str, np.ndarray] | None:
-        return {k: np.asarray(v) for k, v in self.e.items()} if self.on else None
-
-    def internals_arrays(self) -> dict[str, np.ndarray] | None:
-        return {k: np.asarray(v) for k, v in self.i.items()} if self.on else None
+def _sample_row(t: float, y: float, x: np.ndarray, mode: int, p: PlantParams) -> dict[str, float]:
+    return {"t": t, "y": y, "x1": float(x[X1]), "x2": float(x[X2]), "x3": float(x[X3]), "x4": float(x[X4]),
+            "x5": float(x[X5]), "mode": float(mode), "u": float(x[U]),
+            "ks_true": max(p.stiction + float(x[X5]), 0.0), "kc_true": max(p.coulomb + float(x[X5]), 0.0)}

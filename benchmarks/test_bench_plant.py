@@ -1,15 +1,14 @@
 """The plant's hot paths: one pulse, and one sample interval of each drive.
 
-Targets (issue #7): noise-free ``pulse_response`` ≤ 50 µs. Each body also checks its result
+Targets (issue #10): noise-free ``pulse_response`` ≤ 5 µs median; one interval is one compiled call. Each body also checks its result
 against a closed form or the SPEC's reference value, so ``make test`` exercises it for real.
 """
 
 import numpy as np
 import pytest
 
-from plant import DriveCommand, DriveType, pulse_response
-from plant.multimode import Accumulator, SimOptions, Status, advance, initial_state
-from plant.transition import X1, X3
+from plant import DriveCommand, DriveType, NoiseStream, SimOptions, Status, advance, initial_state, pulse_response
+from plant.state import X1, X3
 
 PULSE_S = 1.3e-3           # a typical solnic correction (section 7.3: 1.26–1.43 ms)
 
@@ -23,26 +22,26 @@ def test_pulse_response_noise_free(benchmark, params):
 def _interval(params, command, rng, noise):
     """One sample interval from a stuck shaft with no current, metrics on (as in a run)."""
     state = initial_state(params, x5=0.0)
-    return advance(state, command, params.sample_period, params, rng, options=SimOptions(noise=noise),
-                   acc=Accumulator())
+    return advance(state, command, params, rng, SimOptions(noise=noise))
 
 
 @pytest.mark.parametrize("noise", [False, True], ids=["noise-free", "noisy"])
 def test_interval_bridge_pulse(benchmark, params, noise):
-    rng = np.random.default_rng(np.random.SeedSequence(7)) if noise else None
+    rng = NoiseStream.from_seed(7) if noise else None
     command = DriveCommand.pulse(2e-3, PULSE_S, params.u_max)
-    state, status, message = benchmark(_interval, params, command, rng, noise)
-    assert status == Status.OK, message
-    assert state.mode == 2 and state.X[X3] == 0.0       # flyback over, shaft stuck again by 10 ms
-    assert state.X[X1] > 0.0                            # moved forward past the ramp's 0.3 µrad
+    step = benchmark(_interval, params, command, rng, noise)
+    assert step.status == Status.OK, step.message
+    state = step.state
+    assert state.mode == 2 and state.x[X3] == 0.0       # flyback over, shaft stuck again by 10 ms
+    assert state.x[X1] > 0.0                            # moved forward past the ramp's 0.3 µrad
 
 
 @pytest.mark.parametrize("noise", [False, True], ids=["noise-free", "noisy"])
 def test_interval_linear_hold(benchmark, params, noise):
-    rng = np.random.default_rng(np.random.SeedSequence(8)) if noise else None
+    rng = NoiseStream.from_seed(8) if noise else None
     command = DriveCommand.hold(3.0, DriveType.LINEAR)    # above stiction: breaks away in the interval
-    state, status, message = benchmark(_interval, params, command, rng, noise)
-    assert status == Status.OK, message
+    step = benchmark(_interval, params, command, rng, noise)
+    assert step.status == Status.OK, step.message
     # x3 follows the first-order lag toward the held level: x3(τs) = u·(1 − e^(−τs/τ3)).
-    assert state.X[X3] == pytest.approx(3.0 * -np.expm1(-params.sample_period / params.motor_time_constant),
+    assert step.state.x[X3] == pytest.approx(3.0 * -np.expm1(-params.sample_period / params.motor_time_constant),
                                         rel=1e-12)

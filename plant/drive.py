@@ -2,8 +2,9 @@
 
 At every sample instant a controller returns a :class:`DriveCommand` for the interval up to
 the next sample. The command is a tuple of ``(offset_s, level)`` segments; the first starts at
-offset 0, offsets increase strictly and lie inside ``[0, sample_period)``. A level holds until
-the next segment's offset or the end of the interval.
+offset 0, offsets increase strictly and lie inside ``[0, sample_period)`` (the plant rejects a
+segment at or beyond the interval's end). A level holds until the next segment's offset or
+the end of the interval.
 
 Two drive types (SPEC §2 "Drives"):
 
@@ -16,7 +17,8 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+
+import numpy as np
 
 __all__ = ["DriveType", "DriveCommand"]
 
@@ -26,23 +28,27 @@ class DriveType(str, enum.Enum):
     LINEAR = "linear"
 
 
-@dataclass(frozen=True)
 class DriveCommand:
-    """Piecewise-constant drive levels for one sample interval.
+    """Piecewise-constant drive levels for one sample interval (immutable).
 
     Parameters
     ----------
-    segments : tuple of (offset_s, level)
+    segments : sequence of (offset_s, level)
         Offsets [s] from the sample instant and commanded levels [ozf·in].
     drive : DriveType
         Which power stage realises the levels.
+
+    Raises
+    ------
+    ValueError
+        If there are no segments, the first offset is not 0, offsets do not increase, or a
+        value is not finite.
     """
 
-    segments: tuple[tuple[float, float], ...]
-    drive: DriveType = DriveType.LINEAR
+    __slots__ = ("segments", "drive", "_offsets", "_levels")
 
-    def __post_init__(self) -> None:
-        segs = tuple((float(o), float(v)) for o, v in self.segments)
+    def __init__(self, segments, drive: DriveType = DriveType.LINEAR) -> None:
+        segs = tuple((float(o), float(v)) for o, v in segments)
         if not segs:
             raise ValueError("DriveCommand.segments must not be empty")
         if segs[0][0] != 0.0:
@@ -53,14 +59,45 @@ class DriveCommand:
                 raise ValueError(f"DriveCommand.segments offsets must increase and levels be finite, "
                                  f"got ({o!r}, {v!r}) after offset {prev!r}")
             prev = o
+        self._set(segs, drive if type(drive) is DriveType else DriveType(drive))
+
+    def _set(self, segs: tuple, drive: DriveType) -> None:
         object.__setattr__(self, "segments", segs)
-        if type(self.drive) is not DriveType:
-            object.__setattr__(self, "drive", DriveType(self.drive))
+        object.__setattr__(self, "drive", drive)
+        object.__setattr__(self, "_offsets", None)
+        object.__setattr__(self, "_levels", None)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("DriveCommand is immutable")
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, DriveCommand) and self.segments == other.segments and self.drive is other.drive
+
+    def __hash__(self) -> int:
+        return hash((self.segments, self.drive))
+
+    def __repr__(self) -> str:
+        return f"DriveCommand(segments={self.segments!r}, drive={self.drive!r})"
+
+    def __reduce__(self):
+        return (DriveCommand, (self.segments, self.drive))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(offsets [s], levels) as float arrays, for the compiled plant."""
+        if self._offsets is None:
+            object.__setattr__(self, "_offsets", np.array([o for o, _ in self.segments]))
+            object.__setattr__(self, "_levels", np.array([v for _, v in self.segments]))
+        return self._offsets, self._levels
 
     @classmethod
     def hold(cls, level: float, drive: DriveType = DriveType.LINEAR) -> "DriveCommand":
         """One level for the whole interval (zero-order hold)."""
-        return cls(((0.0, float(level)),), drive)
+        level = float(level)
+        if not math.isfinite(level):
+            raise ValueError(f"DriveCommand level must be finite, got {level!r}")
+        cmd = object.__new__(cls)
+        cmd._set(((0.0, level),), drive if type(drive) is DriveType else DriveType(drive))
+        return cmd
 
     @classmethod
     def pulse(cls, start: float, duration: float, level: float) -> "DriveCommand":

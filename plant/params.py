@@ -11,7 +11,26 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-__all__ = ["PlantParams"]
+import numpy as np
+
+__all__ = ["PlantParams", "KERNEL_RECORD"]
+
+# The one parameter record the compiled kernels read (plant.interval, plant.reference): a
+# numpy structured dtype, so a kernel reads ``prm[0].alpha`` by name and numba dispatches on it
+# as fast as on any array. Built once per PlantParams by :meth:`PlantParams.kernel_record`.
+KERNEL_RECORD = np.dtype([
+    ("alpha", np.float64),       # 1/J  (3-1)
+    ("beta3", np.float64),       # 1/τ3 (3-2)
+    ("beta4", np.float64),       # 1/τ4 (3-3)
+    ("beta5", np.float64),       # 1/τ5 (3-4)
+    ("sigma2_sq", np.float64),   # σ2², w2 intensity
+    ("sigma4_sq", np.float64),   # σ4² = 2 VAR(x4)/τ4
+    ("sigma5_sq", np.float64),   # σ5² = 2 VAR(x5)/τ5
+    ("tau3", np.float64),        # τ3 [s]
+    ("u_max", np.float64),       # u_max [ozf·in]
+    ("coulomb", np.float64),     # k̄c [ozf·in]
+    ("stiction", np.float64),    # k̄s [ozf·in]
+])
 
 
 def _require(condition: bool, field: str, message: str) -> None:
@@ -146,6 +165,17 @@ class PlantParams:
         if not (omega > 0 and math.isfinite(omega)):
             raise ValueError(f"bandwidth must be a finite positive number, got {bandwidth!r}")
         return (self.stiction - self.coulomb) / (2.0 * self.inertia * omega**2)
+
+    def kernel_record(self) -> np.ndarray:
+        """The parameters as a one-element :data:`KERNEL_RECORD` array (read-only, cached)."""
+        rec = self.__dict__.get("_kernel_record")
+        if rec is None:
+            rec = np.rec.array([(self.alpha, self.beta3, self.beta4, self.beta5, self.sigma2_sq, self.sigma4_sq,
+                             self.sigma5_sq, self.motor_time_constant, self.u_max, self.coulomb,
+                             self.stiction)], dtype=KERNEL_RECORD)
+            rec.flags.writeable = False
+            object.__setattr__(self, "_kernel_record", rec)
+        return rec
 
     def replace(self, **changes: float) -> "PlantParams":
         """A copy with some fields changed; unknown names raise ``ValueError``."""

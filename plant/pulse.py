@@ -16,9 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode import Accumulator, SimOptions, Status, advance, initial_state
+from plant.expfun import e1, e2
+from plant.interval import advance
 from plant.params import PlantParams
-from plant.transition import X1, X3, e1, e2
+from plant.randomness import NoiseStream
+from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
 
 __all__ = ["PulseResponse", "pulse_response"]
 
@@ -80,37 +82,37 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
     opts = options or SimOptions(noise=noisy)
     if not noisy:
         opts = dataclasses.replace(opts, noise=False)
-    rng = np.random.default_rng(np.random.SeedSequence(seed)) if noisy else None
+    noise = NoiseStream.from_seed(seed) if noisy else None
     state = initial_state(p, x5=0.0, x4=0.0)
     level = sign * p.u_max
     times: dict[str, float] = {}
 
-    moving = [False]
+    def note(events: dict[str, np.ndarray]) -> None:
+        for t, kind in zip(events["t"], events["kind"]):
+            if kind == EventKind.BREAKAWAY:
+                times.setdefault("breakaway", float(t))
+            elif kind == EventKind.STICK:
+                times["stop"] = float(t)
+            elif kind == EventKind.FLYBACK_END and t > dt_u:
+                times.setdefault("current_zero", float(t))
 
-    def recorder(t: float, X: np.ndarray, mode: int) -> None:
-        if mode != 2 and "breakaway" not in times:
-            times["breakaway"] = t
-        if mode == 2 and moving[0]:
-            times["stop"] = t
-        moving[0] = mode != 2
-        if t > dt_u and X[X3] == 0.0 and "current_zero" not in times:
-            times["current_zero"] = t
-
-    acc = Accumulator(active=False)
-    on = DriveCommand(((0.0, level),), DriveType.BRIDGE)
-    state, status, message = advance(state, on, dt_u, p, rng, options=opts, acc=acc, recorder=recorder)
-    off = DriveCommand(((0.0, 0.0),), DriveType.BRIDGE)
-    t_fly = p.motor_time_constant * math.log1p(abs(state.X[X3]) / p.u_max)
+    step = advance(state, DriveCommand.hold(level, DriveType.BRIDGE), p, noise, opts, duration=dt_u, record=True)
+    note(step.events)
+    state = step.state
+    off = DriveCommand.hold(0.0, DriveType.BRIDGE)
+    t_fly = p.motor_time_constant * math.log1p(abs(state.x[X3]) / p.u_max)
     chunk = max(2.0 * t_fly, 1e-3)
-    while status == Status.OK and (state.mode != 2 or state.flyback) and state.t < _HORIZON_S:
-        state, status, message = advance(state, off, chunk, p, rng, options=opts, acc=acc, recorder=recorder)
-    if status != Status.OK:
-        raise RuntimeError(f"pulse simulation ended with status {status}: {message}")
+    while step.status == Status.OK and (state.mode != 2 or state.flyback) and state.t < _HORIZON_S:
+        step = advance(state, off, p, noise, opts, duration=chunk, record=True)
+        note(step.events)
+        state = step.state
+    if step.status != Status.OK:
+        raise RuntimeError(f"pulse simulation ended with status {step.status}: {step.message}")
     if state.mode != 2:
         raise RuntimeError(f"shaft still moving {_HORIZON_S} s after a {dt_u} s pulse")
     t_cz = times.get("current_zero", dt_u + t_fly)
     t_brk = times.get("breakaway")
-    return PulseResponse(float(state.X[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
+    return PulseResponse(float(state.x[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
 
 
 def _move(x1: float, x2: float, x3: float, u: float, kc: float, tau: float, p: PlantParams) -> tuple[float, float, float]:

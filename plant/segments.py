@@ -1,22 +1,25 @@
-"""Closed-form facts about one constant-drive segment: event times and exact integrals.
+"""Closed-form facts about one constant-drive segment: torque events, exact integrals, peaks.
 
 Within a segment the drive level u is constant, so the motor torque is deterministic:
 x3(τ) = u + (x3₀ − u)·e^(−β3·τ). Every torque event (breakaway, flyback end, the end of the
 reflection regime) is therefore a closed-form time, and every current metric an exact
-integral (SPEC §3).
+integral (SPEC §3). Compiled with numba; callable from Python as well.
 """
 
 from __future__ import annotations
 
 import math
 
-from plant._kernels import _hermite_peak
-from plant.transition import e1
+import numpy as np
+from numba import njit
+
+from plant.expfun import e1
 
 __all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
 
 
-def torque_crossing_time(x3: float, u: float, level: float, tau3: float) -> float:
+@njit(cache=True)
+def torque_crossing_time(x3, u, level, tau3):
     """Time for x3(τ) = u + (x3 − u)e^(−τ/τ3) to reach ``level``; ``inf`` if it never does.
 
     x3 moves monotonically from x3 toward u, so ``level`` is reached once iff it lies strictly
@@ -34,7 +37,8 @@ def torque_crossing_time(x3: float, u: float, level: float, tau3: float) -> floa
     return tau3 * math.log(ratio)
 
 
-def torque_integrals(x3: float, u: float, h: float, tau3: float) -> tuple[float, float, float]:
+@njit(cache=True)
+def torque_integrals(x3, u, h, tau3):
     """Exact (∫x3 dτ, ∫|x3| dτ, ∫x3² dτ) over [0, h]."""
     if h <= 0:
         return 0.0, 0.0, 0.0
@@ -53,11 +57,37 @@ def torque_integrals(x3: float, u: float, h: float, tau3: float) -> tuple[float,
     return integral, absolute, square
 
 
-def hermite_peak(h: float, ya: float, da: float, yb: float, db: float) -> float:
+@njit(cache=True)
+def hermite_peak(h, ya, da, yb, db):
     """Largest |y| at interior critical points of the cubic Hermite interpolant on [0, h].
 
     Used for the peak of x1 inside a noisy sub-step, where x1 is C¹ with slope ẋ1 = x2 − x4
-    known at both ends. Returns 0 when the cubic has no interior extremum. (One
-    implementation, shared with the compiled kernel.)
+    known at both ends. Returns 0 when the cubic has no interior extremum.
     """
-    return float(_hermite_peak(h, ya, da, yb, db))
+    if h <= 0:
+        return 0.0
+    c2 = 3 * (yb - ya) - (2 * da + db) * h
+    c3 = -2 * (yb - ya) + (da + db) * h
+    A, B, C = 3 * c3, 2 * c2, da * h
+    best = 0.0
+    roots = np.empty(2)
+    nr = 0
+    if A == 0.0:
+        if B != 0.0:
+            roots[0] = -C / B
+            nr = 1
+    else:
+        disc = B * B - 4 * A * C
+        if disc >= 0:
+            sq = math.sqrt(disc)
+            q = -0.5 * (B + math.copysign(sq, B))
+            if q != 0.0:
+                roots[0], roots[1] = q / A, C / q
+                nr = 2
+    for i in range(nr):
+        s = roots[i]
+        if 0.0 < s < 1.0:
+            v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
+            if v > best:
+                best = v
+    return best

@@ -1,6 +1,6 @@
 """State-transition matrices Φ(h) and process-noise covariances of the three modes.
 
-State vector, as in (3-5)::
+Augmented state vector, as in (3-5)::
 
     X = [x1, x2, x3, x4, x5, x6, u]
         x1 = c − r, error [rad]          x2 = ċ, shaft velocity [rad/s]
@@ -11,6 +11,9 @@ State vector, as in (3-5)::
 Between events the plant obeys Ẋ = F_i X + W (4-2) with F_1, F_2, F_3 of (3-7)–(3-9):
 mode 1 (moving, x2 < 0) has ẋ2 = α(x3 + x5 + x6), mode 3 (x2 > 0) has
 ẋ2 = α(x3 − x5 − x6), mode 2 (stuck) has x2 ≡ 0 and x5 frozen.
+
+x6 = k̄c is the constant coordinate that makes the affine drift linear; the simulator keeps
+k̄c as a parameter and builds this vector only inside its kernels (plant.moving).
 
 ``phi`` evaluates the closed forms (3-20)–(3-22) with cancellation-free helpers, so every
 entry is accurate to a few ulp for any h. ``process_noise`` evaluates (4-8),
@@ -28,6 +31,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from plant.expfun import e1, e2, e3
 from plant.params import PlantParams
 
 __all__ = [
@@ -38,37 +42,6 @@ __all__ = [
 
 X1, X2, X3, X4, X5, X6, U = range(7)
 N_STATE = 7
-
-_SERIES_CUTOFF = 0.5
-_SERIES_TERMS = 24
-
-
-def e1(x: float) -> float:
-    """1 − e^(−x), without cancellation."""
-    return -math.expm1(-x)
-
-
-def e2(x: float) -> float:
-    """e^(−x) − 1 + x  (≈ x²/2), without cancellation."""
-    if abs(x) >= _SERIES_CUTOFF:
-        return math.expm1(-x) + x
-    term, total = x * x / 2.0, 0.0
-    for k in range(2, _SERIES_TERMS):
-        total += term
-        term *= -x / (k + 1)
-    return total
-
-
-def e3(x: float) -> float:
-    """1 − x + x²/2 − e^(−x)  (≈ x³/6), without cancellation."""
-    if abs(x) >= _SERIES_CUTOFF:
-        return -math.expm1(-x) - x + 0.5 * x * x
-    term, total = x**3 / 6.0, 0.0
-    for k in range(3, _SERIES_TERMS):
-        total += term
-        term *= -x / (k + 1)
-    return total
-
 
 def drift_matrix(mode: int, params: PlantParams) -> np.ndarray:
     """F_i of (3-7)–(3-9); mode 2 uses x2's clamp (row 2 zero) instead of −∞."""

@@ -28,14 +28,13 @@ def test_closed_loop_is_bit_identical_for_the_same_seed():
 def test_zero_length_stuck_step_at_breakaway():
     """Stuck exactly at ks with the torque still rising breaks away after a zero-length step;
     its covariance is exactly 0 (this once divided by zero)."""
-    from plant.drive import DriveCommand, DriveType
-    from plant.multimode import advance, initial_state
-    from plant.transition import X3
+    from plant import DriveCommand, DriveType, NoiseStream, PlantState, advance, initial_state
+    from plant.state import X3
 
     p = PlantParams()
-    rng = np.random.default_rng(0)
-    state = initial_state(p, x5=0.0)
-    state.X[X3] = p.stiction
-    state, status, message = advance(state, DriveCommand.hold(p.u_max, DriveType.LINEAR), p.sample_period, p, rng)
-    assert status == "ok", message
-    assert np.all(np.isfinite(state.X)) and state.mode == 3
+    x = initial_state(p, x5=0.0).x.copy()
+    x[X3] = p.stiction
+    step = advance(PlantState(0.0, x, 2, False), DriveCommand.hold(p.u_max, DriveType.LINEAR), p,
+                   NoiseStream.from_seed(0))
+    assert step.status == "ok", step.message
+    assert np.all(np.isfinite(step.state.x)) and step.state.mode == 3

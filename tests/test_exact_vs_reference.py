@@ -6,20 +6,21 @@ from hypothesis import strategies as st
 
 from plant import PlantParams
 from plant.drive import DriveCommand, DriveType
-from plant.multimode import SimOptions, advance, initial_state
+from plant.interval import advance
 from plant.reference import event_driven, schedule_from_commands
-from plant.transition import X1
+from plant.state import X1, SimOptions, initial_state
 
 P = PlantParams(correlated_friction_std=0.0)
 
 
 def _exact_samples(params, commands, x5=0.0):
     state = initial_state(params, x5=x5)
-    out = [state.X[X1]]
+    out = [state.x[X1]]
     for cmd in commands:
-        state, status, _ = advance(state, cmd, params.sample_period, params, None, options=SimOptions(noise=False))
-        assert status == "ok"
-        out.append(state.X[X1])
+        step = advance(state, cmd, params, None, SimOptions(noise=False))
+        assert step.status == "ok"
+        state = step.state
+        out.append(state.x[X1])
     return np.array(out)
 
 

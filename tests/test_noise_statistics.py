@@ -11,9 +11,10 @@ from scipy import stats
 
 from plant import PlantParams, pulse_response
 from plant.drive import DriveCommand
-from plant.multimode import Accumulator, SimOptions, advance, initial_state
+from plant.interval import advance
+from plant.randomness import NoiseStream
 from plant.reference import fixed_step_pulses
-from plant.transition import X1, X4
+from plant.state import X1, X4, SimOptions, initial_state
 
 P0 = PlantParams()
 N_SEEDS = 2000
@@ -69,10 +70,11 @@ def _stuck_paths(n, x4_0, horizon, params, seed):
     out = np.empty((n, 2))
     hold = DriveCommand.hold(0.0)
     for i, child in enumerate(ss.spawn(n)):
-        rng = np.random.default_rng(child)
+        noise = NoiseStream(np.random.default_rng(child), block=16)
         state = initial_state(params, x4=x4_0[i])
-        state, status, _ = advance(state, hold, horizon, params, rng, acc=Accumulator(active=False))
-        out[i] = state.X[X1], state.X[X4]
+        step = advance(state, hold, params, noise, duration=horizon)
+        assert step.status == "ok"
+        out[i] = step.state.x[X1], step.state.x[X4]
     return out
 
 

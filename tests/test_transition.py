@@ -161,8 +161,7 @@ def test_factor_rejects_bad_matrices(bad, match):
 
 def test_stuck_closed_form_matches_general_factor_statistics():
     """Mode 2's scalar fast path (exact 2 × 2 covariance) against process_noise (quadrature)."""
-    from plant.multimode import _e4
-    from plant.transition import e1
+    from plant.expfun import e1, e4 as _e4
 
     p = PlantParams(command_velocity_tau=3.0)
     for h in (1e-5, 1e-2, 0.7, 4.0):
@@ -176,16 +175,19 @@ def test_stuck_closed_form_matches_general_factor_statistics():
 @pytest.mark.parametrize("params", PARAMS)
 @pytest.mark.parametrize("mode", [1, 3])
 def test_compiled_closed_forms_equal_the_python_ones(params, mode):
-    """plant._kernels restates Φ and Q in scalar form for numba; both must agree."""
-    from plant._kernels import chol_psd, phi_moving, q_moving
+    """plant.moving restates Φ and Q in scalar form for numba; both must agree, and the
+    scalar mean path must equal Φ(h)·X."""
+    from plant.moving import chol_psd, mean_path, phi_moving, q_moving
 
-    pv = np.array([params.alpha, params.beta3, params.beta4, params.beta5,
-                   params.sigma2_sq, params.sigma4_sq, params.sigma5_sq])
+    pv = params.kernel_record()[0]
     idx = np.array(_NOISY)
+    X = np.array([3e-6, -2e-4, 1.7, 2.9e-5, 0.21, params.coulomb, -20.0])
     for h in (1e-7, 3e-5, 1e-3, 0.4, 7.0):
         P = np.empty((7, 7))
         phi_moving(mode, h, pv, P)
         assert np.allclose(P, phi(mode, h, params), rtol=1e-14, atol=0)
+        assert np.allclose(mean_path(mode, h, X, pv), (expm(drift_matrix(mode, params) * h) @ X)[:4],
+                           rtol=1e-10, atol=1e-18)
         Q, L = np.empty((4, 4)), np.empty((4, 4))
         q_moving(mode, h, pv, Q)
         Qref = process_noise(mode, h, params)[np.ix_(idx, idx)]

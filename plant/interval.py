@@ -1,0 +1,416 @@
+"""One sample interval of the exact plant, compiled whole: the pure step of the simulator.
+
+:func:`advance` takes (state, command, params, noise, options) and returns an
+:class:`~plant.state.IntervalResult`: the new state, a status, the interval's exact current
+integrals, counts and peak |x1|, and on request its event records. Nothing the caller owns is
+changed except the noise stream's read position.
+
+Between events the plant is linear and time-invariant (multimode linearization, chapters 3
+and 4), so the state jumps from event to event with X⁺ = Φ(h)·X + N. The events are
+
+* command level changes (the command's segments);
+* the end of flyback, x3 = 0 (closed form, section 4.5);
+* breakaway, |x3| = ks while stuck (closed form: x3 is deterministic);
+* the end of the reflection regime, when the torque in the direction of motion falls to ks
+  (closed form);
+* velocity zero in a moving mode: noise-free (or σ2 = 0) the first root of the closed-form
+  mean velocity, to ~1e-15 s (plant.moving); noisy, the bridge or Newton locator
+  (plant.zero_velocity). At a velocity zero the switching table of SPEC §2 applies: reflect
+  while the torque still breaks stiction forward, reverse when it breaks it backward, stick
+  otherwise (x2 set to exactly 0).
+
+The Coulomb and stiction levels are kc = k̄c + x5 and ks = k̄s + x5, clamped at 0.
+
+Layout: plant.stuck (mode 2), plant.moving (modes 1 and 3), plant.zero_velocity (locators),
+plant.segments (torque events and integrals); this module drives them over one interval.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from plant.drive import DriveCommand, DriveType
+from plant.moving import deterministic_move, first_mean_zero
+from plant.params import PlantParams
+from plant.randomness import NoiseExhausted, NoiseStream
+from plant.segments import torque_crossing_time, torque_integrals
+from plant.state import EVENT_FIELDS, N_STATE, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
+from plant.stuck import stuck_propagate
+from plant.zero_velocity import bisection_tables, bridge_segment, newton_segment, substep_tables
+
+__all__ = ["advance"]
+
+A1, A2, A3, A4, A5, AKC, AU = range(7)
+
+# Work sheet S (float64) shared by the kernel's parts.
+_T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC = range(15)
+_SHEET = 15
+# Options vector (SimOptions.kernel_vector).
+_O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
+# Kernel status codes.
+_OK, _CHATTER, _DIVERGED, _BAD_LEVEL = 0, 1, 2, 3
+_STATUS_OF = {_OK: Status.OK, _CHATTER: Status.CHATTER, _DIVERGED: Status.DIVERGED}
+_LEVEL, _FLYBACK_END, _BREAKAWAY, _REGIME_END, _STICK, _REVERSAL, _REFLECTION = (int(k) for k in EventKind)
+
+
+class _RecordFull(Exception):
+    """The event buffer is full (the caller enlarges it and runs the interval again)."""
+
+
+# --- bookkeeping ------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _event(S, X, kind, o, ev):
+    """Count an event (chatter guard) and record it if asked; True when the interval must stop."""
+    S[_NEV] += 1.0
+    n = int(S[_NREC])
+    if ev.shape[0] > 0:
+        if n >= ev.shape[0]:
+            raise _RecordFull()
+        ev[n, 0] = S[_T]
+        ev[n, 1] = X[A1]
+        ev[n, 2] = X[A2]
+        ev[n, 3] = X[A3]
+        ev[n, 4] = S[_MODE]
+        ev[n, 5] = X[AU]
+        ev[n, 6] = kind
+        S[_NREC] = n + 1
+    return _tick(S, 1.0, o)
+
+
+@njit(cache=True)
+def _tick(S, n, o):
+    S[_COUNT] += n
+    if S[_COUNT] > o[_O_MAXEV]:
+        S[_STATUS] = _CHATTER
+        return True
+    return False
+
+
+@njit(cache=True)
+def _torque_metrics(S, x3, u, h, bridge, p):
+    if h <= 0.0:
+        return
+    integral, absolute, square = torque_integrals(x3, u, h, p.tau3)
+    S[_IABS] += absolute
+    S[_ISQ] += square
+    if bridge:
+        S[_CHG] += (u / p.u_max) * integral   # on: draws i; flyback: returns it
+    else:
+        S[_CHG] += absolute                    # a linear stage draws |i|
+    S[_DUR] += h
+
+
+@njit(cache=True)
+def _apply_level(X, S, level, bridge, p):
+    """Set u for a new command level; False for a level the bridge cannot produce."""
+    umax = p.u_max
+    if not bridge:
+        X[AU] = min(max(level, -umax), umax)
+        S[_FB] = 0.0
+        return True
+    if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
+        return False
+    if level > 0:
+        X[AU], S[_FB] = umax, 0.0
+    elif level < 0:
+        X[AU], S[_FB] = -umax, 0.0
+    elif X[A3] != 0.0:
+        X[AU], S[_FB] = -math.copysign(umax, X[A3]), 1.0   # the diodes conduct
+    else:
+        X[AU], S[_FB] = 0.0, 0.0
+    return True
+
+
+@njit(cache=True)
+def _flyback_time(X, S, p):
+    if S[_FB] == 0.0:
+        return math.inf
+    return p.tau3 * math.log1p(abs(X[A3]) / p.u_max)
+
+
+@njit(cache=True)
+def _end_flyback(X, S):
+    X[A3] = 0.0
+    X[AU] = 0.0
+    S[_FB] = 0.0
+
+
+# --- mode 2 -----------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _stuck(X, S, t_end, bridge, p, o, z, cursor, ev):
+    """Stuck until t_end, the flyback end or breakaway; True when the interval must stop."""
+    x3, u = X[A3], X[AU]
+    ks = max(p.stiction + X[A5], 0.0)
+    h_end = t_end - S[_T]
+    h_fb = _flyback_time(X, S, p)
+    if -ks < u < ks and -ks <= x3 <= ks:
+        h_up = h_dn = math.inf          # x3 heads to u inside (−ks, ks): no breakaway possible
+    else:
+        h_up = torque_crossing_time(x3, u, ks, p.tau3)
+        h_dn = torque_crossing_time(x3, u, -ks, p.tau3)
+    if x3 > ks or (x3 == ks and u > ks):
+        h_up = 0.0      # already at (or past) stiction and rising: breaks away now
+    elif x3 < -ks or (x3 == -ks and u < -ks):
+        h_dn = 0.0
+    h = min(h_end, h_fb, h_up, h_dn)
+    x1_before = abs(X[A1])
+    _torque_metrics(S, x3, u, h, bridge, p)
+    stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)
+    S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))      # x1 is monotone while stuck
+    if h == h_end:
+        S[_T] = t_end
+        return False
+    S[_T] += h
+    if h == h_fb:
+        _end_flyback(X, S)
+        return _event(S, X, _FLYBACK_END, o, ev)
+    X[A3] = ks if h == h_up else -ks
+    X[A2] = 0.0
+    S[_MODE] = 3.0 if h == h_up else 1.0
+    S[_NBRK] += 1.0
+    return _event(S, X, _BREAKAWAY, o, ev)
+
+
+# --- modes 1 and 3 ----------------------------------------------------------------------------
+
+@njit(cache=True)
+def _velocity_zero(X, S, p):
+    """x2 has reached 0 in mode 1 or 3: reflect, reverse or stick (SPEC §2); the event kind."""
+    mode = int(S[_MODE])
+    s = 1.0 if mode == 3 else -1.0
+    x3 = X[A3]
+    ks = max(p.stiction + X[A5], 0.0)
+    X[A2] = 0.0
+    if s * x3 > ks:
+        return _REFLECTION                       # torque still breaks stiction forward
+    if -s * x3 > ks:
+        S[_MODE] = 1.0 if mode == 3 else 3.0     # breaks stiction the other way
+        S[_NBRK] += 1.0
+        return _REVERSAL
+    S[_MODE] = 2.0
+    S[_NSTK] += 1.0
+    return _STICK
+
+
+@njit(cache=True)
+def _moving(X, S, t_end, bridge, p, o, tabs, z, cursor, ev):
+    """Moving until t_end or the next event; True when the interval must stop."""
+    mode = int(S[_MODE])
+    s = 1.0 if mode == 3 else -1.0
+    x3, u = X[A3], X[AU]
+    ks = max(p.stiction + X[A5], 0.0)
+    X[AKC] = p.coulomb if p.coulomb + X[A5] >= 0.0 else -X[A5]   # kc clamped at 0
+    h_end = t_end - S[_T]
+    h_fb = _flyback_time(X, S, p)
+    # At breakaway x3 = ±ks exactly and still rising: that is inside the reflection regime.
+    reflecting = s * x3 > ks or (s * x3 == ks and s * u > ks)
+    h_reg = math.inf
+    if reflecting and s * u < ks:
+        h_reg = torque_crossing_time(x3, u, s * ks, p.tau3)
+        if h_reg == math.inf:          # within rounding of ks and heading below it
+            reflecting = False
+    h = min(h_end, h_fb, h_reg)
+    noise_on = o[_O_NOISE] != 0.0
+    white = noise_on and p.sigma2_sq > 0.0
+    if white and (reflecting or o[_O_NEWTON] == 0.0):
+        budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
+        TP, TL, BPh, BPw, BG, BC = tabs
+        advanced, stopped, peak, n, chattered = bridge_segment(
+            X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, BPh, BPw, BG, BC, z, cursor,
+            S[_PEAK], budget)
+        _torque_metrics(S, x3, u, advanced, bridge, p)
+        S[_PEAK] = peak
+        S[_NSUB] += n
+        S[_T] += advanced
+        if chattered or _tick(S, n, o):
+            S[_STATUS] = _CHATTER
+            return True
+    elif white:
+        advanced, stopped, peak = newton_segment(X, mode, h, p, z, cursor, S[_PEAK])
+        _torque_metrics(S, x3, u, advanced, bridge, p)
+        S[_PEAK] = peak
+        S[_NSUB] += 1.0
+        S[_T] += advanced
+    else:
+        tau = math.inf if reflecting else first_mean_zero(mode, X, p, h)
+        stopped = tau <= h
+        advanced = tau if stopped else h
+        _torque_metrics(S, x3, u, advanced, bridge, p)
+        S[_PEAK] = deterministic_move(mode, X, p, advanced, noise_on, z, cursor, S[_PEAK])
+        S[_T] += advanced
+        if stopped:
+            X[A2] = 0.0
+    if stopped:
+        kind = _velocity_zero(X, S, p)
+        return _event(S, X, kind, o, ev)
+    if h == h_end:
+        S[_T] = t_end
+        return False
+    if h == h_fb:
+        _end_flyback(X, S)
+        return _event(S, X, _FLYBACK_END, o, ev)
+    X[A3] = s * ks              # end of the reflection regime: exactly at stiction
+    return _event(S, X, _REGIME_END, o, ev)
+
+
+# --- the interval -----------------------------------------------------------------------------
+
+@njit(cache=True)
+def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, tabs, z, cursor, ev, x_out, S):
+    """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance()."""
+    p = prm[0]
+    X = np.empty(7)
+    X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
+    for i in range(_SHEET):
+        S[i] = 0.0
+    S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
+    k = offsets.shape[0]
+    for seg in range(k):
+        t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
+        if not _apply_level(X, S, levels[seg], bridge, p):
+            S[_STATUS] = _BAD_LEVEL
+            break
+        if seg > 0 and _event(S, X, _LEVEL, o, ev):
+            break
+        stop = False
+        while S[_T] < t_seg_end:
+            if S[_MODE] == 2.0:
+                stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
+            else:
+                stop = _moving(X, S, t_seg_end, bridge, p, o, tabs, z, cursor, ev)
+            if stop:
+                break
+            if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
+                S[_STATUS] = _DIVERGED
+                stop = True
+                break
+        if stop:
+            break
+    if S[_STATUS] == _OK:
+        S[_T] = t0 + duration
+    x_out[0], x_out[1], x_out[2], x_out[3], x_out[4], x_out[5] = X[A1], X[A2], X[A3], X[A4], X[A5], X[AU]
+
+
+_NO_EVENTS = np.empty((0, len(EVENT_FIELDS)))
+_NO_NOISE = np.empty(0)
+
+
+def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise: NoiseStream | None,
+            options: SimOptions = SimOptions(), *, duration: float | None = None,
+            record: bool = False) -> IntervalResult:
+    """Advance the plant over one interval under ``command``: the pure step.
+
+    Parameters
+    ----------
+    state : PlantState
+        Start state; not modified.
+    command : DriveCommand
+        Levels for [t, t + duration); every segment must start inside the interval.
+    params : PlantParams
+    noise : NoiseStream or None
+        The plant-noise stream. ``None`` (or ``options.noise=False``) runs noise-free.
+    options : SimOptions
+    duration : float, optional
+        Interval length [s]; default ``params.sample_period``.
+    record : bool
+        Return the event records (``IntervalResult.events``).
+
+    Returns
+    -------
+    IntervalResult
+        ``status`` is ``ok``, ``chatter`` or ``diverged``; the state is where it stopped.
+
+    Raises
+    ------
+    ValueError
+        For a non-positive duration, a command segment at or beyond the interval's end, or a
+        bridge level other than 0 and ±u_max.
+    """
+    h = params.sample_period if duration is None else duration
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")
+    offsets, levels = command.arrays()
+    if offsets[-1] >= h:
+        raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
+    bridge = command.drive is DriveType.BRIDGE
+    noisy = options.noise and noise is not None
+    o = options.kernel_vector() if noisy else _quiet_vector(options)
+    x_out = np.empty(N_STATE)
+    S = np.empty(_SHEET)
+    cursor = np.zeros(1, dtype=np.int64)
+    ev = np.empty((16, len(EVENT_FIELDS))) if record else _NO_EVENTS
+    z = _NO_NOISE
+    if noisy:
+        z, cursor[0] = noise.window()
+    while True:
+        start = cursor[0]
+        try:
+            interval_kernel(state.x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
+                            params.kernel_record(), o, _tables(params, options), z, cursor, ev, x_out, S)
+            break
+        except NoiseExhausted:
+            z, cursor[0] = noise.grow(start)
+        except _RecordFull:
+            ev = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
+            cursor[0] = start
+    if noisy:
+        noise.consumed(cursor[0])
+    code = int(S[_STATUS])
+    if code == _BAD_LEVEL:
+        raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
+    x_out.flags.writeable = False
+    new = PlantState(float(S[_T]), x_out, int(S[_MODE]), bool(S[_FB]))
+    status = _STATUS_OF[code]
+    message = "" if code == _OK else _message(code, new, options)
+    events = None
+    if record:
+        n = int(S[_NREC])
+        events = {name: ev[:n, i].copy() for i, name in enumerate(EVENT_FIELDS)}
+        events["mode"] = events["mode"].astype(np.int8)
+        events["kind"] = events["kind"].astype(np.int8)
+    return IntervalResult(new, status, message, float(S[_PEAK]), float(S[_IABS]), float(S[_ISQ]),
+                          float(S[_CHG]), float(S[_DUR]), int(S[_NEV]), int(S[_NBRK]), int(S[_NSTK]),
+                          int(S[_NSUB]), events)
+
+
+@lru_cache(maxsize=64)
+def _tables(params: PlantParams, options: SimOptions) -> tuple[np.ndarray, ...]:
+    """Φ, noise factors and bridge gains of the fixed sub-step widths, for both moving modes.
+
+    A memo of a pure function of (params, options): it saves recomputing them at every
+    segment and bisection level and cannot change a result (the kernels compute the same
+    numbers when a width is not in the table).
+    """
+    prm = params.kernel_record()[0]
+    TP, TL = np.empty((2, 2, 7, 7)), np.empty((2, 2, 4, 4))
+    substep_tables(prm, options.substep, options.reflect_substep, TP, TL)
+    levels = max(0, math.ceil(math.log2(options.substep / options.bisection_tol)))
+    BPh, BPw = np.empty((2, levels, 7, 7)), np.empty((2, levels, 7, 7))
+    BG, BC = np.empty((2, levels, 4, 4)), np.empty((2, levels, 4, 4))
+    bisection_tables(prm, options.substep, BPh, BPw, BG, BC)
+    tables = (TP, TL, BPh, BPw, BG, BC)
+    for a in tables:
+        a.flags.writeable = False
+    return tables
+
+
+def _quiet_vector(options: SimOptions) -> np.ndarray:
+    vec = options.__dict__.get("_quiet_vector")
+    if vec is None:
+        vec = options.kernel_vector().copy()
+        vec[_O_NOISE] = 0.0
+        vec.flags.writeable = False
+        object.__setattr__(options, "_quiet_vector", vec)
+    return vec
+
+
+def _message(code: int, state: PlantState, options: SimOptions) -> str:
+    if code == _CHATTER:
+        return f"more than {options.max_events} events in one interval at t={state.t:.6f} s"
+    return f"|x1| = {abs(state.x[X1]):.3g} rad at t={state.t:.6f} s"

@@ -1,0 +1,323 @@
+"""Modes 1 and 3, the shaft moving: Φ (3-20)/(3-21), the noise (4-8)/(4-10), the mean path.
+
+Inside the kernels the state is the augmented vector of (3-5)::
+
+    Xa = [x1, x2, x3, x4, x5, kc, u]
+
+where slot 5 carries the Coulomb level kc as the constant coordinate that makes the affine
+drift linear (it is the parameter k̄c, not plant state; should k̄c + x5 be negative at the start
+of a moving segment, the segment runs with kc = −x5, i.e. an effective Coulomb level of 0 — a
+4.7σ event for Table 2-1). Mode 3 (x2 > 0) has ẋ2 = α(x3 − x5 − kc) + α·w2, mode 1 the
+mirror image with s = −1 → +1 (the matrices are right, the prose's order is not; SPEC §2).
+
+With y3 = β3·τ, y5 = β5·τ and s = +1 in mode 1, −1 in mode 3, the mean path (3-20)/(3-21)::
+
+    x1(τ) = x1 + τ·x2 − e1(β4τ)/β4·x4 + α·e2(y3)/β3²·x3 + α·e3(y3)/β3²·u
+            + s·α·e2(y5)/β5²·x5 + s·α·τ²/2·kc
+    x2(τ) = x2 + α·e1(y3)/β3·x3 + α·e2(y3)/β3·u + s·α·e1(y5)/β5·x5 + s·α·τ·kc
+    x3(τ) = e^(−y3)·x3 + e1(y3)·u     x4(τ) = e^(−β4τ)·x4     x5(τ) = e^(−y5)·x5
+
+The noise enters through the x2, x4 and x5 columns only, so its covariance lives on the block
+(x1, x2, x4, x5); it is integrated by 8-node Gauss–Legendre on panels with β·Δ ≤ 0.25, exact
+to round-off because those columns are polynomials in v times e^(−β4 v), e^(−β5 v)
+(plant.transition documents the same rule; Van Loan is the test oracle).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from plant.expfun import e1, e2, e3
+from plant.randomness import normal
+from plant.segments import hermite_peak, torque_crossing_time
+
+__all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "deterministic_move",
+           "NOISY_BLOCK"]
+
+A1, A2, A3, A4, A5, AKC, AU = range(7)
+NOISY_BLOCK = np.array([A1, A2, A4, A5])
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_BRENT_ITER = 200
+
+
+@njit(cache=True)
+def phi_moving(mode, h, p, P):
+    """Φ_1 or Φ_3 of (3-20)/(3-21) into P (7 × 7, augmented vector)."""
+    a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
+    for i in range(7):
+        for j in range(7):
+            P[i, j] = 1.0 if i == j else 0.0
+    y3 = b3 * h
+    y5 = b5 * h
+    s = 1.0 if mode == 1 else -1.0
+    P[A3, A3] = math.exp(-y3)                 # q33
+    P[A3, AU] = e1(y3)                        # q37
+    P[A4, A4] = math.exp(-b4 * h)             # q44
+    P[A1, A4] = -e1(b4 * h) / b4              # q14
+    P[A1, A2] = h
+    P[A1, A3] = a * e2(y3) / (b3 * b3)        # q13
+    P[A2, A3] = a * e1(y3) / b3               # q23
+    P[A1, AU] = a * e3(y3) / (b3 * b3)        # q17
+    P[A2, AU] = a * e2(y3) / b3               # q27
+    P[A5, A5] = math.exp(-y5)                 # q55
+    P[A1, A5] = s * a * e2(y5) / (b5 * b5)    # q15
+    P[A2, A5] = s * a * e1(y5) / b5           # q25
+    P[A1, AKC] = s * a * h * h / 2.0
+    P[A2, AKC] = s * a * h
+
+
+@njit(cache=True)
+def mean_path(mode, tau, X, p):
+    """(x1, x2, x3, x4) of Φ(τ)·X by the scalar closed forms in the module docstring."""
+    a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
+    s = 1.0 if mode == 1 else -1.0
+    y3 = b3 * tau
+    y5 = b5 * tau
+    x1 = (X[A1] + tau * X[A2] - e1(b4 * tau) / b4 * X[A4] + a * e2(y3) / (b3 * b3) * X[A3]
+          + a * e3(y3) / (b3 * b3) * X[AU] + s * a * e2(y5) / (b5 * b5) * X[A5] + s * a * tau * tau / 2.0 * X[AKC])
+    x2 = (X[A2] + a * e1(y3) / b3 * X[A3] + a * e2(y3) / b3 * X[AU] + s * a * e1(y5) / b5 * X[A5]
+          + s * a * tau * X[AKC])
+    x3 = math.exp(-y3) * X[A3] + e1(y3) * X[AU]
+    x4 = math.exp(-b4 * tau) * X[A4]
+    return x1, x2, x3, x4
+
+
+@njit(cache=True)
+def q_moving(mode, h, p, Q):
+    """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8)."""
+    a, b4, b5 = p.alpha, p.beta4, p.beta5
+    q2, q4, q5 = a * a * p.sigma2_sq, p.sigma4_sq, p.sigma5_sq
+    s = 1.0 if mode == 1 else -1.0
+    for i in range(4):
+        for j in range(4):
+            Q[i, j] = 0.0
+    rate = max(b4, b5)
+    panels = max(1, int(math.ceil(rate * h / 0.25)))
+    width = h / panels
+    r = np.empty(4)
+    for pnl in range(panels):
+        lo = pnl * width
+        for k in range(_GL_X.shape[0]):
+            v = lo + 0.5 * width * (_GL_X[k] + 1.0)
+            w = 0.5 * width * _GL_W[k]
+            # x2 column (w2 enters x2 with gain α, already in q2)
+            r[0], r[1], r[2], r[3] = v, 1.0, 0.0, 0.0
+            for i in range(4):
+                for j in range(4):
+                    Q[i, j] += w * q2 * r[i] * r[j]
+            # x4 column
+            r[0], r[1], r[2], r[3] = -e1(b4 * v) / b4, 0.0, math.exp(-b4 * v), 0.0
+            for i in range(4):
+                for j in range(4):
+                    Q[i, j] += w * q4 * r[i] * r[j]
+            # x5 column
+            r[0] = s * a * e2(b5 * v) / (b5 * b5)
+            r[1] = s * a * e1(b5 * v) / b5
+            r[2], r[3] = 0.0, math.exp(-b5 * v)
+            for i in range(4):
+                for j in range(4):
+                    Q[i, j] += w * q5 * r[i] * r[j]
+
+
+@njit(cache=True)
+def chol_psd(Q, L):
+    """Lower factor L·Lᵀ = Q of a PSD 4 × 4 (4-29)–(4-34), in diagonally scaled coordinates;
+    zero rows (4-28) and rank-deficient directions give zero columns."""
+    n = Q.shape[0]
+    d = np.empty(n)
+    for i in range(n):
+        d[i] = math.sqrt(Q[i, i]) if Q[i, i] > 0 else 0.0
+    for i in range(n):
+        for j in range(n):
+            L[i, j] = 0.0
+    for j in range(n):
+        if d[j] == 0.0:
+            continue
+        acc = 1.0
+        for k in range(j):
+            acc -= L[j, k] * L[j, k]
+        if acc <= 1e-15:
+            continue
+        piv = math.sqrt(acc)
+        L[j, j] = piv
+        for i in range(j + 1, n):
+            if d[i] == 0.0:
+                continue
+            acc2 = Q[i, j] / (d[i] * d[j])
+            for k in range(j):
+                acc2 -= L[i, k] * L[j, k]
+            L[i, j] = acc2 / piv
+    for i in range(n):
+        for j in range(n):
+            L[i, j] *= d[i]
+
+
+@njit(cache=True)
+def noise_factor_moving(mode, h, p, L):
+    """L with L·Lᵀ = the noisy block of COV[N(h)]."""
+    Q = np.empty((4, 4))
+    q_moving(mode, h, p, Q)
+    chol_psd(Q, L)
+
+
+@njit(cache=True)
+def gaussian_step(X, P, L, z, cursor, out):
+    """out = P·X + N, N = L·ζ on the noisy block, ζ four unit normals of the stream."""
+    for i in range(7):
+        acc = 0.0
+        for j in range(7):
+            acc += P[i, j] * X[j]
+        out[i] = acc
+    z0 = normal(z, cursor)
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    for r in range(4):
+        out[NOISY_BLOCK[r]] += L[r, 0] * z0 + L[r, 1] * z1 + L[r, 2] * z2 + L[r, 3] * z3
+
+
+@njit(cache=True)
+def substep_peak(Xa, Xb, h, peak):
+    """max(peak, |x1| at both ends, the interior extremum of the cubic Hermite of x1)."""
+    pk = max(peak, abs(Xa[A1]), abs(Xb[A1]))
+    da, db = Xa[A2] - Xa[A4], Xb[A2] - Xb[A4]
+    if da * db < 0:
+        pk = max(pk, hermite_peak(h, Xa[A1], da, Xb[A1], db))
+    return pk
+
+
+# --- roots of the mean path -----------------------------------------------------------------
+
+@njit(cache=True)
+def _mean_value(which, mode, tau, X, p):
+    """which = 0: mean velocity x2(τ); which = 1: ẋ1 = x2(τ) − x4(τ)."""
+    _, x2, _, x4 = mean_path(mode, tau, X, p)
+    return x2 if which == 0 else x2 - x4
+
+
+@njit(cache=True)
+def brent_mean(which, mode, X, p, a, b, fa, fb):
+    """Brent's root of _mean_value on [a, b] with f(a)·f(b) ≤ 0, to ~1e-16 s (scipy's brentq)."""
+    xtol, rtol = 1e-16, 8.9e-16
+    xpre, xcur = a, b
+    fpre, fcur = fa, fb
+    xblk, fblk, spre, scur = 0.0, 0.0, 0.0, 0.0
+    if fpre == 0.0:
+        return xpre
+    if fcur == 0.0:
+        return xcur
+    for _ in range(_BRENT_ITER):
+        if fpre != 0.0 and fcur != 0.0 and (fpre < 0.0) != (fcur < 0.0):
+            xblk, fblk = xpre, fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):
+            xpre, xcur, xblk = xcur, xblk, xcur
+            fpre, fcur, fblk = fcur, fblk, fcur
+        delta = (xtol + rtol * abs(xcur)) / 2.0
+        sbis = (xblk - xcur) / 2.0
+        if fcur == 0.0 or abs(sbis) < delta:
+            return xcur
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            if 2.0 * abs(stry) < min(abs(spre), 3.0 * abs(sbis) - delta):
+                spre, scur = scur, stry
+            else:
+                spre, scur = sbis, sbis
+        else:
+            spre, scur = sbis, sbis
+        xpre, fpre = xcur, fcur
+        if abs(scur) > delta:
+            xcur += scur
+        else:
+            xcur += delta if sbis > 0 else -delta
+        fcur = _mean_value(which, mode, xcur, X, p)
+    return xcur
+
+
+@njit(cache=True)
+def velocity_extremum_time(mode, X, p):
+    """τ where ẋ2 ∝ x3(τ) ∓ kc changes sign (x2's only extremum), or inf."""
+    s = -1.0 if mode == 1 else 1.0          # direction of motion
+    kc = max(p.coulomb + X[A5], 0.0)
+    return torque_crossing_time(X[A3], X[AU], s * kc, p.tau3)
+
+
+@njit(cache=True)
+def first_mean_zero(mode, X, p, h):
+    """First τ in (0, h] where the mean velocity reaches 0, or inf (exact to ~1e-15 s).
+
+    ẋ2 ∝ x3(τ) − s·kc changes sign at most once (x3 is monotone), so x2 has one extremum;
+    the root is bracketed on [0, t_ext] or [t_ext, h].
+    """
+    s = 1.0 if mode == 3 else -1.0
+    if s * X[A2] <= 0.0:
+        return 0.0          # at zero velocity below stiction: sticks at once
+    t_ext = velocity_extremum_time(mode, X, p)
+    lo, flo = 0.0, X[A2]
+    for k in range(2):
+        if k == 0:
+            if not (0.0 < t_ext < h):
+                continue
+            hi = t_ext
+        else:
+            hi = h
+        fhi = _mean_value(0, mode, hi, X, p)
+        if s * fhi <= 0.0:
+            return brent_mean(0, mode, X, p, lo, hi, flo, fhi)
+        lo, flo = hi, fhi
+    return math.inf
+
+
+@njit(cache=True)
+def mean_x1_peak(mode, X, p, h):
+    """Largest |x1| at the interior roots of ẋ1 = x2 − x4 of the mean path on (0, h)."""
+    t_ext = velocity_extremum_time(mode, X, p)
+    peak = 0.0
+    lo = 0.0
+    glo = X[A2] - X[A4]
+    for k in range(2):
+        if k == 0:
+            if not (0.0 < t_ext < h):
+                continue
+            hi = t_ext
+        else:
+            hi = h
+        ghi = _mean_value(1, mode, hi, X, p)
+        if glo * ghi < 0.0:
+            r = brent_mean(1, mode, X, p, lo, hi, glo, ghi)
+            x1 = mean_path(mode, r, X, p)[0]
+            peak = max(peak, abs(x1))
+        lo, glo = hi, ghi
+    return peak
+
+
+@njit(cache=True)
+def deterministic_move(mode, X, p, h, noisy, z, cursor, peak):
+    """Advance a moving segment without white velocity noise by h in place; returns the peak.
+
+    The path is the mean path; with noise on (σ2 = 0 here) the slow x4/x5 diffusions add one
+    exact Gaussian jump, whose effect on x1 inside the segment is ~1e-15 rad, so the peak
+    comes from the mean path's exact interior extrema and the end points.
+    """
+    peak = max(peak, abs(X[A1]), mean_x1_peak(mode, X, p, h))
+    P = np.empty((7, 7))
+    phi_moving(mode, h, p, P)
+    Xn = P @ X
+    if noisy:
+        L = np.empty((4, 4))
+        noise_factor_moving(mode, h, p, L)
+        zz = np.empty(4)
+        for i in range(4):
+            zz[i] = normal(z, cursor)
+        for r in range(4):
+            Xn[NOISY_BLOCK[r]] += L[r, 0] * zz[0] + L[r, 1] * zz[1] + L[r, 2] * zz[2] + L[r, 3] * zz[3]
+    X[:] = Xn
+    return max(peak, abs(X[A1]))

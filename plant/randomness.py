@@ -1,0 +1,96 @@
+"""The plant's random numbers: one stream of unit normals, drawn from a numpy Generator in blocks.
+
+Passing a ``numpy.random.Generator`` into a compiled function costs ~10 µs per call (numba
+unboxes the bit generator every time), more than a whole noise-free sample interval. The
+compiled plant therefore reads its randomness from a buffer of unit normals that
+:class:`NoiseStream` fills with ``Generator.standard_normal``. The stream is consumed strictly
+in order and a Generator's normals do not depend on how they are blocked, so results are
+bit-identical whatever the block size, across runs and executors, from one
+``SeedSequence(seed)``.
+
+Uniform variates (bridge-crossing tests, the reflection minimum) come from the same stream as
+U = Φ(Z) = ½·erfc(−Z/√2), which is exactly uniform on (0, 1) for a unit normal Z.
+
+A kernel that reaches the end of the buffer raises :class:`NoiseExhausted`; the caller
+extends the buffer and runs the same (pure) interval again from the same position, which
+reproduces the same draws.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["NoiseStream", "NoiseExhausted"]
+
+
+class NoiseExhausted(Exception):
+    """The kernel ran past the end of the normal buffer (the caller extends it and retries)."""
+
+
+# Position of the read cursor inside the kernels' work sheet (see plant.interval).
+ZPOS = 0
+
+
+@njit(cache=True)
+def normal(z, cursor):
+    """Next unit normal of the stream; ``cursor`` is a one-element int64 array."""
+    i = cursor[ZPOS]
+    if i >= z.shape[0]:
+        raise NoiseExhausted()
+    cursor[ZPOS] = i + 1
+    return z[i]
+
+
+@njit(cache=True)
+def uniform(z, cursor):
+    """U = Φ(Z) on (0, 1), from the next unit normal."""
+    return 0.5 * math.erfc(-normal(z, cursor) / math.sqrt(2.0))
+
+
+class NoiseStream:
+    """Unit normals from ``rng`` with a read position; the plant's only source of randomness.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The plant-noise generator (spawned from the run's ``SeedSequence``).
+    block : int
+        Normals drawn per refill. Does not change any result.
+    """
+
+    __slots__ = ("_rng", "_buf", "_pos", "_block")
+
+    def __init__(self, rng: np.random.Generator, block: int = 8192) -> None:
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"NoiseStream needs a numpy.random.Generator, got {type(rng).__name__}")
+        self._rng = rng
+        self._buf = np.empty(0)
+        self._pos = 0
+        self._block = int(block)
+
+    @classmethod
+    def from_seed(cls, seed: int) -> "NoiseStream":
+        return cls(np.random.default_rng(np.random.SeedSequence(seed)))
+
+    def window(self, minimum: int = 2048) -> tuple[np.ndarray, int]:
+        """The buffer and read position, with at least ``minimum`` unread normals."""
+        if self._buf.shape[0] - self._pos < minimum:
+            self._refill(self._pos, max(self._block, minimum))
+        return self._buf, self._pos
+
+    def grow(self, pos: int) -> tuple[np.ndarray, int]:
+        """After :class:`NoiseExhausted`: keep the normals from ``pos`` on, append a block, and
+        return the buffer and the new position of ``pos``."""
+        self._refill(pos, max(self._block, self._buf.shape[0] - pos))
+        return self._buf, self._pos
+
+    def _refill(self, pos: int, n: int) -> None:
+        self._buf = np.concatenate((self._buf[pos:], self._rng.standard_normal(n)))
+        self._pos = 0
+
+    def consumed(self, pos: int) -> None:
+        """Move the read position to ``pos`` (returned by the kernel)."""
+        self._pos = int(pos)

@@ -1,0 +1,356 @@
+"""Locating a velocity zero in a noisy moving segment (SPEC §2, section 4.5).
+
+Two locators, both compiled:
+
+* **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N; a zero crossing of
+  x2 inside a sub-step is a sign change or, with both ends on one side, happens with the
+  Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by bridge bisection,
+  each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
+  X_m = X_m,free + G·(X_b − X_b,free), G = Q(w/2)·Φ(w/2)ᵀ·Q(w)⁻¹), accepted in proportion to
+  the probability that the halves contain a crossing, so the located time has the exact law of
+  the first crossing of the bridge. It stops at ``bisection_tol`` (≤ 1 µs).
+* **newton**: the seed's method (4-38): the noise sample Z of the whole segment is held fixed
+  and Newton runs on the velocity g ← g − v(g)/a(g), with a bracketing fallback.
+
+While the torque in the direction of motion still exceeds ks a crossing is reflected (the
+shaft cannot stick and friction cannot reverse it). Sub-steps there add the Skorokhod push:
+the bridge minimum of x2 is drawn exactly, m = ½(v_a + v_b − √((v_b − v_a)² − 2α²σ2²h·ln U)),
+x2 is lifted by max(0, −m), and x1 receives the push for half the sub-step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from plant.moving import (NOISY_BLOCK, chol_psd, gaussian_step, mean_path, noise_factor_moving, phi_moving,
+                          q_moving, substep_peak)
+from plant.randomness import normal, uniform
+
+__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables"]
+
+A1, A2, A3, A4, A5, AKC, AU = range(7)
+_MAX_TRIES = 100_000
+
+
+@njit(cache=True)
+def _cross_prob(va, vb, h, sig_v2):
+    """Probability that a Brownian bridge of x2 from va to vb over h crosses 0."""
+    if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
+        return 1.0
+    return math.exp(-2.0 * va * vb / (sig_v2 * h))
+
+
+@njit(cache=True)
+def _bridge_law(mode, w, p, Ph, Pw, G, C):
+    """The law of the midpoint X(w/2) of a sub-step of width w given both its ends.
+
+    On the noisy block (x1, x2, x4, x5), with Q_h = COV[N(w/2)], Q_w = COV[N(w)] and Φ_h the
+    block of Φ(w/2): G = Q_h·Φ_hᵀ·Q_w⁻¹ and, given X_a and X_b,
+
+        X_m ~ N(Φ(w/2)·X_a + G·(X_b − Φ(w)·X_a),  Σ = Q_h − G·Φ_h·Q_h)
+
+    (Gaussian conditioning; the deterministic coordinates follow Φ(w/2)·X_a). Fills Ph = Φ(w/2),
+    Pw = Φ(w), G, and C with √Σ_22 in C[0, 0], the regression of (x1, x4, x5) on x2 in
+    C[1:, 0] and the Cholesky factor of their conditional covariance in C[1:, 1:], so that the
+    bisection draws x2 alone first.
+    """
+    phi_moving(mode, w / 2, p, Ph)
+    phi_moving(mode, w, p, Pw)
+    Q1 = np.empty((4, 4))
+    Qw = np.empty((4, 4))
+    q_moving(mode, w / 2, p, Q1)
+    q_moving(mode, w, p, Qw)
+    P2 = np.empty((4, 4))
+    for i in range(4):
+        for j in range(4):
+            P2[i, j] = Ph[NOISY_BLOCK[i], NOISY_BLOCK[j]]
+    d = np.empty(4)
+    for i in range(4):
+        d[i] = math.sqrt(Qw[i, i]) if Qw[i, i] > 0 else 1.0
+    Qs = np.empty((4, 4))
+    M = np.empty((4, 4))      # M = Q1·P2ᵀ scaled by columns
+    for i in range(4):
+        for j in range(4):
+            Qs[i, j] = Qw[i, j] / (d[i] * d[j])
+            acc = 0.0
+            for k in range(4):
+                acc += Q1[i, k] * P2[j, k]
+            M[i, j] = acc / d[j]
+    # G = M · Qs⁻¹ · D⁻¹  →  Gᵀ = D⁻¹ · solve(Qs, Mᵀ)
+    Gt = np.linalg.lstsq(Qs, M.T.copy(), 1e-13)[0]
+    for i in range(4):
+        for j in range(4):
+            G[i, j] = Gt[j, i] / d[j]
+    # Σ = Q1 − G·P2·Q1, symmetrised
+    GP = G @ P2
+    S = Q1 - GP @ Q1
+    S = 0.5 * (S + S.T)
+    for i in range(4):
+        for j in range(4):
+            C[i, j] = 0.0
+    s22 = max(S[1, 1], 0.0)
+    C[0, 0] = math.sqrt(s22)
+    others = (0, 2, 3)
+    R = np.empty((3, 3))
+    for a in range(3):
+        ia = others[a]
+        C[1 + a, 0] = S[ia, 1] / s22 if s22 > 0.0 else 0.0
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = S[others[a], others[b]] - C[1 + a, 0] * S[1, others[b]]
+    Lc = np.empty((3, 3))
+    _chol3(R, Lc)
+    for a in range(3):
+        for b in range(3):
+            C[1 + a, 1 + b] = Lc[a, b]
+
+
+@njit(cache=True)
+def _chol3(R, L):
+    """Lower factor of a PSD 3 × 3 (zero columns for zero or rank-deficient directions)."""
+    Q = np.zeros((4, 4))
+    for i in range(3):
+        for j in range(3):
+            Q[i, j] = R[i, j]
+    L4 = np.empty((4, 4))
+    chol_psd(Q, L4)
+    for i in range(3):
+        for j in range(3):
+            L[i, j] = L4[i, j]
+
+
+@njit(cache=True)
+def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC):
+    """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
+
+    At each level the midpoint is drawn from its law given both ends (:func:`_bridge_law`)
+    conditioned on the half-intervals containing a crossing, by rejection on x2 alone (the
+    acceptance depends on x2 only): x2 is proposed from its marginal and accepted with the
+    probability that either half crosses; the other coordinates are then drawn given x2. The
+    first crossing is in the left half with probability p_left/p_any.
+
+    ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
+    plant.interval); levels beyond the table are computed here.
+    """
+    m = 0 if mode == 1 else 1
+    Xa = Xa0.copy()
+    Xb = Xb0.copy()
+    ta = 0.0
+    w = h
+    Ph = np.empty((7, 7))
+    Pw = np.empty((7, 7))
+    G = np.empty((4, 4))
+    C = np.empty((4, 4))
+    E = np.empty(7)
+    levels = 0
+    while w > tol:
+        half = w / 2
+        if levels < BPh.shape[1]:
+            Ph[:, :] = BPh[m, levels]
+            Pw[:, :] = BPw[m, levels]
+            G[:, :] = BG[m, levels]
+            C[:, :] = BC[m, levels]
+        else:
+            _bridge_law(mode, w, p, Ph, Pw, G, C)
+        E[:] = Ph @ Xa
+        Fb = Pw @ Xa
+        for r in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += G[r, c] * (Xb[NOISY_BLOCK[c]] - Fb[NOISY_BLOCK[c]])
+            E[NOISY_BLOCK[r]] += acc
+        pl, p_any, x2m = 1.0, 1.0, E[A2]
+        for _ in range(_MAX_TRIES):
+            x2m = E[A2] + C[0, 0] * normal(z, cursor)
+            pl = _cross_prob(Xa[A2], x2m, half, sig_v2)
+            pr = _cross_prob(x2m, Xb[A2], half, sig_v2)
+            p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
+            if p_any >= 1.0 or uniform(z, cursor) < p_any:
+                break
+        Xm = E.copy()
+        Xm[A2] = x2m
+        z1 = normal(z, cursor)
+        z2 = normal(z, cursor)
+        z3 = normal(z, cursor)
+        dv = x2m - E[A2]
+        Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
+        Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
+        Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
+        if pl >= 1.0 or uniform(z, cursor) * p_any < pl:
+            Xb[:] = Xm                  # the first crossing is in the left half
+        else:
+            ta += half
+            Xa[:] = Xm
+        w = half
+        levels += 1
+    Xout[:] = Xb
+    return ta + w, levels
+
+
+@njit(cache=True)
+def bisection_tables(p, sub, BPh, BPw, BG, BC):
+    """Tabulate :func:`_bridge_law` for w = sub/2^k, k < BPh.shape[1], both moving modes."""
+    for m in range(2):
+        mode = 1 if m == 0 else 3
+        w = sub
+        for k in range(BPh.shape[1]):
+            _bridge_law(mode, w, p, BPh[m, k], BPw[m, k], BG[m, k], BC[m, k])
+            w = w / 2
+
+
+@njit(cache=True)
+def substep_tables(p, o_sub, o_rsub, TP, TL):
+    """Φ and noise factors of the regular (j = 0) and reflection (j = 1) sub-steps, both modes."""
+    Q = np.empty((4, 4))
+    for m in range(2):
+        mode = 1 if m == 0 else 3
+        for j in range(2):
+            h = o_sub if j == 0 else o_rsub
+            phi_moving(mode, h, p, TP[m, j])
+            q_moving(mode, h, p, Q)
+            chol_psd(Q, TL[m, j])
+
+
+@njit(cache=True)
+def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, BPh, BPw, BG, BC, z, cursor, peak,
+                   max_steps):
+    """Advance a noisy moving segment of length h in place (bridge locator, or reflection).
+
+    ``TP[m, j], TL[m, j]``: Φ and the noise factor of the regular (j = 0) and reflection
+    (j = 1) sub-steps, m = 0 for mode 1 and 1 for mode 3 (:func:`substep_tables`). While
+    reflecting, a sub-step is the short one only when x2 is within 8 standard deviations of a
+    regular sub-step's velocity noise of 0: farther out, the bridge minimum falls below 0 with
+    probability < e^(−128), the push is 0 and the long step is exact.
+
+    Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
+    velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
+    """
+    s = 1.0 if mode == 3 else -1.0
+    m = 0 if mode == 1 else 1
+    sig_v2 = p.alpha * p.alpha * p.sigma2_sq
+    near = 8.0 * math.sqrt(sig_v2 * o_sub)
+    no_tables = BPh[:, :0]
+    P = np.empty((7, 7))
+    L = np.empty((4, 4))
+    Qtmp = np.empty((4, 4))
+    Xb = np.empty(7)
+    Xc = np.empty(7)
+    t = 0.0
+    n = 0
+    while h - t > 0.0:
+        rem = h - t
+        j = 1 if reflect and s * X[A2] < near else 0
+        sub = o_rsub if j == 1 else o_sub
+        regular = rem > 1.5 * sub
+        if regular:
+            step = sub
+            gaussian_step(X, TP[m, j], TL[m, j], z, cursor, Xb)
+        else:
+            step = rem
+            phi_moving(mode, step, p, P)
+            q_moving(mode, step, p, Qtmp)
+            chol_psd(Qtmp, L)
+            gaussian_step(X, P, L, z, cursor, Xb)
+        n += 1
+        if n > max_steps:
+            return t, False, peak, n, True
+        if reflect:
+            va, vb = s * X[A2], s * Xb[A2]
+            if sig_v2 > 0:
+                u = uniform(z, cursor)
+                low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
+            else:
+                low = min(va, vb)
+            if low < 0.0:
+                Xb[A2] += s * (-low)
+                Xb[A1] += s * (-low) * step / 2.0
+        else:
+            pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
+            if pc >= 1.0 or uniform(z, cursor) < pc:
+                if regular:
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC)
+                else:
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
+                                     BG[:, :0], BG[:, :0])
+                n += lv
+                peak = substep_peak(X, Xc, tc, peak)
+                X[:] = Xc
+                X[A2] = 0.0
+                return t + tc, True, peak, n, False
+        peak = substep_peak(X, Xb, step, peak)
+        X[:] = Xb
+        t += step
+    return h, False, peak, n, False
+
+
+@njit(cache=True)
+def _fixed_z_velocity(mode, tau, X, p, zf):
+    """x2(τ) of the sample path with the segment's noise vector held fixed (4-38)."""
+    if tau <= 0.0:
+        return X[A2]
+    L = np.empty((4, 4))
+    noise_factor_moving(mode, tau, p, L)
+    v = mean_path(mode, tau, X, p)[1]
+    return v + L[1, 0] * zf[0] + L[1, 1] * zf[1] + L[1, 2] * zf[2] + L[1, 3] * zf[3]
+
+
+@njit(cache=True)
+def newton_segment(X, mode, h, p, z, cursor, peak):
+    """Section 4.5: hold Z fixed and iterate g ← g − v(g)/a(g) from the segment end (4-38).
+
+    Advances X in place; returns (advanced [s], stopped, peak).
+    """
+    zf = np.empty(4)
+    for i in range(4):
+        zf[i] = normal(z, cursor)
+    s = 1.0 if mode == 3 else -1.0
+    g = h
+    found = False
+    if s * X[A2] <= 0.0:
+        g, found = 0.0, True
+    if not found:
+        for _ in range(20):
+            v = _fixed_z_velocity(mode, g, X, p, zf)
+            x3g = mean_path(mode, g, X, p)[2]
+            x5g = X[A5] * math.exp(-p.beta5 * g)
+            accel = p.alpha * (x3g - s * (X[AKC] + x5g))
+            if accel == 0.0:
+                break
+            step = v / accel
+            if g == h and step <= 0:       # first correction positive in time: no zero before h
+                break
+            g_new = g - step
+            if not (0.0 < g_new <= h):
+                break
+            if abs(g_new - g) < 1e-13:
+                g, found = g_new, True
+                break
+            g = g_new
+    if not found and s * _fixed_z_velocity(mode, h, X, p, zf) <= 0.0:
+        # Newton left (0, h] although the fixed-Z path ends on the far side: bisect instead.
+        lo, hi = min(1e-12, h / 2), h
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if s * _fixed_z_velocity(mode, mid, X, p, zf) > 0.0:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo <= 1e-15:
+                break
+        g, found = hi, True
+    tau = g if found else h
+    P = np.empty((7, 7))
+    L = np.empty((4, 4))
+    phi_moving(mode, tau, p, P)
+    noise_factor_moving(mode, tau, p, L)
+    Xb = P @ X
+    for r in range(4):
+        Xb[NOISY_BLOCK[r]] += L[r, 0] * zf[0] + L[r, 1] * zf[1] + L[r, 2] * zf[2] + L[r, 3] * zf[3]
+    peak = substep_peak(X, Xb, tau, peak)
+    X[:] = Xb
+    if found:
+        X[A2] = 0.0
+    return tau, found, peak
