@@ -201,11 +201,14 @@ def fixed_step_pulses(params: PlantParams, dt_u: float, dt: float, n_paths: int,
 
 def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12, atol: float = 1e-20,
                  x0: np.ndarray | None = None, sample_times: np.ndarray | None = None,
-                 dense_step: float | None = None, max_events: int = 10_000_000) -> dict[str, np.ndarray]:
+                 dense_step: float | None = None, max_events: int = 10_000_000,
+                 peak_from: float = 0.0) -> dict[str, np.ndarray]:
     """Noise-free reference: ``solve_ivp`` (DOP853) with terminal events per mode segment.
 
-    Returns ``x1_at`` (x1 at ``sample_times``), ``final`` (x1..x5), ``n_segments`` and, with
-    ``dense_step``, ``dense_t``/``dense_x1`` on a uniform grid of that step (for peak checks).
+    Returns ``x1_at`` (x1 at ``sample_times``), ``final`` (x1..x5), ``n_segments``,
+    ``peak_abs_x1`` — max |x1| over [peak_from, end] at segment ends and at the interior extrema
+    of x1, located by solve_ivp as non-terminal events of ẋ1 = x2 − x4 = 0 (x1 is monotone while
+    stuck) — and, with ``dense_step``, ``dense_t``/``dense_x1`` on a uniform grid of that step.
     """
     p = params
     a, b3, b4, b5, U_, kcb, ksb = p.alpha, p.beta3, p.beta4, p.beta5, p.u_max, p.coulomb, p.stiction
@@ -220,6 +223,7 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
     dense_t, dense_x1 = [], []
     u = 0.0
     n_seg = 0
+    peak = abs(x[0]) if t >= peak_from else 0.0
 
     def rhs_factory(mode: int, u: float):
         def rhs(_t, y):
@@ -264,13 +268,22 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 vz = lambda _t, y: y[1]
                 vz.terminal, vz.direction = True, -s
                 events.append(("vz", vz))
+                ext = lambda _t, y: y[1] - y[3]
+                ext.terminal, ext.direction = False, 0
+                events.append(("ext", ext))
             sol = solve_ivp(rhs_factory(mode, u), (t, seg_end), x, method="DOP853", rtol=rtol, atol=atol,
                             events=[e for _, e in events], dense_output=True)
             t_stop = sol.t[-1]
             hit = None
-            for (name, _), te in zip(events, sol.t_events):
-                if len(te):
+            for (name, _), te, ye in zip(events, sol.t_events, sol.y_events):
+                if name == "ext":
+                    keep = te >= peak_from
+                    if keep.any():
+                        peak = max(peak, float(np.max(np.abs(ye[keep, 0]))))
+                elif len(te):
                     hit = name
+            if t_stop >= peak_from:
+                peak = max(peak, abs(float(sol.y[0, -1])))
             mask = (sample_times >= t) & (sample_times <= t_stop)
             if mask.any():
                 x1_at[mask] = sol.sol(sample_times[mask])[0]
@@ -300,7 +313,7 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                     mode = 1 if mode == 3 else 3
                 else:
                     mode = 2
-    out = {"x1_at": x1_at, "final": x, "mode": mode, "n_segments": n_seg}
+    out = {"x1_at": x1_at, "final": x, "mode": mode, "n_segments": n_seg, "peak_abs_x1": peak}
     if dense_step:
         out["dense_t"] = np.concatenate(dense_t) if dense_t else np.array([])
         out["dense_x1"] = np.concatenate(dense_x1) if dense_x1 else np.array([])
