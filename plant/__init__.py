@@ -16,12 +16,16 @@ velocity-zero locators), ``interval`` (the driver), ``pulse``, ``reference`` (Eu
 and ``solve_ivp`` reference simulators).
 """
 
-from plant.drive import DriveCommand, DriveType
-from plant.interval import advance
-from plant.params import PlantParams
-from plant.pulse import PulseResponse, pulse_response
-from plant.randomness import NoiseStream
-from plant.state import EventKind, IntervalResult, PlantState, SimOptions, Status, initial_state
+from plant import _jit_cache
+
+_jit_cache.refresh()
+
+from plant.drive import DriveCommand, DriveType  # noqa: E402
+from plant.interval import advance  # noqa: E402
+from plant.params import PlantParams  # noqa: E402
+from plant.pulse import PulseResponse, pulse_response  # noqa: E402
+from plant.randomness import NoiseStream  # noqa: E402
+from plant.state import EventKind, IntervalResult, PlantState, SimOptions, Status, initial_state  # noqa: E402
 
 __all__ = [
     "PlantParams", "DriveCommand", "DriveType", "PulseResponse", "pulse_response",

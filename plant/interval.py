@@ -199,7 +199,7 @@ def _velocity_zero(X, S, p):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, o, tabs, z, cursor, ev):
+def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev):
     """Moving until t_end or the next event; True when the interval must stop."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
@@ -220,7 +220,6 @@ def _moving(X, S, t_end, bridge, p, o, tabs, z, cursor, ev):
     white = noise_on and p.sigma2_sq > 0.0
     if white and (reflecting or o[_O_NEWTON] == 0.0):
         budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-        TP, TL, BPh, BPw, BG, BC = tabs
         advanced, stopped, peak, n, chattered = bridge_segment(
             X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, BPh, BPw, BG, BC, z, cursor,
             S[_PEAK], budget)
@@ -262,7 +261,8 @@ def _moving(X, S, t_end, bridge, p, o, tabs, z, cursor, ev):
 # --- the interval -----------------------------------------------------------------------------
 
 @njit(cache=True)
-def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, tabs, z, cursor, ev, x_out, S):
+def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z,
+                    cursor, ev, x_out, S):
     """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance()."""
     p = prm[0]
     X = np.empty(7)
@@ -283,7 +283,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, o, tabs, z, cursor, ev)
+                stop = _moving(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
@@ -340,7 +340,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
     noisy = options.noise and noise is not None
-    o = options.kernel_vector() if noisy else _quiet_vector(options)
+    o, TP, TL, BPh, BPw, BG, BC = _plan(params, options, noisy)
     x_out = np.empty(N_STATE)
     S = np.empty(_SHEET)
     cursor = np.zeros(1, dtype=np.int64)
@@ -352,7 +352,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         start = cursor[0]
         try:
             interval_kernel(state.x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
-                            params.kernel_record(), o, _tables(params, options), z, cursor, ev, x_out, S)
+                            params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, x_out, S)
             break
         except NoiseExhausted:
             z, cursor[0] = noise.grow(start)
@@ -361,27 +361,43 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
             cursor[0] = start
     if noisy:
         noise.consumed(cursor[0])
-    code = int(S[_STATUS])
+    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec) = S.tolist()
     if code == _BAD_LEVEL:
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
     x_out.flags.writeable = False
-    new = PlantState(float(S[_T]), x_out, int(S[_MODE]), bool(S[_FB]))
-    status = _STATUS_OF[code]
-    message = "" if code == _OK else _message(code, new, options)
+    new = PlantState(t, x_out, int(mode), flyback != 0.0)
+    if code == _OK:
+        status, message = Status.OK, ""
+    else:
+        status, message = _STATUS_OF[code], _message(code, new, options)
     events = None
     if record:
-        n = int(S[_NREC])
+        n = int(nrec)
         events = {name: ev[:n, i].copy() for i, name in enumerate(EVENT_FIELDS)}
         events["mode"] = events["mode"].astype(np.int8)
         events["kind"] = events["kind"].astype(np.int8)
-    return IntervalResult(new, status, message, float(S[_PEAK]), float(S[_IABS]), float(S[_ISQ]),
-                          float(S[_CHG]), float(S[_DUR]), int(S[_NEV]), int(S[_NBRK]), int(S[_NSTK]),
-                          int(S[_NSUB]), events)
+    return IntervalResult(new, status, message, peak, iabs, isq, chg, dur, int(nev), int(nbrk), int(nstk),
+                          int(nsub), events)
+
+
+def _plan(params: PlantParams, options: SimOptions, noisy: bool) -> tuple[np.ndarray, ...]:
+    """(options vector, sub-step and bisection tables) for this plant and these options.
+
+    Kept on the options object next to the params it was built for (an identity check, cheaper
+    than hashing both at every interval); the tables themselves are a pure function of
+    (params, options), see :func:`_tables`.
+    """
+    memo = options.__dict__.get("_plan")
+    if memo is None or memo[0] is not params or memo[1] != noisy:
+        o = options.kernel_vector() if noisy else _quiet_vector(options)
+        memo = (params, noisy, (o, *_tables(params, options)))
+        object.__setattr__(options, "_plan", memo)
+    return memo[2]
 
 
 @lru_cache(maxsize=64)
 def _tables(params: PlantParams, options: SimOptions) -> tuple[np.ndarray, ...]:
-    """Φ, noise factors and bridge gains of the fixed sub-step widths, for both moving modes.
+    """Φ, noise factors and bridge laws of the fixed sub-step widths, for both moving modes.
 
     A memo of a pure function of (params, options): it saves recomputing them at every
     segment and bisection level and cannot change a result (the kernels compute the same

@@ -170,7 +170,7 @@ class PlantParams:
         """The parameters as a one-element :data:`KERNEL_RECORD` array (read-only, cached)."""
         rec = self.__dict__.get("_kernel_record")
         if rec is None:
-            rec = np.rec.array([(self.alpha, self.beta3, self.beta4, self.beta5, self.sigma2_sq, self.sigma4_sq,
+            rec = np.array([(self.alpha, self.beta3, self.beta4, self.beta5, self.sigma2_sq, self.sigma4_sq,
                              self.sigma5_sq, self.motor_time_constant, self.u_max, self.coulomb,
                              self.stiction)], dtype=KERNEL_RECORD)
             rec.flags.writeable = False

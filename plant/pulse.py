@@ -14,6 +14,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from plant.drive import DriveCommand, DriveType
 from plant.expfun import e1, e2
@@ -62,7 +63,7 @@ def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int
     ValueError
         If ``dt_u`` is negative, not finite, or ``sign`` is not ±1.
     """
-    if not (isinstance(dt_u, (int, float)) and math.isfinite(dt_u) and dt_u >= 0):
+    if not (type(dt_u) is float or isinstance(dt_u, (int, float))) or not (dt_u >= 0 and math.isfinite(dt_u)):
         raise ValueError(f"dt_u must be a finite number of seconds >= 0, got {dt_u!r}")
     if sign not in (1, -1):
         raise ValueError(f"sign must be +1 or -1, got {sign!r}")
@@ -115,9 +116,9 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
     return PulseResponse(float(state.x[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
 
 
-def _move(x1: float, x2: float, x3: float, u: float, kc: float, tau: float, p: PlantParams) -> tuple[float, float, float]:
+@njit(cache=True)
+def _move(x1, x2, x3, u, kc, tau, t3, a):
     """Mode-3 motion under constant u for tau seconds (closed form of (3-20)/(3-21), x4 = x5 = 0)."""
-    t3, a = p.motor_time_constant, p.alpha
     y = tau / t3
     g = x3 - u
     return (x1 + x2 * tau + a * ((u - kc) * tau * tau / 2.0 + g * t3 * t3 * e2(y)),
@@ -125,49 +126,61 @@ def _move(x1: float, x2: float, x3: float, u: float, kc: float, tau: float, p: P
             u + g * math.exp(-y))
 
 
+@njit(cache=True)
+def _closed_form_kernel(dt_u, U, t3, a, ks, kc):
+    """(Δc for sign +1, t_breakaway or −1, t_current_zero, t_stop) of a noise-free pulse."""
+    x3_on = U * e1(dt_u / t3)
+    t_cz = dt_u + t3 * math.log1p(x3_on / U)
+    t_b = -t3 * math.log1p(-ks / U)
+    if not dt_u > t_b:
+        return 0.0, -1.0, t_cz, 0.0
+    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)             # driven, reflecting
+    t = dt_u
+    t_r = t3 * math.log((x3 + U) / (ks + U)) if x3 > ks else 0.0          # flyback down to ks
+    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_r, t3, a)
+    x3 = ks                                                                # exactly at stiction
+    t += t_r
+    t_f = t3 * math.log1p(x3 / U)                                          # to current zero
+    v_end = _move(x1, x2, x3, -U, kc, t_f, t3, a)[1]
+    if v_end <= 0.0:
+        tau = _velocity_root(x1, x2, x3, -U, kc, t_f, t3, a)
+        x1 = _move(x1, x2, x3, -U, kc, tau, t3, a)[0]
+        return x1, t_b, t_cz, t + tau
+    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_f, t3, a)
+    t += t_f
+    if kc <= 0.0:
+        return math.nan, t_b, t_cz, math.inf                               # coasts for ever
+    tau = x2 / (a * kc)                                                    # coast: ẋ2 = −α·k̄c
+    return x1 + x2 * x2 / (2.0 * a * kc), t_b, t_cz, t + tau
+
+
 def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
     """Noise-free pulse by its closed-form phases: stuck, driven, flyback, coasting.
 
     Breakaway, the end of the reflection regime, the flyback end and the final stop on the
     coast (ẋ2 = −α·k̄c) are explicit; only a stop during flyback needs a scalar root of the
-    closed-form velocity, found by safeguarded Newton to ~1e-15 s.
+    closed-form velocity, found by safeguarded Newton to ~1e-15 s. Compiled: this is the
+    solnic predictor's inner call.
     """
     p = params
-    U, t3, a, ks, kc = p.u_max, p.motor_time_constant, p.alpha, p.stiction, p.coulomb
-    x3_on = U * e1(dt_u / t3)
-    t_cz = dt_u + t3 * math.log1p(x3_on / U)
-    t_b = p.breakaway_time
-    if not dt_u > t_b:
+    dc, t_b, t_cz, t_stop = _closed_form_kernel(dt_u, p.u_max, p.motor_time_constant, p.alpha, p.stiction,
+                                                p.coulomb)
+    if t_b < 0.0:
         return PulseResponse(0.0, None, t_cz, 0.0)
-    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, p)                # driven, reflecting
-    t = dt_u
-    t_r = t3 * math.log((x3 + U) / (ks + U)) if x3 > ks else 0.0         # flyback down to ks
-    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_r, p)
-    x3 = ks                                                               # exactly at stiction
-    t += t_r
-    t_f = t3 * math.log1p(x3 / U)                                         # to current zero
-    v_end = _move(x1, x2, x3, -U, kc, t_f, p)[1]
-    if v_end <= 0.0:
-        tau = _velocity_root(x1, x2, x3, -U, kc, t_f, p)
-        x1 = _move(x1, x2, x3, -U, kc, tau, p)[0]
-        return PulseResponse(sign * x1, t_b, t_cz, t + tau)
-    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_f, p)
-    t += t_f
-    if kc <= 0.0:
+    if t_stop == math.inf:
         raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
-    tau = x2 / (a * kc)                                                   # coast: ẋ2 = −α·k̄c
-    return PulseResponse(sign * (x1 + x2 * x2 / (2.0 * a * kc)), t_b, t_cz, t + tau)
+    return PulseResponse(sign * dc, t_b, t_cz, t_stop)
 
 
-def _velocity_root(x1: float, x2: float, x3: float, u: float, kc: float, h: float, p: PlantParams) -> float:
+@njit(cache=True)
+def _velocity_root(x1, x2, x3, u, kc, h, t3, a):
     """First zero of the closed-form velocity on (0, h], given x2 > 0 at 0 and ≤ 0 at h."""
-    t3 = p.motor_time_constant
     # x2 rises while x3 > kc and falls after: the zero lies after x3 = kc.
     lo = t3 * math.log((x3 - u) / (kc - u)) if x3 > kc else 0.0
     hi = h
     tau = 0.5 * (lo + hi)
     for _ in range(200):
-        _, v, x3t = _move(x1, x2, x3, u, kc, tau, p)
+        _, v, x3t = _move(x1, x2, x3, u, kc, tau, t3, a)
         if v == 0.0:
             return tau
         if v > 0.0:
@@ -176,7 +189,7 @@ def _velocity_root(x1: float, x2: float, x3: float, u: float, kc: float, h: floa
             hi = tau
         if hi - lo <= 1e-15:
             return hi
-        slope = p.alpha * (x3t - kc)
+        slope = a * (x3t - kc)
         newton = tau - v / slope if slope != 0.0 else math.nan
         tau = newton if lo < newton < hi else 0.5 * (lo + hi)
     return tau

@@ -18,6 +18,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,8 +31,7 @@ X1, X2, X3, X4, X5, U = range(6)
 N_STATE = 6
 
 
-@dataclass(frozen=True, slots=True)
-class PlantState:
+class PlantState(NamedTuple):
     """Plant state at time ``t`` [s]: ``x`` as above (read-only), the mode, and flyback."""
 
     t: float
@@ -144,8 +144,7 @@ class SimOptions:
 EventRecords = dict  # field name (EVENT_FIELDS) → ndarray, one entry per event
 
 
-@dataclass(frozen=True, slots=True)
-class IntervalResult:
+class IntervalResult(NamedTuple):
     """What :func:`plant.interval.advance` returns for one interval.
 
     Attributes

@@ -32,7 +32,6 @@ from plant.randomness import normal, uniform
 __all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
-_MAX_TRIES = 100_000
 
 
 @njit(cache=True)
@@ -127,10 +126,9 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
 
     At each level the midpoint is drawn from its law given both ends (:func:`_bridge_law`)
-    conditioned on the half-intervals containing a crossing, by rejection on x2 alone (the
-    acceptance depends on x2 only): x2 is proposed from its marginal and accepted with the
-    probability that either half crosses; the other coordinates are then drawn given x2. The
-    first crossing is in the left half with probability p_left/p_any.
+    conditioned on the sub-step containing a crossing: x2 first (:func:`_hitting_midpoint`,
+    exact, acceptance ≥ ½), then the other coordinates given x2. The first crossing is in the
+    left half with probability p_left/p_any.
 
     ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
     plant.interval); levels beyond the table are computed here.
@@ -162,14 +160,15 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
             for c in range(4):
                 acc += G[r, c] * (Xb[NOISY_BLOCK[c]] - Fb[NOISY_BLOCK[c]])
             E[NOISY_BLOCK[r]] += acc
-        pl, p_any, x2m = 1.0, 1.0, E[A2]
-        for _ in range(_MAX_TRIES):
-            x2m = E[A2] + C[0, 0] * normal(z, cursor)
-            pl = _cross_prob(Xa[A2], x2m, half, sig_v2)
-            pr = _cross_prob(x2m, Xb[A2], half, sig_v2)
-            p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
-            if p_any >= 1.0 or uniform(z, cursor) < p_any:
-                break
+        a, b = Xa[A2], Xb[A2]
+        if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
+            x2m = E[A2] + C[0, 0] * normal(z, cursor)       # a sign change: both halves possible
+        else:
+            sgn = 1.0 if a > 0 else -1.0
+            x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * E[A2], C[0, 0], sig_v2 * half, z, cursor)
+        pl = _cross_prob(a, x2m, half, sig_v2)
+        pr = _cross_prob(x2m, b, half, sig_v2)
+        p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
         Xm = E.copy()
         Xm[A2] = x2m
         z1 = normal(z, cursor)
@@ -188,6 +187,66 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
         levels += 1
     Xout[:] = Xb
     return ta + w, levels
+
+
+@njit(cache=True)
+def _log_ncdf(x):
+    """log Φ(x) for the standard normal CDF, accurate far into the lower tail."""
+    if x > -30.0:
+        return math.log(0.5 * math.erfc(-x / math.sqrt(2.0)))
+    return -0.5 * x * x - math.log(-x) - 0.5 * math.log(2.0 * math.pi) + math.log1p(-1.0 / (x * x))
+
+
+@njit(cache=True)
+def _normal_above(alpha, z, cursor):
+    """A unit normal conditioned to exceed ``alpha`` (Robert 1995's exponential proposal in the tail)."""
+    if alpha < 0.45:
+        while True:                              # plain rejection, acceptance ≥ P(Z > 0.45) ≈ 0.33
+            x = normal(z, cursor)
+            if x > alpha:
+                return x
+    lam = 0.5 * (alpha + math.sqrt(alpha * alpha + 4.0))
+    while True:
+        x = alpha - math.log(uniform(z, cursor)) / lam
+        if uniform(z, cursor) < math.exp(-0.5 * (x - lam) ** 2):
+            return x
+
+
+@njit(cache=True)
+def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
+    """x2 at the midpoint of a sub-step with x2 = a > 0 and b > 0 at its ends, given a crossing.
+
+    Unconditioned, the midpoint is N(μ, sd²) (:func:`_bridge_law`). Given it, the halves cross
+    with p_l = e^(−k_l·m), p_r = e^(−k_r·m) for m > 0 (k = 2·end/(σ_v²·w/2), the bridge
+    crossing probability) and surely for m ≤ 0, so the target density is
+    f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r − p_l·p_r)]. It is sampled exactly from the
+    proposal f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r)] — a mixture of three truncated normals,
+    since f(m)·e^(−k·m) ∝ N(m; μ − k·sd², sd²) — accepted with (p_l + p_r − p_l·p_r)/(p_l + p_r) ≥ ½.
+    """
+    if not sd > 0.0:
+        return mu
+    v = sd * sd
+    kl = 2.0 * a / s2h
+    kr = 2.0 * b / s2h
+    mul = mu - kl * v
+    mur = mu - kr * v
+    w0 = _log_ncdf(-mu / sd)
+    w1 = -kl * mu + 0.5 * kl * kl * v + _log_ncdf(mul / sd)
+    w2 = -kr * mu + 0.5 * kr * kr * v + _log_ncdf(mur / sd)
+    top = max(w0, w1, w2)
+    e0, e1, e2 = math.exp(w0 - top), math.exp(w1 - top), math.exp(w2 - top)
+    total = e0 + e1 + e2
+    while True:
+        pick = uniform(z, cursor) * total
+        if pick < e0:
+            return mu - sd * _normal_above(mu / sd, z, cursor)           # m ≤ 0: always crosses
+        centre = mul if pick < e0 + e1 else mur
+        m = centre + sd * _normal_above(-centre / sd, z, cursor)         # m > 0
+        pl = math.exp(-kl * m)
+        pr = math.exp(-kr * m)
+        accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
+        if uniform(z, cursor) < accept:
+            return m
 
 
 @njit(cache=True)
