@@ -262,9 +262,17 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev):
 
 @njit(cache=True)
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z,
-                    cursor, ev, x_out, S):
-    """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance()."""
+                    zpos, ev, out):
+    """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance().
+
+    ``out[:6]`` receives the new state, ``out[6:]`` the work sheet; returns the new read
+    position in the normal buffer ``z`` (from ``zpos``).
+    """
     p = prm[0]
+    x_out = out[:6]
+    S = out[6:]
+    cursor = np.empty(1, dtype=np.int64)
+    cursor[0] = zpos
     X = np.empty(7)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
@@ -295,6 +303,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     if S[_STATUS] == _OK:
         S[_T] = t0 + duration
     x_out[0], x_out[1], x_out[2], x_out[3], x_out[4], x_out[5] = X[A1], X[A2], X[A3], X[A4], X[A5], X[AU]
+    return cursor[0]
 
 
 _NO_EVENTS = np.empty((0, len(EVENT_FIELDS)))
@@ -335,33 +344,35 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     h = params.sample_period if duration is None else duration
     if not (h > 0 and math.isfinite(h)):
         raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")
-    offsets, levels = command.arrays()
+    offsets = command._offsets
+    if offsets is None:
+        offsets, levels = command.arrays()
+    else:
+        levels = command._levels
     if offsets[-1] >= h:
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
     noisy = options.noise and noise is not None
     o, TP, TL, BPh, BPw, BG, BC = _plan(params, options, noisy)
-    x_out = np.empty(N_STATE)
-    S = np.empty(_SHEET)
-    cursor = np.zeros(1, dtype=np.int64)
+    out = np.empty(N_STATE + _SHEET)
     ev = np.empty((16, len(EVENT_FIELDS))) if record else _NO_EVENTS
-    z = _NO_NOISE
     if noisy:
-        z, cursor[0] = noise.window()
+        z, pos = noise.window()
+    else:
+        z, pos = _NO_NOISE, 0
     while True:
-        start = cursor[0]
         try:
-            interval_kernel(state.x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
-                            params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, x_out, S)
+            pos_after = interval_kernel(state.x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
+                                        params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, z, pos, ev, out)
             break
         except NoiseExhausted:
-            z, cursor[0] = noise.grow(start)
+            z, pos = noise.grow(pos)
         except _RecordFull:
             ev = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
-            cursor[0] = start
     if noisy:
-        noise.consumed(cursor[0])
-    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec) = S.tolist()
+        noise.consumed(pos_after)
+    x_out = out[:N_STATE]
+    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec) = out[N_STATE:].tolist()
     if code == _BAD_LEVEL:
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
     x_out.flags.writeable = False

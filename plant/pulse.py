@@ -49,6 +49,7 @@ class PulseResponse:
 
 
 _HORIZON_S = 1.0
+_BREAKAWAY, _STICK, _FLYBACK_END = int(EventKind.BREAKAWAY), int(EventKind.STICK), int(EventKind.FLYBACK_END)
 
 
 def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int | None = None,
@@ -79,23 +80,26 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
               options: SimOptions | None) -> PulseResponse:
     """The pulse through the general event-driven simulator (noisy or not)."""
     noisy = seed is not None
-    p = params.replace(command_velocity_std=0.0)
+    p = params.__dict__.get("_pulse_plant")
+    if p is None:                       # x4 ≡ 0 here, so x1 is the shaft angle
+        p = params.replace(command_velocity_std=0.0)
+        object.__setattr__(params, "_pulse_plant", p)
     opts = options or SimOptions(noise=noisy)
     if not noisy:
         opts = dataclasses.replace(opts, noise=False)
-    noise = NoiseStream.from_seed(seed) if noisy else None
+    noise = NoiseStream.from_seed(seed, block=512) if noisy else None
     state = initial_state(p, x5=0.0, x4=0.0)
     level = sign * p.u_max
     times: dict[str, float] = {}
 
     def note(events: dict[str, np.ndarray]) -> None:
-        for t, kind in zip(events["t"], events["kind"]):
-            if kind == EventKind.BREAKAWAY:
-                times.setdefault("breakaway", float(t))
-            elif kind == EventKind.STICK:
-                times["stop"] = float(t)
-            elif kind == EventKind.FLYBACK_END and t > dt_u:
-                times.setdefault("current_zero", float(t))
+        for t, kind in zip(events["t"].tolist(), events["kind"].tolist()):
+            if kind == _BREAKAWAY:
+                times.setdefault("breakaway", t)
+            elif kind == _STICK:
+                times["stop"] = t
+            elif kind == _FLYBACK_END and t > dt_u:
+                times.setdefault("current_zero", t)
 
     step = advance(state, DriveCommand.hold(level, DriveType.BRIDGE), p, noise, opts, duration=dt_u, record=True)
     note(step.events)

@@ -61,7 +61,7 @@ class NoiseStream:
         Normals drawn per refill. Does not change any result.
     """
 
-    __slots__ = ("_rng", "_buf", "_pos", "_block")
+    __slots__ = ("_rng", "_buf", "_pos", "_block", "_minimum")
 
     def __init__(self, rng: np.random.Generator, block: int = 8192) -> None:
         if not isinstance(rng, np.random.Generator):
@@ -70,15 +70,16 @@ class NoiseStream:
         self._buf = np.empty(0)
         self._pos = 0
         self._block = int(block)
+        self._minimum = min(2048, self._block // 2)
 
     @classmethod
-    def from_seed(cls, seed: int) -> "NoiseStream":
-        return cls(np.random.default_rng(np.random.SeedSequence(seed)))
+    def from_seed(cls, seed: int, block: int = 8192) -> "NoiseStream":
+        return cls(np.random.default_rng(np.random.SeedSequence(seed)), block)
 
-    def window(self, minimum: int = 2048) -> tuple[np.ndarray, int]:
-        """The buffer and read position, with at least ``minimum`` unread normals."""
-        if self._buf.shape[0] - self._pos < minimum:
-            self._refill(self._pos, max(self._block, minimum))
+    def window(self) -> tuple[np.ndarray, int]:
+        """The buffer and read position, with at least min(2048, block/2) unread normals."""
+        if self._buf.shape[0] - self._pos < self._minimum:
+            self._refill(self._pos, self._block)
         return self._buf, self._pos
 
     def grow(self, pos: int) -> tuple[np.ndarray, int]:
