@@ -171,6 +171,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     n_window = 0
     status, message = Status.OK, ""
     wall0 = time.perf_counter()
+    privileged = controller.privileged
     try:
         controller.reset(params, streams["controller"])
         for n in range(n_samples):
@@ -182,6 +183,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 n_window += 1
             if rec is not None:
                 rec.sample(_sample_row(state.t, y, x, state.mode, params))
+            if privileged:
+                controller.observe_truth(state)
             command = controller.step(y)
             if rec is not None:
                 rec.internals(controller.internals())

@@ -1,34 +1,69 @@
-"""The controller protocol and the name registry.
+"""The controller protocol (v2) and the name registry.
 
 A controller is a small class (STYLE §2): ``reset(params, rng)`` once per run, then
 ``step(y)`` once per sample instant. ``step`` receives the measurement y(n) = x1(n·τs) + w1(n)
 [rad] and returns the :class:`~plant.drive.DriveCommand` for the interval up to the next sample.
+
+Options are a frozen dataclass named by the class attribute ``Options`` (named fields, units in
+its docstring, ``__post_init__`` raising ``ValueError`` that names the field). A controller is
+built as ``Cls()``, ``Cls(preset="name")``, ``Cls(options)`` or with field overrides
+``Cls(preset="name", a_c=1e-4)``; :func:`resolve_options` checks every override's name and
+type, so a matrix variant with an unknown or ill-typed option is a user error naming it.
+
+Optional hooks (class attributes and methods with neutral defaults) replace every place where
+``bench/`` or ``reports/`` would otherwise know a controller by name:
+
+``family``
+    The design family the claims scorecard groups by (defaults to the registered name).
+``counter``
+    The key of :meth:`summary` that counts the controller's discrete actions ("pulses",
+    "resets"); ``""`` if none.
+``knobs``
+    The documented tuning knob(s): option field → the values a frontier sweep visits.
+``event_times`` / ``report_series``
+    Labelled event instants and extra per-sample series for traces and the report.
+``privileged`` / ``observe_truth``
+    Only for bounds (e.g. an oracle) that are not real controllers: the runner hands them the
+    true plant state before every ``step``. Real controllers never see it.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable, ClassVar, TypeVar
+import dataclasses
+import types
+import typing
+from typing import Any, Callable, ClassVar, Mapping, TypeVar
 
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
-__all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller"]
+__all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller",
+           "resolve_options"]
 
 
 class Controller(abc.ABC):
     """Base class of every controller.
 
-    Subclasses set ``name`` and ``drive`` and implement :meth:`reset` and :meth:`step`.
-    Constructor keyword arguments are the controller's options; they must be validated in
-    ``__init__`` and raise ``ValueError`` naming the option.
+    Subclasses set ``drive``, an ``Options`` dataclass (or leave it ``None`` for a controller
+    without options) and implement :meth:`reset` and :meth:`step`. ``register(name)`` sets
+    ``name`` (and ``family`` when the class does not set it).
     """
 
     name: ClassVar[str] = ""
+    family: ClassVar[str] = ""
     drive: ClassVar[DriveType] = DriveType.LINEAR
     description: ClassVar[str] = ""
+    Options: ClassVar[type | None] = None
+    presets: ClassVar[Mapping[str, Any]] = types.MappingProxyType({})
+    knobs: ClassVar[Mapping[str, tuple]] = types.MappingProxyType({})
+    counter: ClassVar[str] = ""
+    privileged: ClassVar[bool] = False
+
+    def __init__(self, options: Any = None, /, *, preset: str | None = None, **fields: Any) -> None:
+        self.options = resolve_options(type(self), options, preset, fields)
 
     @abc.abstractmethod
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
@@ -45,8 +80,104 @@ class Controller(abc.ABC):
         return {}
 
     def summary(self) -> dict[str, Any]:
-        """Design or end-of-run facts for the results table (e.g. crossover, margins)."""
+        """Design or end-of-run facts for the results table (e.g. crossover, margins, pulses)."""
         return {}
+
+    def event_times(self) -> dict[str, np.ndarray]:
+        """Labelled instants [s] of the controller's discrete actions (e.g. ``{"pulse": t}``)."""
+        return {}
+
+    def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
+        """Extra series sampled at the sample instants ``t`` [s] for the report's figures."""
+        return {}
+
+    def observe_truth(self, state: Any) -> None:
+        """Privileged hook: the true :class:`~plant.state.PlantState` before each ``step``.
+
+        Called by the runner only when ``privileged`` is True (bounds, never real controllers).
+        """
+        raise NotImplementedError(f"controller {self.name!r} is not privileged")
+
+
+def _check_type(owner: str, key: str, value: Any, hint: Any) -> Any:
+    """``value`` converted to the field type ``hint``, or ``ValueError`` naming ``key``."""
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _check_type(owner, key, value, a)
+            except ValueError as exc:
+                errors.append(str(exc))
+        raise ValueError(f"option {key!r} of {owner!r}: {value!r} has the wrong type ({hint})")
+    if origin is typing.Literal:
+        if value in args:
+            return value
+        raise ValueError(f"option {key!r} of {owner!r} must be one of {list(args)}, got {value!r}")
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ValueError(f"option {key!r} of {owner!r} must be a list, got {value!r}")
+        item = args[0] if args else Any
+        return tuple(_check_type(owner, key, v, item) for v in value)
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"option {key!r} of {owner!r} must be a number, got {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"option {key!r} of {owner!r} must be an integer, got {value!r}")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"option {key!r} of {owner!r} must be true or false, got {value!r}")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ValueError(f"option {key!r} of {owner!r} must be a string, got {value!r}")
+        return value
+    return value
+
+
+def resolve_options(cls: type[Controller], options: Any = None, preset: str | None = None,
+                    fields: Mapping[str, Any] | None = None) -> Any:
+    """The options of ``cls``: defaults, a preset or an instance, with checked field overrides.
+
+    Raises ``ValueError`` naming an unknown preset, an unknown field or an ill-typed value; the
+    dataclass's own ``__post_init__`` validates the values.
+    """
+    fields = dict(fields or {})
+    owner = cls.name or cls.__name__
+    O = cls.Options
+    if O is None:
+        if options is not None or preset is not None or fields:
+            given = sorted(fields) + (["preset"] if preset is not None else [])
+            raise ValueError(f"controller {owner!r} takes no options; got {given}")
+        return None
+    if options is not None and preset is not None:
+        raise ValueError(f"controller {owner!r}: give an options object or a preset, not both")
+    if preset is not None:
+        if preset not in cls.presets:
+            raise ValueError(f"unknown preset {preset!r} of {owner!r}; presets: {sorted(cls.presets)}")
+        base = cls.presets[preset]
+    elif options is not None:
+        if not isinstance(options, O):
+            raise ValueError(f"options of {owner!r} must be a {O.__name__}, got {type(options).__name__}")
+        base = options
+    else:
+        base = O()
+    hints = typing.get_type_hints(O)
+    names = {f.name for f in dataclasses.fields(O) if f.init}
+    converted = {}
+    for key, value in fields.items():
+        if key not in names:
+            raise ValueError(f"unknown option {key!r} of {owner!r}; options: {sorted(names)}")
+        converted[key] = _check_type(owner, key, value, hints[key])
+    return dataclasses.replace(base, **converted)
 
 
 _C = TypeVar("_C", bound=type[Controller])
@@ -60,6 +191,9 @@ def register(name: str) -> Callable[[_C], _C]:
         if name in _REGISTRY and _REGISTRY[name] is not cls:
             raise ValueError(f"controller name {name!r} is already registered")
         cls.name = name
+        if not cls.__dict__.get("family"):   # a subclass keeps its parent's family
+            parent = next((b.family for b in cls.__mro__[1:] if getattr(b, "family", "")), "")
+            cls.family = parent or name
         _REGISTRY[name] = cls
         return cls
 
@@ -87,5 +221,5 @@ def get_controller(name: str) -> type[Controller]:
 
 
 def make_controller(name: str, **options: Any) -> Controller:
-    """Instantiate a registered controller with options."""
+    """Instantiate a registered controller with options (``preset=`` and field overrides)."""
     return get_controller(name)(**options)
