@@ -62,10 +62,19 @@ numba-compiled (one compiled call per sample interval for the exact one), so
 comparison was. ``solve_ivp`` is SciPy with a Python right-hand side.
 ``speedup_vs_fixed_step_python_at_1e-6`` is kept for reference: the same Euler kernel run
 uncompiled (``NUMBA_DISABLE_JIT=1`` in a fresh process).
+
+5. **With noise** (``weak_error``, :mod:`bench.weak_error`). The headline above is noise-free:
+   path-by-path errors need identical noise. The dissertation's simulator is for the *noisy*
+   plant, where two methods are compared by the statistics a controller uses — the mean and
+   95th percentile of one pulse's Δc — with Monte-Carlo confidence intervals. ``weak_error``
+   reports, for Euler–Maruyama at each step, the weak error with its 95 % CI and the cost ratio
+   (EM wall per path / exact wall per path) at the coarsest step whose error the Monte-Carlo
+   sample cannot tell from zero; ``noisy_speedup_at_equal_weak_error`` is its inverse.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -84,6 +93,7 @@ import typer
 
 from plant.drive import DriveCommand, DriveType
 from bench.metrics import WindowTotals
+from bench.weak_error import FULL_WEAK, QUICK_WEAK, WeakErrorConfig, weak_error_comparison
 from plant.interval import advance
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
@@ -145,6 +155,7 @@ class SpeedConfig:
     probe_steps: tuple[float, ...] = (1e-8,)
     exact_processes: int = 1
     linear_sequence: bool = False
+    weak: WeakErrorConfig | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.record_s):
@@ -160,9 +171,10 @@ class SpeedConfig:
 
 
 QUICK = SpeedConfig(record_s=50.0, window_s=10.0, rtols=(1e-3, 1e-5, 1e-7, 1e-9, 1e-12), probe_pulses=12,
-                    probe_steps=(1e-8, 1e-9))
+                    probe_steps=(1e-8, 1e-9), weak=QUICK_WEAK)
 FULL = SpeedConfig(record_s=100.0, window_s=100.0, rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12),
-                   probe_pulses=40, probe_steps=(1e-8, 1e-9), exact_processes=3, linear_sequence=True)
+                   probe_pulses=40, probe_steps=(1e-8, 1e-9), exact_processes=3, linear_sequence=True,
+                   weak=FULL_WEAK)
 
 
 # --- the command sequence -----------------------------------------------------------------
@@ -766,6 +778,15 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
         "technology": _technology(),
     }
 
+    if cfg.weak is not None:
+        say(f"noisy weak error: exact vs Euler–Maruyama, Δc of a {cfg.weak.dt_u * 1e3:g} ms pulse, "
+            f"{cfg.weak.n_paths} paths each")
+        weak = weak_error_comparison(params, cfg.weak, seed=seed)
+        result["weak_error"] = weak
+        ratio = weak["equal_error"]["mean"]
+        result["noisy_speedup_at_equal_weak_error"] = 1.0 / ratio["cost_ratio"]
+        result["noisy_speedup_is_lower_bound"] = ratio["lower_bound"]
+
     if cfg.linear_sequence:
         say(f"recording linear closed loop, noise-free, {cfg.record_s:g} s")
         lin_commands, lstatus, lmessage = record_commands(params, "linear", cfg.record_s, seed=seed)
@@ -778,7 +799,7 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
             result["linear_hold"] = {"status": lstatus, "message": lmessage}
 
     result["mode"] = "quick" if quick and config is None else ("full" if config is None else "custom")
-    result["config"] = {k: getattr(cfg, k) for k in cfg.__dataclass_fields__}
+    result["config"] = dataclasses.asdict(cfg)
     result["load_average_1min"] = load
     result["elapsed_s"] = time.perf_counter() - wall0
     return _jsonable(result)
@@ -866,6 +887,21 @@ def _print_table(result: dict[str, Any], console: Any) -> None:
         for r in noisy["rows"]:
             console.print(f"noisy {r['method']} {r['setting']}: wall {_fmt(r['wall_s'])} s, "
                           f"real-time × {_fmt(r['realtime_factor'])}")
+    weak = result.get("weak_error")
+    if weak:
+        console.print(f"noisy: Δc of a {weak['dt_u_s'] * 1e3:g} ms pulse, {weak['n_paths']} paths per method "
+                      f"(mean and p95, weak error with 95 % CI)")
+        for r in weak["rows"]:
+            if r["method"] == "multimode":
+                console.print(f"  exact: mean {_fmt(r['mean_rad'] * 1e6)} µrad, p95 {_fmt(r['p95_rad'] * 1e6)} µrad, "
+                              f"{_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
+            else:
+                console.print(f"  EM h={_fmt(r['step_s'])}: mean error {_fmt(r['mean_error_rad'] * 1e6)} µrad "
+                              f"(resolved: {r['mean_error_resolved']}), p95 error {_fmt(r['p95_error_rad'] * 1e6)} µrad "
+                              f"(resolved: {r['p95_error_resolved']}), {_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
+        bound = "≥ " if result.get("noisy_speedup_is_lower_bound") else ""
+        console.print(f"  exact vs EM at equal weak error (mean Δc): {bound}"
+                      f"{_fmt(result['noisy_speedup_at_equal_weak_error'])}×")
     console.print(f"[yellow]technology:[/yellow] {result['technology']['caveat']}")
     console.print(f"error: {result['error_definition']}; elapsed {_fmt(result['elapsed_s'])} s, "
                   f"load average {_fmt(result['load_average_1min'])}")

@@ -165,6 +165,30 @@ def _speed_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
             for r in speed["rows"]]
 
 
+def _weak_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
+    """Rows of the noisy weak-error comparison (speed.json ``weak_error``), µrad and µs."""
+    weak = (speed or {}).get("weak_error")
+    if not isinstance(weak, Mapping):
+        return []
+    rows = []
+    for r in weak.get("rows", []):
+        def urad(key: str) -> float:
+            v = r.get(key)
+            return math.nan if v is None else float(v) * 1e6
+
+        def ci(w: str) -> str:
+            c = r.get(f"{w}_error_ci_rad")
+            return "—" if not c else f"[{_num(c[0] * 1e6)}, {_num(c[1] * 1e6)}]"
+        step = r.get("step_s")
+        wall = math.nan if r.get("wall_per_path_s") is None else float(r["wall_per_path_s"]) * 1e6
+        rows.append([_cell("exact (multimode)" if step is None else "Euler–Maruyama"),
+                     _cell("—" if step is None else f"h = {_num(step)} s"),
+                     _cell(_num(urad("mean_rad")), urad("mean_rad"), "num"), _cell(ci("mean")),
+                     _cell(_num(urad("p95_rad")), urad("p95_rad"), "num"), _cell(ci("p95")),
+                     _cell(_num(wall), wall, "num")])
+    return rows
+
+
 def _hunting_table(hunting: pd.DataFrame | None) -> list[list[dict[str, str]]]:
     if hunting is None:
         return []
@@ -351,6 +375,7 @@ def render_html(inputs: ReportInputs) -> str:
         "hunting_rows": _hunting_table(inputs.hunting),
         "speed": inputs.speed,
         "speed_rows": _speed_table(inputs.speed),
+        "weak_rows": _weak_table(inputs.speed),
         "speedup": None if speedup is None or math.isnan(speedup) else speedup,
     }
     return _environment().get_template("report.html.j2").render(**context)
