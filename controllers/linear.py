@@ -443,20 +443,29 @@ class LinearController(Controller):
         self.design = design_linear(params, o["crossover"], o["lag_ratio"], integral=o["integral"],
                                     phase_margin_deg=o["phase_margin_deg"],
                                     lag_corner_fraction=o["lag_corner_fraction"])
-        self._A, self._B, self._C, self._D = self.design.state_space
-        self._B = self._B[:, 0]
-        self._C = self._C[0]
-        self._D = float(self._D[0, 0])
-        self._x = np.zeros(self._A.shape[0])
+        A, B, C, D = self.design.state_space
+        # plain floats: the compensator is 2-4 states, where numpy's per-call cost dominates
+        self._A = tuple(tuple(float(a) for a in row) for row in A)
+        self._B = tuple(float(b) for b in B[:, 0])
+        self._C = tuple(float(c) for c in C[0])
+        self._D = float(D[0, 0])
+        self._x = (0.0,) * len(self._B)
         self._u_max = params.u_max
         self._level = 0.0
 
     def control_level(self, y: float) -> float:
-        """Advance the compensator with y(n) [rad]; the clipped level u(n) [ozf·in]."""
+        """Advance the compensator with y(n) [rad]; the clipped level u(n) [ozf·in].
+
+        u(n) = −(C·x(n) + D·y(n)), x(n+1) = A·x(n) + B·y(n): the realization of C(z).
+        """
         if self.design is None:
             raise RuntimeError("LinearController.reset must be called before step")
-        u = -(float(self._C @ self._x) + self._D * y)  # u(n) = −C(z)·y(n)
-        self._x = self._A @ self._x + self._B * y
+        x = self._x
+        u = self._D * y
+        for c, xi in zip(self._C, x):
+            u += c * xi
+        u = -u
+        self._x = tuple(b * y + sum([a * xi for a, xi in zip(row, x)]) for row, b in zip(self._A, self._B))
         self._level = min(max(u, -self._u_max), self._u_max)
         return self._level
 

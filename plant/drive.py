@@ -23,6 +23,10 @@ import numpy as np
 __all__ = ["DriveType", "DriveCommand"]
 
 
+# The offsets of every zero-order hold (shared; the compiled plant only reads it).
+_HOLD_OFFSETS = np.zeros(1)
+
+
 class DriveType(str, enum.Enum):
     BRIDGE = "bridge"
     LINEAR = "linear"
@@ -97,6 +101,8 @@ class DriveCommand:
             raise ValueError(f"DriveCommand level must be finite, got {level!r}")
         cmd = object.__new__(cls)
         cmd._set(((0.0, level),), drive if type(drive) is DriveType else DriveType(drive))
+        object.__setattr__(cmd, "_offsets", _HOLD_OFFSETS)
+        object.__setattr__(cmd, "_levels", np.full(1, level))
         return cmd
 
     @classmethod
