@@ -352,6 +352,10 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     if offsets[-1] >= h:
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
+    x = state.x
+    if x.flags.writeable:   # one compiled signature: the kernel always gets a read-only state vector
+        x = np.array(x, dtype=np.float64)
+        x.flags.writeable = False
     noisy = options.noise and noise is not None
     o, TP, TL, BPh, BPw, BG, BC = _plan(params, options, noisy)
     out = np.empty(N_STATE + _SHEET)
@@ -362,7 +366,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         z, pos = _NO_NOISE, 0
     while True:
         try:
-            pos_after = interval_kernel(state.x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
+            pos_after = interval_kernel(x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
                                         params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, z, pos, ev, out)
             break
         except NoiseExhausted:
