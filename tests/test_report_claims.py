@@ -26,7 +26,9 @@ def _results(rows):
 
 
 def _cell(controller, seed=0, scenario="thesis", status="ok", **metrics):
-    return dict(controller=controller, scenario=scenario, seed=seed, status=status, **metrics)
+    base = "solnic" if controller.startswith("solnic") else controller   # variants of solnic
+    return dict(controller=controller, controller_base=base, controller_family=base,
+                scenario=scenario, seed=seed, status=status, **metrics)
 
 
 def _series_run(seed=0, **cols):
