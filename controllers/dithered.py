@@ -127,6 +127,7 @@ class DitheredController(LinearController):
     """
 
     description = "Lead/lag linear controller plus square-wave dither at the drive input"
+    family = "dithered"   # its own family in the claims and the report, not "linear"
     Options = DitheredOptions
     presets = MappingProxyType({
         "default": _DITHER_DEFAULTS,
