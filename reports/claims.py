@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from controllers import roles
 from reports.inputs import SIZE_PEAK_COLUMNS, SeriesRun
 from reports.limits import PlantLimits
 
@@ -182,8 +183,8 @@ class Selection:
     """
 
     thesis_scenario: str = "thesis"
-    solnic: str = "solnic"
-    linear: str = "linear"
+    solnic: str = roles.IDENTIFICATION
+    linear: str = roles.CLASSICAL
     high_error_cost: str = "high"
     typical_cell: str | None = None
 
