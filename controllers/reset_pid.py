@@ -16,8 +16,10 @@ Design rule (the same sample rate and crossover rules as ``linear``):
   u_pid = −(v + q).
 * Stick detection from measurements only: the shaft velocity estimate x̂2 = ẏ̂ + x̂4 (ẏ̂ the
   least-squares slope of the last N samples) is below ``stick_velocity``.
-* Reset law (after Beerens et al.): at a sample where the axis sticks and the integrator's
-  torque −q pushes away from zero error (q·e < 0), q := 0.
+* Reset law (after Beerens et al.): q := 0 (i) when the measured error crosses zero by more than
+  ``crossing_band`` (the integrator must not carry the slip past the set-point) and (ii) at a
+  sample where the axis sticks and the integrator's torque −q pushes away from zero error
+  (q·e < 0), so that it need not unwind through the stiction band.
 * Coulomb feedforward in the reference's direction: u_ff = k̄c·sign(x̂4) once |x̂4| exceeds
   ``feedforward_min_velocity``; x̂4 is the exponentially averaged −ẏ̂ over stuck samples (the
   error moves at −x4 while the shaft sticks). k̄c is the nominal Coulomb level of the plant
@@ -88,8 +90,8 @@ class PidFrictionOptions:
     integral_corner_fraction: float = 0.1
     velocity_window: int = 10
     stick_velocity: float = 5e-4
-    reference_velocity_tau: float = 2.0
-    feedforward_min_velocity: float = 10e-6
+    reference_velocity_tau: float = 10.0
+    feedforward_min_velocity: float = 15e-6
     coulomb_feedforward: bool = True
 
     def __post_init__(self) -> None:
@@ -120,14 +122,28 @@ class ResetPidOptions(PidFrictionOptions):
     ----------
     reset : bool
         Apply the reset law (False: the same PID with feedforward, never reset).
+    reset_on_crossing : bool
+        Reset when the measured error changes sign by more than ``crossing_band``.
+    reset_on_stick : bool
+        Reset when the axis sticks with q·e < 0.
+    crossing_band : float
+        Smallest |y(n) − y(n−1)| [rad] of a sign change that counts as a crossing (measurement
+        noise alone does not reset).
     """
 
     reset: bool = True
+    reset_on_crossing: bool = True
+    reset_on_stick: bool = True
+    crossing_band: float = 20e-6
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not isinstance(self.reset, bool):
-            raise ValueError(f"reset must be a bool, got {self.reset!r}")
+        for name in ("reset", "reset_on_crossing", "reset_on_stick"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
+        if isinstance(self.crossing_band, bool) or not isinstance(self.crossing_band, (int, float)) \
+                or not (math.isfinite(self.crossing_band) and self.crossing_band >= 0):
+            raise ValueError(f"crossing_band must be a finite number >= 0, got {self.crossing_band!r}")
 
 
 class _PidFrictionBase(Controller):
@@ -198,15 +214,19 @@ class ResetPidController(_PidFrictionBase):
         """Design for ``params`` and zero every state."""
         super().reset(params, rng)
         self._reset_times: list[float] = []
+        self._y_prev = 0.0
 
     def step(self, y: float) -> DriveCommand:
         """u(n) = clip(−(v + q) + k̄c·sign(x̂4)), with q := 0 on a stick where q·e < 0."""
         t = self._n * self.params.sample_period
         self._observe(y)
         v = self.pid.proportional(y)
-        if self.options.reset and self.stuck and self.pid.q * y < 0.0:
+        o = self.options
+        crossed = o.reset_on_crossing and y * self._y_prev < 0.0 and abs(y - self._y_prev) > o.crossing_band
+        if o.reset and ((o.reset_on_stick and self.stuck and self.pid.q * y < 0.0) or crossed):
             self.pid.reset_integrator()                 # the integrator pushes away from e = 0
             self._reset_times.append(t)
+        self._y_prev = y
         self._u_ff = self._feedforward()
         return self._hold(v, self._u_ff)
 
