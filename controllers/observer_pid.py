@@ -134,7 +134,7 @@ class ObserverPidOptions(PidFrictionOptions):
         k̂c starts at this × the nominal k̄c [–], ≥ 0.
     """
 
-    observer_bandwidth: float = 30.0
+    observer_bandwidth: float = 160.0
     coulomb_tau: float = 1.0
     initial_coulomb_factor: float = 0.5
     breakaway_jump: bool = True
@@ -161,7 +161,8 @@ class ObserverPidController(_PidFrictionBase):
         "no-adaptation": dataclasses.replace(ObserverPidOptions(), coulomb_tau=1e9,
                                              initial_coulomb_factor=1.0),
     })
-    knobs = MappingProxyType({"observer_bandwidth": (5.0, 10.0, 20.0, 30.0, 50.0, 80.0)})
+    knobs = MappingProxyType({"observer_bandwidth": (5.0, 10.0, 20.0, 30.0, 50.0, 80.0, 120.0, 160.0,
+                                                     250.0)})
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design the PID and the observer for ``params``; k̂c from the nominal k̄c."""

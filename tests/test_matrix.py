@@ -28,9 +28,10 @@ def test_builtin_scenarios_match_the_spec():
 def test_builtin_matrices_cover_every_controller_and_scenario(quick):
     m = load_matrix(builtin_matrix_path(quick))
     names = [c.name for c in m.controllers]
-    assert names[:3] == ["linear", "dithered", "solnic"]
+    from controllers.base import available_controllers
+    assert set(available_controllers()) <= set(names)  # every registered controller runs
     if not quick:
-        assert names[3:] == ["solnic-high"]           # the high-error-cost claim needs it
+        assert "solnic-high" in names                 # the high-error-cost claim needs it
     assert [s.name for s in m.scenarios] == ["thesis", "quiet-friction", "ratio-2"]
     assert len(m.cells()) == 3 * len(names) * len(m.seeds)
     if quick:
