@@ -472,6 +472,26 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
                        "means over seeds; best solnic variant on the thesis plant")
 
 
+def _m_vs_peers(ctx: _Context) -> Measurement:
+    """Mean thesis peak of every other family's registered controller over solnic's."""
+    r, s = ctx.results, ctx.selection
+    if r.empty or "peak_error_rad" not in r.columns:
+        return _not_measured("needs ok cells with peak_error_rad")
+    ok = r[(r["status"] == "ok") & (r["scenario"] == s.thesis_scenario) & r["peak_error_rad"].notna()]
+    fam = _family(ok)
+    base = ok["controller_base"].astype(str) if "controller_base" in ok.columns else ok["controller"]
+    plain = ok[ok["controller"] == base]
+    means = plain.groupby(fam[plain.index])["peak_error_rad"].mean()
+    if s.solnic not in means.index or len(means) < 2:
+        return _not_measured(f"needs ok {s.solnic} and other controllers on {s.thesis_scenario}")
+    ref = float(means[s.solnic])
+    others = means.drop(s.solnic).sort_values()
+    ratio = float(others.iloc[0]) / ref
+    parts = ", ".join(f"{k} {_g(v * 1e6)} µrad ({_g(v / ref)}×)" for k, v in others.items())
+    return Measurement(ratio, f"{s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+                       f"means over seeds on {s.thesis_scenario}; ratio = best other / {s.solnic}")
+
+
 def _m_less_current(ctx: _Context) -> Measurement:
     s = ctx.cells(ctx.selection.solnic, ctx.selection.thesis_scenario, "mean_abs_current")
     lin = ctx.cells(ctx.selection.linear, ctx.selection.thesis_scenario, "mean_abs_current")
@@ -637,6 +657,10 @@ CLAIMS: tuple[ClaimSpec, ...] = (
     ClaimSpec("ten_times_linear", "Solnic is at least ten times more accurate than the best "
               "time-invariant controller", "§8.1, §8.2", "≥ 10×", "×", at_least(10.0),
               _m_ten_times_linear),
+    ClaimSpec("vs_peers", "Solnic is more accurate than every other controller in the run, "
+              "today's peers included (mean peak error on the thesis plant)",
+              "§8.1 (against 1967's baselines); SPEC §10 peers", "best other / solnic > 1", "×",
+              above(1.0), _m_vs_peers),
     ClaimSpec("less_current", "Solnic operates at a lower average current than the linear "
               "controller", "abstract; §8.1", "solnic/linear < 1", "", below(1.0),
               _m_less_current),
