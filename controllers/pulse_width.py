@@ -18,18 +18,21 @@ Design rule, on the switched bridge (±u_max pulses, then flyback):
   weighted), so x̂1(t) = level − x̂4·(t − t_p). No friction model is used.
 * **Trigger.** At sample n the error predicted for the next sample, p = x̂1(t_n + τs), is
   corrected by a pulse towards zero when it drifts away from zero past half the target step,
-  |p| ≥ Δ/2, or lies beyond ``overshoot_factor``·Δ whatever its drift.
-* **Measured displacement.** When the next pulse is due, the segments before and after the
-  previous pulse give its displacement Δc_e = ȳ_a − ȳ_b + x̂4·(t̄_a − t̄_b) (in the pulse's
-  direction) and its standard deviation σ1·√(1/n_a + 1/n_b).
+  |p| ≥ Δ/2, or lies beyond ``overshoot_factor``·Δ (and 3 standard deviations) whatever its
+  drift. The pulse starts at the sample instant.
+* **Measured displacement.** When the next pulse is due, the samples of the segments before
+  and after the previous pulse alone give its displacement
+  Δc_e = ȳ_a − ȳ_b + x̂4·(t̄_a − t̄_b) (in the pulse's direction) and its variance
+  σ1²·(1/n_a + 1/n_b); the model's prediction is not used twice.
 * **Displacement-versus-width model, identified online.** Δc(w) = θ0 + θ1·v + θ2·v² + θ3·v³,
-  v = w/1 ms, by recursive least squares with forgetting λ (``forgetting``) over the pulses
-  with significant motion (z ≥ 2; a pulse without motion raises the width floor instead). It is
-  inverted for the target step Δ by bisection on its increasing branch; the widths cycle
-  through (1 − δ, 1, 1 + δ)× the inverse (``width_dither`` δ) so that the model stays
-  identifiable. Before ``min_model_pulses`` significant pulses the width follows the
-  square-root rule w ← w·√(Δ/Δc_e) of a pulse against Coulomb friction (Δc ∝ w²,
-  Yang & Tomizuka's model).
+  v = w/1 ms, by recursive least squares with forgetting λ (``forgetting``) over every pulse
+  after the first one that moved (:class:`PulseModelRls`). It is inverted for the target step
+  Δ by bisection on its increasing branch within ±``max_width_change`` of the last width; the
+  widths cycle through (1 − δ, 1, 1 + δ)× the inverse (``width_dither`` δ) so that the model
+  stays identifiable. Start-up: the width grows by ``width_growth`` until a pulse moves the
+  shaft significantly (z ≥ 2); then, before ``min_model_pulses`` such pulses, it follows
+  the square-root rule w ← w·√(Δ/Δc_e) (clipped to ±10 %) of a pulse against Coulomb
+  friction (Δc ∝ w², Yang & Tomizuka's model).
 
 Knob: the target step Δ [rad]. The default is chosen by the sweep in docs/tuning.md (thesis
 scenario, seeds 0–4 only).

@@ -180,14 +180,13 @@ class _PidFrictionBase(Controller):
 
     def _hold(self, v: float, extra: float) -> DriveCommand:
         """u = clip(−(v + q) + extra); integrate q only when not clipped."""
-        q_before, v_prev = self.pid.q, self.pid.v_prev
+        q_before = self.pid.q
         q = self.pid.integrate(v)
         u = -(v + q) + extra
         if abs(u) > self._u_max:   # conditional integration (anti-windup)
-            self.pid.q, self.pid.v_prev = q_before, v
+            self.pid.q = q_before
             u = -(v + q_before) + extra
         self._level = min(max(u, -self._u_max), self._u_max)
-        del v_prev
         self._n += 1
         return DriveCommand.hold(self._level, DriveType.LINEAR)
 
