@@ -26,14 +26,17 @@ Design rule:
 
 * the PID of ``reset-pid`` (``design_linear(integral=True)``, the same crossover rules as
   ``linear``), without reset;
-* while the axis moves (x̂2 = ẏ̂ + x̂4 above ``stick_velocity``, ẏ̂ the least-squares slope of
-  the last N samples), compensate the observed friction: u_comp = d̂;
-* while it sticks, the friction is a reaction that mirrors the applied torque (feeding d̂ back
-  would be an integrator in the loop), so compensate only the adaptive Coulomb level in the
-  reference's direction: u_comp = k̂c·sign(x̂4);
+* disturbance-observer compensation, always: u = clip(u_pid + d̂, ±u_max) on the linear
+  amplifier. While the axis sticks the observed "disturbance" is the friction reaction, so d̂
+  follows the applied torque and the loop gains fast integral action: the static friction in
+  the reference's direction is fed forward by the observer itself (a separate Coulomb
+  feedforward would count it twice);
+* stiction → Coulomb at breakaway: when the observer's velocity x̂2 = ẏ̂ + x̂4 (x̂4 the
+  stuck-sample average of −ẏ̂ of the least-squares slope, as in ``reset-pid``) first exceeds
+  ``stick_velocity``, the friction drops from the static level that d̂ holds to the Coulomb
+  level, so d̂ := k̂c·sign(x̂2) (``breakaway_jump``);
 * adaptive Coulomb estimate (after Friedland & Park): while moving,
-  k̂c ← k̂c + (τs/τc)·(sign(x̂2)·d̂ − k̂c), starting from ``initial_coulomb_factor``·k̄c;
-* u = clip(u_pid + u_comp, ±u_max) on the linear amplifier.
+  k̂c ← k̂c + (τs/τc)·(sign(x̂2)·d̂ − k̂c), starting from ``initial_coulomb_factor``·k̄c.
 
 Knob: the observer bandwidth ωo [rad/s]. Default chosen by the sweep in docs/tuning.md
 (thesis scenario, seeds 0–4 only).
@@ -132,6 +135,11 @@ class ObserverPidOptions(PidFrictionOptions):
         Time constant τc of the adaptive Coulomb estimate while moving [s].
     initial_coulomb_factor : float
         k̂c starts at this × the nominal k̄c [–], ≥ 0.
+    breakaway_jump : bool
+        Set d̂ := k̂c·sign(x̂2) when motion is first detected.
+
+    The inherited ``coulomb_feedforward`` and ``feedforward_min_velocity`` are not used: the
+    observer supplies the static level.
     """
 
     observer_bandwidth: float = 160.0
@@ -146,13 +154,16 @@ class ObserverPidOptions(PidFrictionOptions):
         v = self.initial_coulomb_factor
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             raise ValueError(f"initial_coulomb_factor must be a finite number >= 0, got {v!r}")
+        if not isinstance(self.breakaway_jump, bool):
+            raise ValueError(f"breakaway_jump must be a bool, got {self.breakaway_jump!r}")
 
 
 @register("observer-pid")
 class ObserverPidController(_PidFrictionBase):
     """PID plus friction compensation from a position-only disturbance observer and an adaptive
     Coulomb estimate (Friedland & Park 1992). Options: :class:`ObserverPidOptions`. Knob:
-    ``observer_bandwidth`` [rad/s]. Its report series: k̂c against the true kc."""
+    ``observer_bandwidth`` [rad/s]. Counter: ``breakaways`` (detected stick → slip, where d̂
+    jumps to the Coulomb estimate). Its report series: k̂c against the true kc."""
 
     description = "PID + position-only disturbance observer + adaptive Coulomb (Friedland & Park 1992)"
     Options = ObserverPidOptions
@@ -161,6 +172,7 @@ class ObserverPidController(_PidFrictionBase):
         "no-adaptation": dataclasses.replace(ObserverPidOptions(), coulomb_tau=1e9,
                                              initial_coulomb_factor=1.0),
     })
+    counter = "breakaways"
     knobs = MappingProxyType({"observer_bandwidth": (5.0, 10.0, 20.0, 30.0, 50.0, 80.0, 120.0, 160.0,
                                                      250.0)})
 
@@ -179,12 +191,6 @@ class ObserverPidController(_PidFrictionBase):
         self._moving_samples = 0
         self._breakaways = 0
         self._was_moving = False
-
-    def _feedforward(self) -> float:
-        o = self.options
-        if abs(self.x4_hat) > o.feedforward_min_velocity and o.coulomb_feedforward:
-            return math.copysign(self.kc_hat, self.x4_hat)
-        return 0.0
 
     def step(self, y: float) -> DriveCommand:
         """u(n) = clip(u_pid + d̂); at breakaway d̂ := k̂c·sign(x̂2) (see module docstring)."""
@@ -221,5 +227,5 @@ class ObserverPidController(_PidFrictionBase):
             return {}
         out = self.design.summary()
         out.update(observer_bandwidth=self.options.observer_bandwidth, kc_hat=self.kc_hat,
-                   moving_samples=self._moving_samples)
+                   moving_samples=self._moving_samples, breakaways=self._breakaways)
         return out
