@@ -16,12 +16,13 @@ Schema (public API, documented in the README)::
     base = "thesis"           # (also duration_s, warmup_s, description)
     inertia = 1.0
 
-    [controllers.solnic-hi]   # optional controller variant: a base plus constructor options
-    base = "solnic"
+    [controllers.solnic-hi]   # optional controller variant: a base plus ``preset`` and fields
+    base = "solnic"           # of the base's ``Options`` dataclass (controller protocol v2)
     preset = "high-error-cost"
 
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
-e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0``.
+e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0`` or
+``matrix.toml: controllers.lin.crossuver: unknown option 'crossuver' of 'linear'; options: [...]``.
 """
 
 from __future__ import annotations
