@@ -4,11 +4,12 @@
 * :mod:`bench.scenarios` — built-in scenarios (thesis, quiet-friction, ratio-2);
 * :mod:`bench.matrix` — the TOML matrix file → cells;
 * :mod:`bench.cells` — one cell: config hash, :func:`~bench.cells.run_cell` (row + artifacts);
-* :mod:`bench.series`, :mod:`bench.traces` — solnic figure series; rerun recordings;
+* :mod:`bench.series`, :mod:`bench.traces` — figure series from the report hooks; rerun recordings;
 * :mod:`bench.executors` — local process pool, dask.distributed;
 * :mod:`bench.store`, :mod:`bench.driver` — atomic per-cell store, resume, rebuilt tables;
 * :mod:`bench.aggregate`, :mod:`bench.provenance`, :mod:`bench.cli` — the terminal table,
   ``meta.json``, the ``solnic-bench`` command;
 * :mod:`bench.bound`, :mod:`bench.hunting`, :mod:`bench.speed` — the check of (2-6)/(2-1) and
-  the speed comparison.
+  the speed comparison;
+* :mod:`bench.tuning` — honest knob sweeps behind the controllers' defaults (docs/tuning.md).
 """

@@ -434,7 +434,11 @@ def _durations(cell: BoundCell, static_stiffness: float) -> tuple[float, float, 
 def run_bound_cell(cell: BoundCell) -> dict[str, Any]:
     """Design, run and score one bound cell; a failing design or run is a row, not an error."""
     from bench.runner import run_closed_loop
-    from controllers.linear import LinearController, design_linear
+    from controllers import roles
+    from controllers.base import get_controller
+    from controllers.linear import design_linear
+
+    LinearController = get_controller(roles.CLASSICAL)   # the LTI family the bound is about
 
     params = cell.params()
     lmax = params.lag_ratio_limit
@@ -504,8 +508,10 @@ def run_bound_cell(cell: BoundCell) -> dict[str, Any]:
 def run_hunting_cell(cell: HuntingCell) -> dict[str, Any]:
     """One stationary set-point run from initial error e0; hunting per :func:`detect_hunting`."""
     from bench.runner import run_closed_loop
-    from controllers.linear import LinearController
+    from controllers import roles
+    from controllers.base import get_controller
 
+    LinearController = get_controller(roles.CLASSICAL)
     params = cell.params()
     e0 = cell.offset_factor * params.stiction / (cell.inertia * cell.omega_c**2)
     lmax = params.lag_ratio_limit

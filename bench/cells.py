@@ -2,13 +2,17 @@
 
 :func:`run_cell` is the pure unit of work that the executors distribute: it builds the plant
 and the controller, runs the closed loop, writes the cell's artifacts (the rerun trace and, for
-solnic, the figure series) and returns the cell's results row. It never raises for a failing
+controllers with a report series, the figure series) and returns the cell's results row. It never raises for a failing
 cell: a controller that raises, a run over its time limit or a failing artifact gives a row with
 status ``error`` and the message.
 
 A cell's identity is its *config hash*: the sha256 of a canonical JSON of everything that
 determines its numbers (resolved plant parameters, controller base and options, seed, run length,
 warm-up, plugin modules) plus :data:`CODE_VERSION`. The results store resumes on it.
+
+No controller is known here by name: the counter column ``n_corrections`` comes from the
+controller's ``counter`` hook, the ``controller_family`` column from its ``family`` (a variant
+has its base's family) and the series from ``report_series`` (:mod:`bench.series`).
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ __all__ = ["ControllerSpec", "Cell", "run_cell", "code_version", "load_plugins",
 RUNTIME_COLUMNS = ("runtime_s", "realtime_factor", "cell_wall_s")
 SIZE_PEAK_COLUMNS = ("peak_error_small_rad", "peak_error_medium_rad", "peak_error_large_rad")
 LEADING_COLUMNS = ("cell", "controller", "scenario", "seed", "status", "message", "controller_base",
-                   "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
+                   "controller_family", "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
                    "runtime_s", "realtime_factor", "simulated_s", *SIZE_PEAK_COLUMNS, "config_hash",
                    "code_version", "cell_wall_s")
 
@@ -93,6 +97,15 @@ class ControllerSpec:
     def build(self):
         from controllers.base import make_controller
         return make_controller(self.base, **self.options)
+
+    @property
+    def family(self) -> str:
+        """The base controller's ``family`` (``""`` if the base is not registered here)."""
+        from controllers.base import get_controller
+        try:
+            return get_controller(self.base).family
+        except ValueError:
+            return ""
 
     def to_json(self) -> dict[str, Any]:
         return {"base": self.base, "options": dict(self.options)}
@@ -196,6 +209,7 @@ def _base_row(cell: Cell) -> dict[str, Any]:
     row: dict[str, Any] = {
         "cell": cell.cell_id, "controller": cell.controller.name, "scenario": cell.scenario.name,
         "seed": cell.seed, "status": "error", "message": "", "controller_base": cell.controller.base,
+        "controller_family": cell.controller.family,
         "scenario_base": cell.scenario.base, "duration_s": cell.duration_s, "warmup_s": cell.warmup_s,
     }
     for col in (*METRIC_COLUMNS, "n_corrections", "runtime_s", "realtime_factor", "simulated_s",
@@ -210,7 +224,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
     """Run one cell, write its artifacts under ``out_dir`` and return its results row.
 
     Artifacts: ``out_dir/traces/<cell>.rrd`` when ``traces``; ``out_dir/series/<cell>.parquet``
-    for controllers with a figure series (solnic). Both are written atomically. The row has
+    for controllers with a report series (``report_series`` hook). Both are written atomically. The row has
     the columns of :data:`LEADING_COLUMNS` plus the controller's scalar summary, prefixed
     ``ctl_``.
     """
@@ -225,6 +239,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         with _hard_limit(None if cell.time_limit_s is None else 1.25 * cell.time_limit_s + 10.0):
             load_plugins(cell.plugins, cell.plugin_dirs)
             controller = cell.controller.build()
+            row["controller_family"] = type(controller).family
             series = wants_series(controller)
             result = run_closed_loop(cell.scenario.params, controller, duration_s=cell.duration_s,
                                      warmup_s=cell.warmup_s, seed=cell.seed, record=traces or series,
@@ -233,7 +248,8 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
             row.update({k: _scalar(v) for k, v in result.metrics.items()})
             row["simulated_s"] = float(result.simulated_s)
             summary = {k: _scalar(v) for k, v in result.summary.items()}
-            corrections = summary.get("n_corrections", summary.get("pulses"))
+            counter = type(controller).counter
+            corrections = summary.get(counter) if counter else None
             if isinstance(corrections, (int, float)) and not isinstance(corrections, bool):
                 row["n_corrections"] = corrections
             row.update({f"ctl_{k}": v for k, v in summary.items() if v is not _SKIP})

@@ -16,12 +16,13 @@ Schema (public API, documented in the README)::
     base = "thesis"           # (also duration_s, warmup_s, description)
     inertia = 1.0
 
-    [controllers.solnic-hi]   # optional controller variant: a base plus constructor options
-    base = "solnic"
+    [controllers.solnic-hi]   # optional controller variant: a base plus ``preset`` and fields
+    base = "solnic"           # of the base's ``Options`` dataclass (controller protocol v2)
     preset = "high-error-cost"
 
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
-e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0``.
+e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0`` or
+``matrix.toml: controllers.lin.crossuver: unknown option 'crossuver' of 'linear'; options: [...]``.
 """
 
 from __future__ import annotations
@@ -291,13 +292,36 @@ def _variants(source: str, table: Any) -> dict[str, ControllerSpec]:
             raise _fail(source, f"{key}.base", f"must name a registered controller, got {base!r}; "
                                                f"registered: {sorted(registered)}")
         cs = ControllerSpec(name, base, options)
-        try:
-            cs.build()
-        except Exception as exc:  # the constructor validates its options (ValueError, TypeError)
-            msg = str(exc)
-            named = [o for o in options if re.search(rf"\b{re.escape(o)}\b", msg)]
-            where = f"{key}.{named[0]}" if named else key
-            raise _fail(source, where, f"{type(exc).__name__}: {msg}" if not isinstance(exc, ValueError)
-                        else msg) from None
+        _check_variant(source, key, registered[base], options, cs)
         out[name] = cs
     return out
+
+
+def _check_variant(source: str, key: str, cls: Any, options: dict[str, Any], cs: ControllerSpec) -> None:
+    """Map a variant's options onto the base's ``Options`` fields (protocol v2): an unknown
+    preset or field, an ill-typed value or one its ``__post_init__`` rejects is a
+    :class:`MatrixError` naming ``controllers.NAME.field``. A base without an ``Options``
+    dataclass is checked by building it."""
+    from controllers.base import resolve_options
+
+    fields = dict(options)
+    preset = fields.pop("preset", None)
+    if preset is not None and not isinstance(preset, str):
+        raise _fail(source, f"{key}.preset", f"must be a preset name, got {preset!r}")
+    try:
+        if cls.Options is not None:
+            resolve_options(cls, None, preset, fields)
+        else:
+            cs.build()
+    except Exception as exc:  # the options validate themselves (ValueError, TypeError)
+        msg = str(exc)
+        quoted = re.search(r"option '(\w+)'", msg)
+        if quoted and quoted.group(1) in fields:
+            named = [quoted.group(1)]
+        else:
+            named = [o for o in fields if re.search(rf"\b{re.escape(o)}\b", msg)]
+        if not named and preset is not None and "preset" in msg:
+            named = ["preset"]
+        where = f"{key}.{named[0]}" if named else key
+        raise _fail(source, where, f"{type(exc).__name__}: {msg}" if not isinstance(exc, ValueError)
+                    else msg) from None

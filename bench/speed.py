@@ -91,6 +91,7 @@ from typing import Annotated, Any, Callable, Optional
 import numpy as np
 import typer
 
+from controllers import roles
 from plant.drive import DriveCommand, DriveType
 from bench.metrics import WindowTotals
 from bench.weak_error import FULL_WEAK, QUICK_WEAK, WeakErrorConfig, weak_error_comparison
@@ -750,7 +751,7 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
     _warm_up_references(params)
 
     say(f"recording solnic closed loop, noise-free, {cfg.record_s:g} s")
-    commands, status, message = record_commands(params, "solnic", cfg.record_s, seed=seed)
+    commands, status, message = record_commands(params, roles.IDENTIFICATION, cfg.record_s, seed=seed)
     n_record = int(round(cfg.record_s / params.sample_period))
     if status == Status.OK and len(commands) == n_record:
         source = f"solnic closed loop, noise-free, seed {seed}, thesis defaults, {cfg.record_s:g} s recorded"
@@ -758,7 +759,7 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
         commands = synthetic_pulse_train(params, cfg.record_s)
         source = (f"synthetic stand-in (solnic run ended '{status}': {message}): 1.3 ms ±u_max pulses "
                   "of alternating sign every 60 ms, open loop")
-    main = _compare(_window(params, commands, cfg.window_s, "solnic", source), cfg, seed, say, noisy=True)
+    main = _compare(_window(params, commands, cfg.window_s, roles.IDENTIFICATION, source), cfg, seed, say, noisy=True)
 
     result: dict[str, Any] = {
         "rows": main.pop("rows"),
@@ -789,9 +790,9 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
 
     if cfg.linear_sequence:
         say(f"recording linear closed loop, noise-free, {cfg.record_s:g} s")
-        lin_commands, lstatus, lmessage = record_commands(params, "linear", cfg.record_s, seed=seed)
+        lin_commands, lstatus, lmessage = record_commands(params, roles.CLASSICAL, cfg.record_s, seed=seed)
         if lstatus == Status.OK:
-            lin = _compare(_window(params, lin_commands, cfg.window_s, "linear",
+            lin = _compare(_window(params, lin_commands, cfg.window_s, roles.CLASSICAL,
                                    f"linear closed loop, noise-free, seed {seed}, held levels"),
                            cfg, seed, say, noisy=False)
             result["linear_hold"] = lin
@@ -854,7 +855,7 @@ def _fmt(v: Any, digits: int = 3) -> str:
 def _print_table(result: dict[str, Any], console: Any) -> None:
     from rich.table import Table
 
-    for name, block in (("solnic", result), ("linear", result.get("linear_hold"))):
+    for name, block in ((roles.IDENTIFICATION, result), (roles.CLASSICAL, result.get("linear_hold"))):
         if not block or "rows" not in block:
             continue
         seq = block["sequence"]

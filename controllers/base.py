@@ -114,6 +114,8 @@ def _check_type(owner: str, key: str, value: Any, hint: Any) -> Any:
                 return _check_type(owner, key, value, a)
             except ValueError as exc:
                 errors.append(str(exc))
+        if len(errors) == 1:   # Optional[X]: X's own message ("must be a number, got ...")
+            raise ValueError(errors[0])
         raise ValueError(f"option {key!r} of {owner!r}: {value!r} has the wrong type ({hint})")
     if origin is typing.Literal:
         if value in args:

@@ -13,20 +13,23 @@ f_d above ωb/(2π) can break it, paying with motor current (mean |x3|, rms x3).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
 from controllers.base import register
-from controllers.linear import LinearController
+from controllers.linear import LinearController, LinearOptions
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
-__all__ = ["DitheredController", "square_wave_segments", "DEFAULT_DITHER_AMPLITUDE",
+__all__ = ["DitheredController", "DitheredOptions", "square_wave_segments", "DEFAULT_DITHER_AMPLITUDE",
            "DEFAULT_DITHER_FREQUENCY_HZ"]
 
-# Defaults measured with dither_sweep on Table 2-1 (table in controllers/dither_sweep.py):
+# Defaults measured with the dither sweep on Table 2-1 (bench/tuning.py, docs/tuning.md):
 # the lowest mean peak error above ωc and the Nyquist rate, 62 µrad vs 1233 µrad undithered,
 # at a mean |x3| of 1.12 vs 0.82 ozf·in.
 DEFAULT_DITHER_AMPLITUDE = 18.0  # ozf·in
@@ -74,49 +77,79 @@ def square_wave_segments(t0: float, duration: float, base: float, amplitude: flo
     return tuple(segments)
 
 
+@dataclass(frozen=True)
+class DitheredOptions(LinearOptions):
+    """Options of :class:`DitheredController`: those of :class:`LinearOptions` plus the dither.
+
+    Attributes
+    ----------
+    dither_amplitude : float
+        A_d ≥ 0 [ozf·in]; must stay below u_max (checked at ``reset``). Default 18.
+    dither_frequency : float
+        f_d > 0 [Hz]. Default 250.
+    random_phase : bool
+        Draw φ ~ U[0, 1) at reset from the controller's generator; otherwise φ = 0.
+    """
+
+    dither_amplitude: float = DEFAULT_DITHER_AMPLITUDE
+    dither_frequency: float = DEFAULT_DITHER_FREQUENCY_HZ
+    random_phase: bool = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("dither_amplitude", "dither_frequency"):
+            value = getattr(self, name)
+            if (isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value)):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
+        if self.dither_amplitude < 0:
+            raise ValueError(f"dither_amplitude must be >= 0 ozf·in, got {self.dither_amplitude!r}")
+        if self.dither_frequency <= 0:
+            raise ValueError(f"dither_frequency must be > 0 Hz, got {self.dither_frequency!r}")
+        if not isinstance(self.random_phase, bool):
+            raise ValueError(f"random_phase must be a bool, got {self.random_phase!r}")
+
+
+_DITHER_DEFAULTS = DitheredOptions()
+
+
 @register("dithered")
 class DitheredController(LinearController):
     """Linear lead/lag controller plus square-wave dither at the drive input.
 
-    Parameters
-    ----------
-    dither_amplitude : float
-        A_d ≥ 0 [ozf·in]; must stay below u_max.
-    dither_frequency : float
-        f_d > 0 [Hz].
-    random_phase : bool
-        Draw φ ~ U[0, 1) at reset from the controller's generator; otherwise φ = 0.
-    **linear_options
-        Options of :class:`~controllers.linear.LinearController`.
+    Options: :class:`DitheredOptions`. Presets: ``"default"`` and ``"below-nyquist"``
+    (A_d = 8 ozf·in at 125 Hz, the best cell of the sweep below 250 Hz).
 
-    Notes
-    -----
-    The defaults (A_d = 18 ozf·in, f_d = 250 Hz) come from ``dither_sweep`` on Table 2-1
-    (SPEC §4; table in :mod:`controllers.dither_sweep`): the lowest peak error among the
-    frequencies above the crossover and the Nyquist rate.
+    Knobs: ``dither_amplitude`` [ozf·in] and ``dither_frequency`` [Hz], over the grid of the
+    recorded sweep (:mod:`bench.tuning`, docs/tuning.md). The defaults (A_d = 18 ozf·in,
+    f_d = 250 Hz) are the lowest peak error among the frequencies above the crossover and the
+    Nyquist rate (SPEC §4).
     """
 
     description = "Lead/lag linear controller plus square-wave dither at the drive input"
+    family = "dithered"   # its own family in the claims and the report, not "linear"
+    Options = DitheredOptions
+    presets = MappingProxyType({
+        "default": _DITHER_DEFAULTS,
+        "below-nyquist": dataclasses.replace(_DITHER_DEFAULTS, dither_amplitude=8.0,
+                                             dither_frequency=125.0),
+    })
+    knobs = MappingProxyType({"dither_amplitude": (2.0, 4.0, 8.0, 12.0, 16.0, 18.0),
+                              "dither_frequency": (25.0, 125.0, 250.0, 500.0)})
 
-    def __init__(self, *, dither_amplitude: float = DEFAULT_DITHER_AMPLITUDE,
-                 dither_frequency: float = DEFAULT_DITHER_FREQUENCY_HZ,
-                 random_phase: bool = True, **linear_options: Any) -> None:
-        super().__init__(**linear_options)
-        for name, value in (("dither_amplitude", dither_amplitude),
-                            ("dither_frequency", dither_frequency)):
-            if (isinstance(value, bool) or not isinstance(value, (int, float))
-                    or not math.isfinite(value)):
-                raise ValueError(f"{name} must be a finite number, got {value!r}")
-        if dither_amplitude < 0:
-            raise ValueError(f"dither_amplitude must be >= 0 ozf·in, got {dither_amplitude!r}")
-        if dither_frequency <= 0:
-            raise ValueError(f"dither_frequency must be > 0 Hz, got {dither_frequency!r}")
-        if not isinstance(random_phase, bool):
-            raise ValueError(f"random_phase must be a bool, got {random_phase!r}")
-        self.dither_amplitude = float(dither_amplitude)
-        self.dither_frequency = float(dither_frequency)
-        self.random_phase = random_phase
+    def __init__(self, options: Any = None, /, *, preset: str | None = None, **fields: Any) -> None:
+        super().__init__(options, preset=preset, **fields)
         self._phase = 0.0
+
+    @property
+    def dither_amplitude(self) -> float:
+        """A_d [ozf·in]."""
+        return float(self.options.dither_amplitude)
+
+    @property
+    def dither_frequency(self) -> float:
+        """f_d [Hz]."""
+        return float(self.options.dither_frequency)
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design, zero the state, and draw the dither phase."""
@@ -126,7 +159,7 @@ class DitheredController(LinearController):
         super().reset(params, rng)
         self._tau_s = params.sample_period
         self._n = 0
-        self._phase = float(rng.random()) if self.random_phase else 0.0
+        self._phase = float(rng.random()) if self.options.random_phase else 0.0
 
     def step(self, y: float) -> DriveCommand:
         """Linear level −C(z)·y(n) plus the dither over [n·τs, (n+1)·τs)."""

@@ -28,9 +28,11 @@ compensator pole, and an RMS drive noise from w1 ≤ 5 % of u_max. For Table 2-1
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import control as ct
@@ -41,7 +43,8 @@ from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
-__all__ = ["LAG_RATIO_CAP", "LinearDesign", "design_linear", "highest_crossover", "LinearController"]
+__all__ = ["LAG_RATIO_CAP", "LinearDesign", "design_linear", "highest_crossover", "LinearOptions",
+           "LinearController"]
 
 #: Lag ratio used when Lmax = 2k̄s/(k̄s − k̄c) is infinite (k̄s = k̄c): any ratio is allowed by
 #: (2-1) then, and 10 keeps the lag network's phase cost and wind-up time moderate.
@@ -384,65 +387,98 @@ def highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
     return float(np.floor(lo * 10) / 10)
 
 
-def _check_number(name: str, value: Any, *, allow_none: bool = True) -> None:
+def _finite(name: str, value: Any, *, allow_none: bool = True) -> None:
     if value is None and allow_none:
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
 
 
+@dataclass(frozen=True)
+class LinearOptions:
+    """Options of :class:`LinearController` (all validated in ``__post_init__``).
+
+    Attributes
+    ----------
+    crossover : float or None
+        Gain-crossover frequency ωc [rad/s], > 0; None (default) is the highest feasible one for
+        the plant (:func:`highest_crossover`, 48.7 rad/s for Table 2-1).
+    lag_ratio : float or None
+        Lag corner ratio L ≥ 1 [–]; None (default) is Lmax = 2k̄s/(k̄s − k̄c)  (2-1).
+    phase_margin_deg : float
+        Phase-margin target at ωc [deg], in (0, 90); default 45.
+    integral : bool
+        Pure integral (s + ωz)/s instead of the lag network (then ``lag_ratio`` must be None).
+    lag_corner_fraction : float
+        Upper lag corner ωz as a fraction of ωc [–], in (0, 1); default 0.1.
+    """
+
+    crossover: float | None = None
+    lag_ratio: float | None = None
+    phase_margin_deg: float = 45.0
+    integral: bool = False
+    lag_corner_fraction: float = 0.1
+
+    def __post_init__(self) -> None:
+        _finite("crossover", self.crossover)
+        if self.crossover is not None and self.crossover <= 0:
+            raise ValueError(f"crossover must be > 0 rad/s, got {self.crossover!r}")
+        _finite("lag_ratio", self.lag_ratio)
+        if self.lag_ratio is not None and self.lag_ratio < 1:
+            raise ValueError(f"lag_ratio must be >= 1, got {self.lag_ratio!r}")
+        _finite("phase_margin_deg", self.phase_margin_deg, allow_none=False)
+        if not 0 < self.phase_margin_deg < 90:
+            raise ValueError(f"phase_margin_deg must be in (0, 90), got {self.phase_margin_deg!r}")
+        if not isinstance(self.integral, bool):
+            raise ValueError(f"integral must be a bool, got {self.integral!r}")
+        if self.integral and self.lag_ratio is not None:
+            raise ValueError("lag_ratio must be None when integral=True (the ratio is infinite)")
+        _finite("lag_corner_fraction", self.lag_corner_fraction, allow_none=False)
+        if not 0 < self.lag_corner_fraction < 1:
+            raise ValueError(f"lag_corner_fraction must be in (0, 1), got {self.lag_corner_fraction!r}")
+
+    def design(self, params: PlantParams) -> LinearDesign:
+        """The lead/lag design of these options for ``params`` (cached)."""
+        return design_linear(params, self.crossover, self.lag_ratio, integral=self.integral,
+                             phase_margin_deg=self.phase_margin_deg,
+                             lag_corner_fraction=self.lag_corner_fraction)
+
+
+_LINEAR_DEFAULTS = LinearOptions()
+
+
 @register("linear")
 class LinearController(Controller):
     """Lag-compensated linear controller on the linear amplifier: u(n) = −C(z)·y(n).
 
-    Parameters
-    ----------
-    crossover : float, optional
-        ωc [rad/s]; default the highest feasible one for the plant (:func:`highest_crossover`).
-    lag_ratio : float, optional
-        L ≥ 1; default Lmax = 2k̄s/(k̄s − k̄c)  (2-1).
-    phase_margin_deg : float
-        Phase-margin target at ωc [deg], default 45.
-    integral : bool
-        Pure integral instead of the lag network.
-    lag_corner_fraction : float
-        Upper lag corner as a fraction of ωc, default 0.1.
+    Options: :class:`LinearOptions` (``LinearController(crossover=30.0)``, a preset, or an
+    options object). Presets: ``"integral"`` (pure integral instead of the lag network) and
+    ``"no-lag"`` (L = 1, no lag network gain).
+
+    Knobs (:attr:`knobs`): the crossover ωc [rad/s] and the lag ratio L; the swept values span
+    the feasible crossovers of Table 2-1 (≤ 48.7 rad/s, the sample-rate limit) and L from 1 to
+    above Lmax = 6, the ranges of the inequality check (``solnic-bench check-bound``).
     """
 
     drive = DriveType.LINEAR
     description = "Lead/lag sampled-data design at the Bohacek–Tuteur lag limit (2-1)"
+    Options = LinearOptions
+    presets = MappingProxyType({
+        "default": _LINEAR_DEFAULTS,
+        "integral": dataclasses.replace(_LINEAR_DEFAULTS, integral=True),
+        "no-lag": dataclasses.replace(_LINEAR_DEFAULTS, lag_ratio=1.0),
+    })
+    knobs = MappingProxyType({"crossover": (10.0, 20.0, 30.0, 40.0, 48.0),
+                              "lag_ratio": (1.0, 2.0, 4.0, 6.0, 8.0)})
 
-    def __init__(self, *, crossover: float | None = None, lag_ratio: float | None = None,
-                 phase_margin_deg: float = 45.0, integral: bool = False,
-                 lag_corner_fraction: float = 0.1) -> None:
-        _check_number("crossover", crossover)
-        if crossover is not None and crossover <= 0:
-            raise ValueError(f"crossover must be > 0 rad/s, got {crossover!r}")
-        _check_number("lag_ratio", lag_ratio)
-        if lag_ratio is not None and lag_ratio < 1:
-            raise ValueError(f"lag_ratio must be >= 1, got {lag_ratio!r}")
-        _check_number("phase_margin_deg", phase_margin_deg, allow_none=False)
-        if not 0 < phase_margin_deg < 90:
-            raise ValueError(f"phase_margin_deg must be in (0, 90), got {phase_margin_deg!r}")
-        if not isinstance(integral, bool):
-            raise ValueError(f"integral must be a bool, got {integral!r}")
-        if integral and lag_ratio is not None:
-            raise ValueError("lag_ratio must be None when integral=True (the ratio is infinite)")
-        _check_number("lag_corner_fraction", lag_corner_fraction, allow_none=False)
-        if not 0 < lag_corner_fraction < 1:
-            raise ValueError(f"lag_corner_fraction must be in (0, 1), got {lag_corner_fraction!r}")
-        self._options = dict(crossover=crossover, lag_ratio=lag_ratio, integral=integral,
-                             phase_margin_deg=phase_margin_deg,
-                             lag_corner_fraction=lag_corner_fraction)
+    def __init__(self, options: Any = None, /, *, preset: str | None = None, **fields: Any) -> None:
+        super().__init__(options, preset=preset, **fields)
         self.design: LinearDesign | None = None
         self._u_max = math.inf
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design for ``params`` (cached) and zero the compensator state."""
-        o = self._options
-        self.design = design_linear(params, o["crossover"], o["lag_ratio"], integral=o["integral"],
-                                    phase_margin_deg=o["phase_margin_deg"],
-                                    lag_corner_fraction=o["lag_corner_fraction"])
+        self.design = self.options.design(params)
         A, B, C, D = self.design.state_space
         # plain floats: the compensator is 2-4 states, where numpy's per-call cost dominates
         self._A = tuple(tuple(float(a) for a in row) for row in A)

@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from controllers import roles
 from reports.inputs import SIZE_PEAK_COLUMNS, SeriesRun
 from reports.limits import PlantLimits
 
@@ -170,17 +171,20 @@ class Selection:
     thesis_scenario : str
         Scenario of the thesis run (Table 2-1, 100 s).
     solnic, linear : str
-        Controller names of the default-cost solnic and the lag-compensated linear controller.
+        *Families* (results column ``controller_family``; a variant has its base's family) of
+        the dissertation's controller and of the lag-compensated linear controller. A claim
+        about "solnic" reads the cells of the family's registered controller itself (its name
+        equals ``controller_base``), not its variants.
     high_error_cost : str
-        Marker of the "high error cost" solnic preset: a cell counts when its controller starts
-        with ``solnic`` and its controller or scenario name contains this marker.
+        Marker of the "high error cost" preset: a cell counts when it belongs to the ``solnic``
+        family and its controller or scenario name contains this marker.
     typical_cell : str or None
         The series shown as "the typical run" (default: solnic/thesis with the lowest seed).
     """
 
     thesis_scenario: str = "thesis"
-    solnic: str = "solnic"
-    linear: str = "linear"
+    solnic: str = roles.IDENTIFICATION
+    linear: str = roles.CLASSICAL
     high_error_cost: str = "high"
     typical_cell: str | None = None
 
@@ -271,12 +275,13 @@ class _Context:
     selection: Selection
     warmup_s: float
 
-    def cells(self, controller: str, scenario: str | None = None,
+    def cells(self, family: str, scenario: str | None = None,
               column: str | None = None) -> pd.DataFrame:
+        """Ok cells of the registered controller of ``family`` (not its variants)."""
         r = self.results
         if r.empty:
             return r
-        m = (r["controller"] == controller) & (r["status"] == "ok")
+        m = _plain(r, family) & (r["status"] == "ok")
         if scenario is not None:
             m &= r["scenario"] == scenario
         out = r[m]
@@ -291,10 +296,27 @@ class _Context:
         if r.empty or column not in r.columns:
             return r.iloc[0:0]
         marker = s.high_error_cost.lower()
-        m = (r["controller"].str.startswith(s.solnic) & (r["status"] == "ok")
+        m = (_family(r) == s.solnic) & (r["status"] == "ok")
+        m = (m
              & (r["controller"].str.lower().str.contains(marker, regex=False)
                 | r["scenario"].str.lower().str.contains(marker, regex=False)))
         return r[m & r[column].notna()]
+
+
+def _family(r: pd.DataFrame) -> pd.Series:
+    """Each row's family: ``controller_family``, else ``controller_base``, else ``controller``."""
+    out = r["controller"].astype(str)
+    for col in ("controller_base", "controller_family"):
+        if col in r.columns:
+            v = r[col].astype("string")
+            out = v.where(v.notna() & (v != ""), out).astype(str)
+    return out
+
+
+def _plain(r: pd.DataFrame, family: str) -> pd.Series:
+    """Rows of ``family`` whose controller is the registered one, not a variant."""
+    base = r["controller_base"].astype(str) if "controller_base" in r.columns else r["controller"]
+    return (_family(r) == family) & (r["controller"] == base)
 
 
 def _not_measured(why: str) -> Measurement:
@@ -436,8 +458,7 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
     r, s = ctx.results, ctx.selection
     if lin.empty or "peak_error_rad" not in r.columns:
         return _not_measured("needs ok linear and solnic cells with peak_error_rad")
-    sol = r[r["controller"].str.startswith(s.solnic) & (r["status"] == "ok")
-            & r["peak_error_rad"].notna()]
+    sol = r[(_family(r) == s.solnic) & (r["status"] == "ok") & r["peak_error_rad"].notna()]
     sol = pd.concat([sol[sol["scenario"] == s.thesis_scenario],
                      ctx.high_cost_cells("peak_error_rad")]).drop_duplicates("cell")
     if sol.empty:
@@ -449,6 +470,26 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
     return Measurement(ratio, f"mean linear peak {_g(ml * 1e6)} µrad / best solnic ({bc}/{bs}) "
                               f"{_g(bv * 1e6)} µrad = {_g(ratio)}×",
                        "means over seeds; best solnic variant on the thesis plant")
+
+
+def _m_vs_peers(ctx: _Context) -> Measurement:
+    """Mean thesis peak of every other family's registered controller over solnic's."""
+    r, s = ctx.results, ctx.selection
+    if r.empty or "peak_error_rad" not in r.columns:
+        return _not_measured("needs ok cells with peak_error_rad")
+    ok = r[(r["status"] == "ok") & (r["scenario"] == s.thesis_scenario) & r["peak_error_rad"].notna()]
+    fam = _family(ok)
+    base = ok["controller_base"].astype(str) if "controller_base" in ok.columns else ok["controller"]
+    plain = ok[ok["controller"] == base]
+    means = plain.groupby(fam[plain.index])["peak_error_rad"].mean()
+    if s.solnic not in means.index or len(means) < 2:
+        return _not_measured(f"needs ok {s.solnic} and other controllers on {s.thesis_scenario}")
+    ref = float(means[s.solnic])
+    others = means.drop(s.solnic).sort_values()
+    ratio = float(others.iloc[0]) / ref
+    parts = ", ".join(f"{k} {_g(v * 1e6)} µrad ({_g(v / ref)}×)" for k, v in others.items())
+    return Measurement(ratio, f"{s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+                       f"means over seeds on {s.thesis_scenario}; ratio = best other / {s.solnic}")
 
 
 def _m_less_current(ctx: _Context) -> Measurement:
@@ -631,6 +672,10 @@ CLAIMS: tuple[ClaimSpec, ...] = (
     ClaimSpec("ten_times_linear", "Solnic is at least ten times more accurate than the best "
               "time-invariant controller", "§8.1, §8.2", "≥ 10×", "×", at_least(10.0),
               _m_ten_times_linear),
+    ClaimSpec("vs_peers", "Solnic is more accurate than every other controller in the run, "
+              "today's peers included (mean peak error on the thesis plant)",
+              "§8.1 (against 1967's baselines); SPEC §10 peers", "best other / solnic > 1", "×",
+              above(1.0), _m_vs_peers),
     ClaimSpec("less_current", "Solnic operates at a lower average current than the linear "
               "controller", "abstract; §8.1", "solnic/linear < 1", "", below(1.0),
               _m_less_current),
@@ -717,9 +762,13 @@ def evaluate_claims(*, results: pd.DataFrame, limits: PlantLimits,
     list of ClaimRow, in the order of ``claims``.
     """
     sel = selection or Selection()
+    known = set(results["cell"]) if "cell" in results.columns else set()
+    plain = (set(results.loc[_plain(results, sel.solnic), "cell"])
+             if "cell" in results.columns and not results.empty else set())
     runs = tuple(sorted(
         (r for r in (series or {}).values()
-         if r.controller == sel.solnic and r.scenario == sel.thesis_scenario),
+         if (r.cell in plain if r.cell in known else r.controller == sel.solnic)
+         and r.scenario == sel.thesis_scenario),
         key=lambda r: (r.seed if r.seed is not None else 0, r.cell)))
     ctx = _Context(results, runs, bound, hunting, speed, limits, sel, float(warmup_s))
     rows = []

@@ -26,8 +26,9 @@ __all__ = [
     "hunting_onset", "work_precision", "decimate_minmax",
 ]
 
-_PALETTE = {"linear": "#1f77b4", "dithered": "#ff7f0e", "solnic": "#2ca02c"}
-_EXTRA = ("#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+_PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+            "#7f7f7f", "#bcbd22", "#17becf")
+_SERIES_COLOUR = "#2ca02c"
 _SYMBOLS = ("circle", "square", "diamond", "triangle-up", "cross", "x", "star", "hexagon")
 _TEMPLATE = "plotly_white"
 _CONFIG = {"displaylogo": False, "responsive": True,
@@ -35,12 +36,10 @@ _CONFIG = {"displaylogo": False, "responsive": True,
 
 
 def controller_colour(name: str, known: Sequence[str] = ()) -> str:
-    """Stable colour per controller: fixed for the three built-ins, then a cycle."""
-    if name in _PALETTE:
-        return _PALETTE[name]
-    others = sorted(n for n in known if n not in _PALETTE)
-    idx = others.index(name) if name in others else sum(map(ord, name))
-    return _EXTRA[idx % len(_EXTRA)]
+    """Stable colour per controller: its position in ``known`` (the run's controllers in matrix
+    order), else a hash of the name; no controller has a colour of its own."""
+    idx = list(known).index(name) if name in known else sum(map(ord, name))
+    return _PALETTE[idx % len(_PALETTE)]
 
 
 def figure_div(fig: go.Figure, div_id: str, height: int = 440) -> str:
@@ -140,7 +139,7 @@ def error_vs_time(run: SeriesRun | None, limits: PlantLimits, part: int) -> go.F
     sel = f[(f["t"] <= mid)] if part == 1 else f[(f["t"] >= mid)]
     t, y = decimate_minmax(sel["t"].to_numpy(), sel["x1"].to_numpy() * 1e6)
     fig = go.Figure(go.Scatter(x=t, y=y, mode="lines", name="x1 (true error)",
-                               line=dict(color=_PALETTE["solnic"], width=1)))
+                               line=dict(color=_SERIES_COLOUR, width=1)))
     lim = limits.classical_limit_rad * 1e6
     for sign in (1, -1):
         fig.add_hline(y=sign * lim, line=dict(color="#b00", dash="dash", width=1))

@@ -26,7 +26,8 @@ shown in the report as "not measured in this run", never as a number):
     ==========================  ================================================================
 
 ``DIR/series/<cell>.parquet``
-    Time series of one solnic run for figures 7-2…7-5 (write it with :func:`write_series`,
+    Time series of one run of a controller with a ``report_series`` hook (solnic's give
+    figures 7-2…7-5; see :mod:`bench.series` for the layout) (write it with :func:`write_series`,
     which checks the column names); ``<cell>`` is the ``cell`` value of its results row. Rows at every sample instant (events may be added), increasing ``t``.
     Only ``t`` is required; every other column is optional and the figure or claim that needs
     it says so when it is missing. Step quantities (estimates, costs) are held between updates;

@@ -41,7 +41,9 @@ def _results(rng: np.random.Generator, seeds: list[int]) -> pd.DataFrame:
                 continue
             for seed in seeds:
                 p = peak * factor * rng.uniform(0.85, 1.15) * 1e-6
-                row = dict(controller=ctrl, scenario=scenario, seed=seed, status="ok",
+                family = ctrl.removesuffix("-high-cost")   # the variant's base and family
+                row = dict(controller=ctrl, controller_base=family, controller_family=family,
+                           scenario=scenario, seed=seed, status="ok",
                            message="", peak_error_rad=p, rms_error_rad=p * 0.35,
                            p99_error_rad=p * 0.8, mean_abs_current=iabs * rng.uniform(0.9, 1.1),
                            rms_current=irms * rng.uniform(0.9, 1.1),
@@ -54,7 +56,8 @@ def _results(rng: np.random.Generator, seeds: list[int]) -> pd.DataFrame:
                                peak_error_medium_rad=1.4e-6 * rng.uniform(0.9, 1.1),
                                peak_error_large_rad=p)
                 rows.append(row)
-    fail = dict(controller="dithered", scenario="ratio-2", seed=max(seeds) + 1,
+    fail = dict(controller="dithered", controller_base="dithered", controller_family="dithered",
+                scenario="ratio-2", seed=max(seeds) + 1,
                 status="chatter", message="event-count guard: 10000 events in 1e-6 s")
     rows.append(fail)
     df = pd.DataFrame(rows)

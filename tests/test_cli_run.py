@@ -108,8 +108,14 @@ def test_quick_run_writes_the_report_and_solnic_series(quick):
     assert "report:" in proc.stdout
     series = sorted(p.stem for p in (out / "series").glob("*.parquet"))
     df = pd.read_parquet(out / "results.parquet")
-    assert series == sorted(df.loc[df["controller"] == "solnic", "cell"])
-    frame = pd.read_parquet(out / "series" / f"{series[0]}.parquet")
+    from bench.series import wants_series
+    from controllers.base import get_controller
+
+    with_series = {c for c in set(df["controller_base"]) if wants_series(get_controller(c)())}
+    assert "solnic" in with_series and "linear" not in with_series
+    assert series == sorted(df.loc[df["controller_base"].isin(with_series), "cell"])
+    assert (df["controller_family"] == df["controller_base"]).all()   # no variants in quick
+    frame = pd.read_parquet(out / "series" / f"{df.loc[df['controller'] == 'solnic', 'cell'].iloc[0]}.parquet")
     assert {"t", "x1", "ks_hat_pct", "kc_hat_pct", "cost_small", "dc_ratio", "cycle_size"} <= set(frame.columns)
 
 

@@ -164,45 +164,51 @@ def test_peak_error_falls_once_dither_breaks_stiction(dither_runs: dict) -> None
 def test_sweep_table_and_best_choice() -> None:
     import pandas as pd
 
-    from controllers.dither_sweep import best_dither, dither_sweep
+    from bench.tuning import best_setting, knob_sweep
 
-    df = dither_sweep(amplitudes=(0.0, 12.0), frequencies_hz=(5.0, 125.0), seeds=(0,),
-                      duration_s=1.5, warmup_s=0.5, noise=False)
+    df = knob_sweep("dithered", {"dither_amplitude": (0.0, 12.0), "dither_frequency": (5.0, 125.0)},
+                    seeds=(0,), duration_s=1.5, warmup_s=0.5, noise=False)
     assert len(df) == 4 and set(df["status"]) == {"ok"}
-    for col in ("peak_error_rad", "mean_abs_current", "rms_current", "above_crossover",
-                "above_nyquist", "crossover_hz"):
+    for col in ("peak_error_rad", "mean_abs_current", "rms_current", "dither_amplitude",
+                "dither_frequency", "seed"):
         assert col in df.columns
-    assert list(df.loc[df["frequency_hz"] == 5.0, "above_crossover"]) == [False, False]  # 5 Hz < ωc/2π
-    assert list(df.loc[df["frequency_hz"] == 125.0, "above_nyquist"]) == [True, True]
+    # zero amplitude is the linear loop whatever the frequency
+    zero = df[df["dither_amplitude"] == 0.0]["peak_error_rad"].to_numpy()
+    assert zero[0] == zero[1]
     synthetic = pd.DataFrame({
-        "amplitude": [2.0, 4.0, 4.0, 8.0], "frequency_hz": [25.0, 125.0, 125.0, 250.0],
-        "seed": [0, 0, 1, 0], "status": ["ok"] * 4, "peak_error_rad": [1e-6, 3e-5, 1e-5, 4e-5],
-        "above_crossover": [True] * 4, "above_nyquist": [False, True, True, True]})
-    assert best_dither(synthetic) == (4.0, 125.0)  # seed mean 2e-5 beats 4e-5
-    assert best_dither(synthetic, above="above_crossover") == (2.0, 25.0)
+        "dither_amplitude": [2.0, 4.0, 4.0, 8.0], "dither_frequency": [25.0, 125.0, 125.0, 250.0],
+        "seed": [0, 0, 1, 0], "status": ["ok"] * 4, "peak_error_rad": [1e-6, 3e-5, 1e-5, 4e-5]})
+    above = synthetic["dither_frequency"] > 50.0
+    assert best_setting(synthetic, where=above) == {"dither_amplitude": 4.0,
+                                                    "dither_frequency": 125.0}  # 2e-5 beats 4e-5
+    assert best_setting(synthetic) == {"dither_amplitude": 2.0, "dither_frequency": 25.0}
+    failed = synthetic.assign(status=["ok", "error", "ok", "ok"])   # one failed seed disqualifies
+    assert best_setting(failed, where=above) == {"dither_amplitude": 8.0, "dither_frequency": 250.0}
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"amplitudes": (-1.0,)}, "amplitudes"),
-    ({"amplitudes": (20.0,)}, "amplitudes"),
-    ({"frequencies_hz": (0.0,)}, "frequencies_hz"),
+    ({"grid": {"dither_amplitude": (-1.0,)}}, "dither_amplitude"),
+    ({"grid": {"dither_frequency": (0.0,)}}, "dither_frequency"),
+    ({"grid": {"dither_phase": (0.0,)}}, "dither_phase"),
+    ({"grid": {"dither_amplitude": ()}}, "grid"),
     ({"workers": 0}, "workers"),
+    ({"scenario": "moon"}, "scenario"),
 ])
 def test_sweep_errors(kwargs: dict, match: str) -> None:
-    from controllers.dither_sweep import dither_sweep
+    from bench.tuning import knob_sweep
 
     with pytest.raises(ValueError, match=match):
-        dither_sweep(**kwargs)
+        knob_sweep("dithered", **kwargs)
 
 
-def test_best_dither_errors() -> None:
+def test_best_setting_errors() -> None:
     import pandas as pd
 
-    from controllers.dither_sweep import best_dither
+    from bench.tuning import best_setting
 
-    empty = pd.DataFrame({"amplitude": [0.0], "frequency_hz": [250.0], "seed": [0], "status": ["ok"],
-                          "peak_error_rad": [1e-5], "above_crossover": [True], "above_nyquist": [True]})
-    with pytest.raises(ValueError, match="no ok cell"):
-        best_dither(empty)
-    with pytest.raises(ValueError, match="above"):
-        best_dither(empty, above="sideways")
+    df = pd.DataFrame({"dither_amplitude": [0.0], "dither_frequency": [250.0], "seed": [0],
+                       "status": ["error"], "peak_error_rad": [1e-5]})
+    with pytest.raises(ValueError, match="every seed ok"):
+        best_setting(df)
+    with pytest.raises(ValueError, match="no eligible"):
+        best_setting(df, where=df["dither_frequency"] > 1e3)

@@ -26,7 +26,9 @@ def _results(rows):
 
 
 def _cell(controller, seed=0, scenario="thesis", status="ok", **metrics):
-    return dict(controller=controller, scenario=scenario, seed=seed, status=status, **metrics)
+    base = "solnic" if controller.startswith("solnic") else controller   # variants of solnic
+    return dict(controller=controller, controller_base=base, controller_family=base,
+                scenario=scenario, seed=seed, status=status, **metrics)
 
 
 def _series_run(seed=0, **cols):
@@ -295,3 +297,17 @@ def test_cost_update_times_from_counter_or_from_cost_changes():
                                  series={run.cell: run})
         assert _row(rows, "first_cost_update").value == pytest.approx(20.0)
         assert _row(rows, "fourteenth_cost_update").value == pytest.approx(20.0 + 13 * 2.5)
+
+
+def test_vs_peers_compares_solnic_with_every_other_family_and_names_a_winner():
+    lim = TABLE_2_1.classical_limit_rad
+    cells = []
+    for s in range(3):
+        cells += [_cell("linear", s, peak_error_rad=200 * lim),
+                  _cell("solnic", s, peak_error_rad=2 * lim),
+                  _cell("solnic-high", s, peak_error_rad=0.5 * lim),       # a variant: not a peer
+                  dict(_cell("pulse-width", s, peak_error_rad=1.5 * lim), controller_family="pulse-width")]
+    row = _row(C.evaluate_claims(results=_results(cells), limits=TABLE_2_1), "vs_peers")
+    assert row.verdict == C.NOT_REPRODUCED and row.value == pytest.approx(0.75)
+    assert row.measured.index("pulse-width") < row.measured.index("linear")   # best first
+    assert "solnic-high" not in row.measured

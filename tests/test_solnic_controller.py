@@ -10,7 +10,8 @@ from controllers.solnic import SolnicController
 from plant import DriveType, PlantParams
 
 INTERNALS = {"ks_hat", "kc_hat", "P_kc_kc", "P_ks_ks", "P_kc_ks", "dtu_opt", "dtu_inc", "cost_small",
-             "cost_medium", "cost_large", "dc_ratio", "cycle_size", "x1_hat", "x4_hat"}
+             "cost_medium", "cost_large", "dc_ratio", "cycle_size", "x1_hat", "x4_hat",
+             "ks_kc_corr", "dt_opt_rel_error", "n_cost_updates"}  # for the report series
 
 
 def test_registered_on_the_bridge():

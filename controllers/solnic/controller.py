@@ -55,6 +55,7 @@ from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.predictor import Predictor, PulsePrediction
 from controllers.solnic.presets import resolve_options
+from controllers.solnic.series import cycle_event_times, log_series
 from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
                                          SizeSchedule, plan_trigger)
 
@@ -124,6 +125,7 @@ class SolnicController(Controller):
 
     drive = DriveType.BRIDGE
     description = "solnic: semi-open-loop nonlinear identification and control (Acker 1967)"
+    counter = "pulses"
 
     def __init__(self, preset: str = "thesis", **options: Any) -> None:
         self.options = resolve_options(preset, **options)
@@ -314,7 +316,25 @@ class SolnicController(Controller):
             "cost_small": self._costs[0], "cost_medium": self._costs[1], "cost_large": self._costs[2],
             "dc_ratio": self._dc_ratio, "cycle_size": float(sch.size),
             "x1_hat": float(self.mode2.x[0]), "x4_hat": float(self.mode2.x[1]),
+            # for the report's figures (protocol v2 series)
+            "ks_kc_corr": float(P[0, 1] / math.sqrt(P[0, 0] * P[1, 1])) if P[0, 0] * P[1, 1] > 0 else _NAN,
+            "dt_opt_rel_error": (abs(sch.dtu_opt - self.adjusted[0]) / self.adjusted[0]
+                                 if self.adjusted[0] > 0 else _NAN),
+            "n_cost_updates": float(self.counts["cost_evaluations"]),
         }
+
+    def event_times(self) -> dict[str, np.ndarray]:
+        """``pulse`` and ``phase:<size>`` launch instants [s] (:mod:`controllers.solnic.series`)."""
+        if not self._ready:
+            return {}
+        cycles = [(e["t_a"], int(e["size"])) for e in self.log]
+        if self._pending is not None:
+            cycles.append((self._pending.t_a, int(self._pending.size)))
+        return cycle_event_times(cycles)
+
+    def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
+        """Δc of the last large cycle and the last Δc_e/Δc_p mismatch, held on ``t``."""
+        return log_series(self.log if self._ready else [], t)
 
     def summary(self) -> dict[str, Any]:
         if not self._ready:
