@@ -67,8 +67,25 @@ def _die_with_parent() -> None:
         pass
 
 
+def _release_forkserver() -> None:
+    """Close this child's copy of the run's "alive" pipe to the forkserver: the forkserver exits
+    when the run's process dies only if no child holds it, and its exit then kills the children
+    (``PR_SET_PDEATHSIG``)."""
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+        server._forkserver_alive_fd = None
+
+
 def _child(conn, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
     _die_with_parent()
+    _release_forkserver()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_DFL)
