@@ -276,14 +276,16 @@ def test_a_full_disk_is_one_line_exit_1_and_nothing_half_written(tmp_path):
         out = disk / "run"
         first = write_matrix(tmp_path, ["t-hold"], seeds=(0,), duration=1, name="one.toml")
         assert cli("run", "--matrix", first, "--out", out, "--traces", "none").returncode == 0
-        (disk / "filler").write_bytes(b"")
-        with open(disk / "filler", "wb") as fh:     # fill the disk to the last block
-            try:
-                while True:
-                    fh.write(b"\0" * 4096)
-                    fh.flush()
-            except OSError:
-                pass
+        fd = os.open(disk / "filler", os.O_WRONLY | os.O_CREAT)      # fill the disk to the last byte
+        try:
+            for size in (65536, 4096, 1):
+                try:
+                    while True:
+                        os.write(fd, b"\0" * size)
+                except OSError:
+                    pass
+        finally:
+            os.close(fd)
         proc = cli("run", "--matrix", matrix, "--out", out, "--traces", "none")
         lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
         assert proc.returncode == 1, proc.stderr
