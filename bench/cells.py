@@ -1,14 +1,19 @@
 """One cell of the benchmark matrix: a controller on a scenario with one seed.
 
 :func:`run_cell` is the pure unit of work that the executors distribute: it builds the plant
-and the controller, runs the closed loop, writes the cell's artifacts (the rerun trace and, for
-controllers with a report series, the figure series) and returns the cell's results row. It never raises for a failing
-cell: a controller that raises, a run over its time limit or a failing artifact gives a row with
-status ``error`` and the message.
+and the controller, runs the closed loop, writes the cell's artifacts (the rerun trace, streamed
+while the cell runs, and, for controllers with a figure series, the series) and returns the
+cell's results row. It never raises for a failing cell: a controller that raises anything
+(``SystemExit`` and ``KeyboardInterrupt`` included), a run over its time limit or a failing
+artifact gives a row with status ``error``, the message and an ``error_kind``. A cell whose
+process dies or hangs is turned into such a row by the driver (:func:`failure_row`).
 
 A cell's identity is its *config hash*: the sha256 of a canonical JSON of everything that
 determines its numbers (resolved plant parameters, controller base and options, seed, run length,
-warm-up, plugin modules) plus :data:`CODE_VERSION`. The results store resumes on it.
+warm-up, plugin modules and a digest of their source) plus :data:`CODE_VERSION`. Its
+*definition hash* is the same without the code digests: what the user asked for. The results
+store resumes on the first and keeps one run directory to one definition per cell id with the
+second.
 
 No controller is known here by name: the counter column ``n_corrections`` comes from the
 controller's ``counter`` hook, the ``controller_family`` column from its ``family`` (a variant
@@ -17,18 +22,15 @@ has its base's family) and the series from ``report_series`` (:mod:`bench.series
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
 import importlib
 import json
 import math
 import os
-import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -37,8 +39,9 @@ from typing import Any
 from bench.metrics import METRIC_COLUMNS
 from bench.scenarios import Scenario
 
-__all__ = ["ControllerSpec", "Cell", "run_cell", "code_version", "load_plugins", "RUNTIME_COLUMNS",
-           "SIZE_PEAK_COLUMNS", "LEADING_COLUMNS"]
+__all__ = ["ControllerSpec", "Cell", "run_cell", "code_version", "load_plugins", "plugin_digest",
+           "failure_row", "kill_deadline", "RUNTIME_COLUMNS", "SIZE_PEAK_COLUMNS", "LEADING_COLUMNS",
+           "ERROR_KINDS", "RETRIED_ERROR_KINDS"]
 
 # Columns that measure the machine, not the controller: excluded from determinism checks.
 RUNTIME_COLUMNS = ("runtime_s", "realtime_factor", "cell_wall_s")
@@ -46,7 +49,13 @@ SIZE_PEAK_COLUMNS = ("peak_error_small_rad", "peak_error_medium_rad", "peak_erro
 LEADING_COLUMNS = ("cell", "controller", "scenario", "seed", "status", "message", "controller_base",
                    "controller_family", "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
                    "runtime_s", "realtime_factor", "simulated_s", *SIZE_PEAK_COLUMNS, "config_hash",
-                   "code_version", "cell_wall_s")
+                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash")
+# Why a cell has status "error": "run" (the controller or the plant failed: a result of the
+# configuration), "time_limit" (over its wall-clock limit), "crash" (its process died),
+# "artifact" (its trace or series could not be written). Only "run" errors are final; the
+# others depend on the machine and are retried on resume.
+ERROR_KINDS = ("run", "time_limit", "crash", "artifact")
+RETRIED_ERROR_KINDS = ("time_limit", "crash", "artifact")
 
 # Source that determines a cell's numbers and artifacts; its digest is part of CODE_VERSION.
 _ROOT = Path(__file__).resolve().parent.parent
@@ -83,6 +92,24 @@ def load_plugins(modules: tuple[str, ...], search_dirs: tuple[str, ...] = ()) ->
         importlib.import_module(name)
 
 
+def plugin_digest(modules: tuple[str, ...], search_dirs: tuple[str, ...] = ()) -> str:
+    """sha256 (16 hex digits) of the source of the plugin ``modules`` (imported first): the
+    module file, or every ``.py`` file of a package. Editing a plugin changes the config hash."""
+    if not modules:
+        return ""
+    load_plugins(modules, search_dirs)
+    digest = hashlib.sha256()
+    for name in modules:
+        module = sys.modules[name]
+        paths = [Path(p) for p in getattr(module, "__path__", [])]
+        files = sorted(f for p in paths for f in p.rglob("*.py")) if paths else \
+            [Path(module.__file__)] if getattr(module, "__file__", None) else []
+        digest.update(name.encode() + b"\0")
+        for f in files:
+            digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
 @dataclass(frozen=True)
 class ControllerSpec:
     """A controller of the matrix: a registered ``base`` with constructor ``options``.
@@ -115,8 +142,9 @@ class ControllerSpec:
 class Cell:
     """A controller × scenario × seed, with the run length and warm-up of its scenario.
 
-    ``time_limit_s`` (wall clock) and the plugin search directories do not enter the hash;
-    ``code_version`` is taken where the cell is made (the process that plans the matrix).
+    ``time_limit_s`` (wall clock) and the plugin search directories do not enter the hash (an
+    error row remembers its limit, see ``bench.store``); ``code_version`` and ``plugin_source``
+    (:func:`plugin_digest`) are taken where the cell is made (the process that plans the matrix).
     """
 
     controller: ControllerSpec
@@ -126,6 +154,7 @@ class Cell:
     plugins: tuple[str, ...] = ()
     plugin_dirs: tuple[str, ...] = ()
     code_version: str = field(default_factory=lambda: code_version())
+    plugin_source: str = ""
 
     @property
     def cell_id(self) -> str:
@@ -140,47 +169,43 @@ class Cell:
     def warmup_s(self) -> float:
         return self.scenario.warmup_s
 
-    def config(self) -> dict[str, Any]:
-        """Everything that determines the cell's numbers, as plain JSON data."""
+    def definition(self) -> dict[str, Any]:
+        """What the user asked for: controller, scenario, seed, run length, plugins (no code)."""
         return {
             "controller": {"name": self.controller.name, **self.controller.to_json()},
             "scenario": {"name": self.scenario.name, "base": self.scenario.base,
                          "plant": dataclasses.asdict(self.scenario.params)},
             "seed": self.seed, "duration_s": self.duration_s, "warmup_s": self.warmup_s,
-            "plugins": list(self.plugins), "code_version": self.code_version,
+            "plugins": list(self.plugins),
         }
+
+    def config(self) -> dict[str, Any]:
+        """Everything that determines the cell's numbers, as plain JSON data."""
+        config = {**self.definition(), "code_version": self.code_version}
+        if self.plugin_source:
+            config["plugin_source"] = self.plugin_source
+        return config
 
     @cached_property
     def config_hash(self) -> str:
-        canonical = json.dumps(self.config(), sort_keys=True, separators=(",", ":"), allow_nan=True)
-        return hashlib.sha256(canonical.encode()).hexdigest()
+        return _sha256(self.config())
+
+    @cached_property
+    def definition_hash(self) -> str:
+        return _sha256(self.definition())
 
 
-class _HardTimeout(BaseException):
-    """Raised by SIGALRM when a cell overruns its limit inside code that never returns to the
-    runner's per-sample check (a BaseException, so the runner's ``except Exception`` lets it by)."""
+def _sha256(obj: Any) -> str:
+    canonical = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True, default=str)
+    return hashlib.sha256(canonical.encode()).hexdigest()
 
 
-@contextlib.contextmanager
-def _hard_limit(seconds: float | None) -> Iterator[None]:
-    """Backstop for the runner's cooperative limit: SIGALRM after ``seconds``. Only in a
-    process's main thread (local pool workers); a no-op elsewhere (dask worker threads)."""
-    usable = (seconds is not None and hasattr(signal, "setitimer")
-              and threading.current_thread() is threading.main_thread())
-    if not usable:
-        yield
-        return
-
-    def on_alarm(signum, frame):
-        raise _HardTimeout(f"hard time limit of {seconds:g} s exceeded")
-
-    previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+def kill_deadline(cell: Cell) -> float | None:
+    """Wall seconds after which the executor kills the cell's process: the limit plus a grace
+    for process start and artifacts (the runner itself stops at the limit, between samples)."""
+    if cell.time_limit_s is None:
+        return None
+    return cell.time_limit_s * 1.05 + 2.0
 
 
 def _scalar(value: Any) -> Any:
@@ -191,8 +216,8 @@ def _scalar(value: Any) -> Any:
         value = value.item()
     if isinstance(value, bool):
         return value
-    if isinstance(value, int):
-        return int(value)
+    if isinstance(value, int):   # beyond int64 (parquet's widest integer): a float
+        return int(value) if -2**63 <= value < 2**63 else float(value)
     if isinstance(value, float):
         return float(value)
     return _SKIP
@@ -217,53 +242,72 @@ def _base_row(cell: Cell) -> dict[str, Any]:
         row[col] = math.nan
     row["config_hash"] = cell.config_hash
     row["code_version"] = cell.code_version
+    row["error_kind"] = ""
+    row["time_limit_s"] = math.nan if cell.time_limit_s is None else float(cell.time_limit_s)
+    row["definition_hash"] = cell.definition_hash
+    return row
+
+
+def failure_row(cell: Cell, kind: str, message: str, wall_s: float = math.nan) -> dict[str, Any]:
+    """The row of a cell that returned no row (its process died or was killed)."""
+    row = _base_row(cell)
+    row["message"], row["error_kind"], row["cell_wall_s"] = message, kind, wall_s
     return row
 
 
 def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
     """Run one cell, write its artifacts under ``out_dir`` and return its results row.
 
-    Artifacts: ``out_dir/traces/<cell>.rrd`` when ``traces``; ``out_dir/series/<cell>.parquet``
-    for controllers with a report series (``report_series`` hook). Both are written atomically. The row has
-    the columns of :data:`LEADING_COLUMNS` plus the controller's scalar summary, prefixed
-    ``ctl_``.
+    Artifacts: ``out_dir/traces/<cell>.rrd`` when ``traces`` (streamed while the cell runs,
+    :class:`bench.traces.TraceRecorder`); ``out_dir/series/<cell>.parquet`` for controllers with
+    a report series (``report_series`` hook). Both are written atomically. The row has the columns of
+    :data:`LEADING_COLUMNS` plus the controller's scalar summary, prefixed ``ctl_``. A row whose
+    status is not ``ok`` has NaN metrics.
     """
-    from bench.runner import run_closed_loop
+    from bench.runner import MemoryRecorder, run_closed_loop
     from bench.series import figure_series, wants_series
-    from bench.traces import write_trace
+    from bench.traces import TeeRecorder, TraceRecorder
 
     wall0 = time.perf_counter()
     out = Path(out_dir)
     row = _base_row(cell)
+    trace = None
     try:
-        with _hard_limit(None if cell.time_limit_s is None else 1.25 * cell.time_limit_s + 10.0):
-            load_plugins(cell.plugins, cell.plugin_dirs)
-            controller = cell.controller.build()
-            row["controller_family"] = type(controller).family
-            series = wants_series(controller)
-            result = run_closed_loop(cell.scenario.params, controller, duration_s=cell.duration_s,
-                                     warmup_s=cell.warmup_s, seed=cell.seed, record=traces or series,
-                                     time_limit_s=cell.time_limit_s)
-            row["status"], row["message"] = result.status, result.message
-            row.update({k: _scalar(v) for k, v in result.metrics.items()})
-            row["simulated_s"] = float(result.simulated_s)
-            summary = {k: _scalar(v) for k, v in result.summary.items()}
-            counter = type(controller).counter
-            corrections = summary.get(counter) if counter else None
-            if isinstance(corrections, (int, float)) and not isinstance(corrections, bool):
-                row["n_corrections"] = corrections
-            row.update({f"ctl_{k}": v for k, v in summary.items() if v is not _SKIP})
-            if series:
-                frame, peaks = figure_series(result, controller, cell.warmup_s)
-                row.update(peaks)
-                _write_parquet(frame, out / "series" / f"{cell.cell_id}.parquet")
-            if traces:
-                write_trace(out / "traces" / f"{cell.cell_id}.rrd", result, recording_id=cell.cell_id)
-    except _HardTimeout as exc:
-        row["status"], row["message"] = "error", str(exc)
-    except Exception as exc:  # a failing cell is a result (STYLE §8)
-        prefix = "" if row["status"] == "error" else "artifact: "
-        row["status"], row["message"] = "error", prefix + _error_message(exc)
+        load_plugins(cell.plugins, cell.plugin_dirs)
+        controller = cell.controller.build()
+        row["controller_family"] = type(controller).family
+        series = wants_series(controller)
+        memory = MemoryRecorder() if series else None
+        if traces:
+            trace = TraceRecorder(out / "traces" / f"{cell.cell_id}.rrd", recording_id=cell.cell_id)
+        recorder = TeeRecorder(trace, memory) if (trace or memory) else None
+        result = run_closed_loop(cell.scenario.params, controller, duration_s=cell.duration_s,
+                                 warmup_s=cell.warmup_s, seed=cell.seed, recorder=recorder,
+                                 time_limit_s=cell.time_limit_s)
+        row["status"], row["message"] = result.status, result.message
+        if result.status == "error":
+            row["error_kind"] = "time_limit" if result.message.startswith("time limit") else "run"
+        row.update({k: _scalar(v) for k, v in result.metrics.items()})
+        row["simulated_s"] = float(result.simulated_s)
+        summary = {k: _scalar(v) for k, v in result.summary.items()}
+        counter = type(controller).counter
+        corrections = summary.get(counter) if counter else None
+        if isinstance(corrections, (int, float)) and not isinstance(corrections, bool):
+            row["n_corrections"] = corrections
+        row.update({f"ctl_{k}": v for k, v in summary.items() if v is not _SKIP})
+        if series:
+            samples, events, internals = memory.arrays()
+            result = dataclasses.replace(result, samples=samples, events=events, internals=internals)
+            frame, peaks = figure_series(result, controller, cell.warmup_s)
+            row.update(peaks)
+            _write_parquet(frame, out / "series" / f"{cell.cell_id}.parquet")
+    except BaseException as exc:  # noqa: BLE001 — a failing cell is a result (STYLE §8), whatever it raised
+        artifact = row["status"] != "error"
+        row["status"], row["message"] = "error", ("artifact: " if artifact else "") + _error_message(exc)
+        row["error_kind"] = "artifact" if artifact else "run"
+    if row["status"] != "ok":
+        for col in (*METRIC_COLUMNS, *SIZE_PEAK_COLUMNS):
+            row[col] = math.nan
     row["cell_wall_s"] = time.perf_counter() - wall0
     return row
 

@@ -8,10 +8,13 @@ Commands (one function each; a new command is one more ``@app.command`` function
 * ``check-bound`` — the empirical check of inequality (2-6) and the lag limit (2-1) (SPEC §6);
 * ``speed`` — the work-precision comparison behind the ≥ 1000× claim (SPEC §8).
 
-Exit codes: 0 done (cells with status ``error`` are results, not failures of the command);
-1 some cells could not be run (a lost worker) or the report failed; 2 a user error — a malformed
-matrix, an unknown controller or scenario, a bad parameter, an unwritable ``--out`` — reported in
-one line naming the file, line or field, with nothing written to the results; 130 interrupted.
+Exit codes: 0 done (cells with status ``error`` are results, not failures of the command — also a
+cell whose process died or hung); 1 the run directory could not be written (full disk ...) or the
+report failed, in one line naming the path; 2 a user error — a malformed matrix, an unknown
+controller or scenario, a bad parameter, an unwritable ``--out``, a run directory of another
+matrix, a usage error — reported in one line naming the file, line, field or flag, with nothing
+written to the results; 130 interrupted (Ctrl-C), 143 SIGTERM, 129 SIGHUP (finished cells are
+kept and the tables rebuilt).
 """
 
 from __future__ import annotations
@@ -54,6 +57,13 @@ def _user_errors(fn: Callable[..., Any]) -> Callable[..., Any]:
             raise typer.Exit(2) from None
 
     return wrapper
+
+
+def _out_dir(value: str, flag: str = "--out") -> Path:
+    """``--out`` as a path; an empty value is a user error (not the current directory)."""
+    if not value.strip():
+        raise UserError(f"{flag} must name a directory, got an empty value")
+    return Path(value)
 
 
 def _writable_dir(path: Path, flag: str = "--out") -> Path:
@@ -119,27 +129,36 @@ def _print_aggregate(results, matrix) -> None:
 def run(
     matrix: Optional[Path] = typer.Option(None, "--matrix", help="Matrix TOML file (default: the built-in default matrix)."),
     quick: bool = typer.Option(False, "--quick", help="The built-in quick matrix (about a minute on 2 cores)."),
-    out: Path = typer.Option(Path("results"), "--out", help="Run directory; a re-run resumes it."),
+    out_value: str = typer.Option("results", "--out", help="Run directory; a re-run resumes it."),
     executor: str = typer.Option("local", "--executor", help="local (process pool) or dask."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="dask scheduler address (default: a LocalCluster)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: CPU count)."),
-    no_traces: bool = typer.Option(False, "--no-traces", help="Do not write rerun traces."),
+    traces_policy: Optional[str] = typer.Option(None, "--traces", help="Which cells write a rerun trace: all, "
+                                                "first-seed (default: one per controller x scenario) or none."),
+    no_traces: bool = typer.Option(False, "--no-traces", help="Same as --traces none."),
 ) -> None:
     """Run a benchmark matrix: DIR/results.{parquet,csv}, DIR/traces/*.rrd, DIR/report.html."""
     from bench.executors import make_executor   # light: the flags are checked before the simulator loads
 
     if matrix is not None and quick:
         raise UserError("--matrix and --quick exclude each other")
+    if no_traces and traces_policy not in (None, "none"):
+        raise UserError(f"--no-traces and --traces {traces_policy} exclude each other")
+    traces = "none" if no_traces else (traces_policy or "first-seed")
+    if traces not in ("all", "first-seed", "none"):
+        raise UserError(f"--traces must be one of all, first-seed, none; got {traces!r}")
+    out = _out_dir(out_value)
     pool = make_executor(executor, workers, scheduler)
     from bench.matrix import builtin_matrix_path, load_matrix
     spec = load_matrix(matrix if matrix is not None else builtin_matrix_path(quick))
+    from bench.store import check_layout
+    check_layout(out)
     _writable_dir(out)
 
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
     from bench.driver import run_matrix
-    traces = not no_traces
 
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                         TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(),
@@ -163,6 +182,12 @@ def run(
     try:
         outcome = run_matrix(spec, out, executor=pool, traces=traces, on_start=on_start, on_cell=on_cell,
                              command=shlex.join(["solnic-bench", *sys.argv[1:]]))
+    except OSError as exc:   # the run directory cannot be written: what was stored stays stored
+        progress.stop()
+        where = exc.filename or out
+        err_console.print(f"error: {escape(str(where))}: {escape(exc.strerror or str(exc))} (cells stored so far "
+                          f"are kept; run again with --out {escape(str(out))} to resume)", soft_wrap=True)
+        raise typer.Exit(1) from None
     finally:
         progress.stop()
 
@@ -176,8 +201,11 @@ def run(
     for cell, why in outcome.lost:
         err_console.print(f"{escape(cell)}: not run: {escape(why)}", soft_wrap=True)
     if outcome.interrupted:
-        err_console.print(f"interrupted: {len(outcome.computed)} cells stored; run again with --out {out} to resume")
-        raise typer.Exit(130)
+        import signal as _signal
+        what = _signal.Signals(outcome.signal).name if outcome.signal else "interrupted"
+        err_console.print(f"{what}: stopped; {len(outcome.computed)} cells stored, tables rebuilt; run again with "
+                          f"--out {out} to resume", soft_wrap=True)
+        raise typer.Exit(128 + outcome.signal if outcome.signal else 130)
     try:
         path = _build_report(out)
     except Exception as exc:  # the results are stored; say what failed, exit 1
@@ -195,8 +223,11 @@ def run(
 @_user_errors
 def report(run_dir: Path = typer.Argument(..., help="A run directory written by `solnic-bench run`.")) -> None:
     """Rebuild DIR/report.html from the results stored in DIR."""
-    if not run_dir.is_dir():
+    if not str(run_dir).strip() or not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run directory")
+    if not (run_dir / "results.parquet").is_file() and not any(run_dir.glob("cells/*.json")):
+        raise UserError(f"{run_dir}: no results (no results.parquet, no cells/); run `solnic-bench run --out "
+                        f"{run_dir}` first")
     try:
         from reports import build_report_from_dir
     except ImportError as exc:
@@ -220,7 +251,7 @@ def list_(
     from bench.matrix import builtin_matrix_path, load_matrix
     from bench.scenarios import builtin_scenarios
 
-    spec = load_matrix(matrix) if matrix is not None else None
+    spec = load_matrix(matrix, check_resets=False) if matrix is not None else None
     table = Table(title="controllers", title_justify="left")
     for col in ("name", "drive", "description"):
         table.add_column(escape(col))
@@ -240,8 +271,8 @@ def list_(
         table.add_row(escape(name), f"{s.duration_s:g}", f"{s.warmup_s:g}", escape(s.description))
     out_console.print(table)
     for quick in (False, True):
-        m = load_matrix(builtin_matrix_path(quick))
-        n = len(m.cells())
+        m = load_matrix(builtin_matrix_path(quick), check_resets=False)
+        n = len(m.controllers) * len(m.scenarios) * len(m.seeds)
         out_console.print(f"{'--quick' if quick else 'default'} matrix: {n} cells = "
                           f"{len(m.controllers)} controllers × {len(m.scenarios)} scenarios × "
                           f"{len(m.seeds)} seeds ({escape(m.source)})")
@@ -260,13 +291,33 @@ app.command("check-bound")(_user_errors(check_bound_command))
 app.command("speed")(_user_errors(speed_command))
 
 
-def main() -> None:
-    """Entry point for ``python -m bench.cli`` (the console script calls ``app`` directly)."""
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``solnic-bench`` and ``python -m bench.cli``: click's usage errors (unknown
+    flag, missing value, bad type) become one line ``error: ...`` and exit 2, like every user error."""
     try:
-        app()
+        from typer._click import exceptions as click_errors   # typer >= 0.22 vendors click
+    except ImportError:  # pragma: no cover - older typer on click
+        from click import exceptions as click_errors
+
+    try:
+        code = app(args=argv, standalone_mode=False)
+    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:   # bare command: its help
+        exc.show()
+        sys.exit(2)
+    except click_errors.UsageError as exc:
+        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+        err_console.print(f"error: {escape(where + ' '.join(exc.format_message().split()))}", soft_wrap=True)
+        sys.exit(2)
+    except click_errors.ClickException as exc:
+        err_console.print(f"error: {escape(' '.join(exc.format_message().split()))}", soft_wrap=True)
+        sys.exit(exc.exit_code)
+    except typer.Abort:   # Ctrl-C outside a run
+        err_console.print("interrupted")
+        sys.exit(130)
     except UserError as exc:  # raised outside a command body; commands handle their own
         err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
         sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -3,17 +3,27 @@
 The order of events, so that a kill at any moment leaves a consistent directory:
 
 1. take the directory lock and remove temporaries of a killed run;
-2. find the cells still to do (no stored row with the same config hash, or a missing trace);
+2. refuse a matrix of another definition (:meth:`ResultsStore.check_matrix`), then find the
+   cells still to do (no stored row with the same config hash, a retried error, or a missing
+   trace the traces policy wants);
 3. start the executor (a scheduler that cannot be reached fails here, before anything is
    written), then write ``config.json`` and ``meta.json``;
-4. store each finished cell's row as its own file the moment it arrives;
-5. rebuild ``results.parquet``/``results.csv`` from the cell files — also after Ctrl-C or a
-   failure — and complete ``meta.json``.
+4. store each finished cell's row as its own file the moment it arrives — a cell whose process
+   died, overran its limit or raised anything is stored as an ``error`` row with the reason;
+5. rebuild ``results.parquet``/``results.csv`` from the cell files — also after Ctrl-C,
+   SIGTERM, SIGHUP or a failure — and complete ``meta.json``.
+
+SIGTERM and SIGHUP are handled like Ctrl-C while the run holds the directory: the cell
+processes are killed (none survives the run), finished cells stay stored, the tables are
+rebuilt, and :attr:`RunOutcome.signal` says which signal stopped the run.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -22,14 +32,57 @@ from typing import Any
 
 import pandas as pd
 
-from bench.cells import Cell, run_cell
+from bench.cells import Cell, failure_row, kill_deadline, run_cell
 from bench.executors import Executor
+from bench.isolation import CellFailure
 from bench.matrix import Matrix
 from bench.provenance import run_metadata
 from bench.scenarios import builtin_scenarios
 from bench.store import ResultsStore
 
-__all__ = ["RunOutcome", "run_matrix", "run_config"]
+__all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace"]
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP arrived: stop like Ctrl-C (a KeyboardInterrupt, so the same paths run)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def _stop_on_signals():
+    """Turn SIGTERM/SIGHUP into :class:`Stopped` (main thread only); a second one during the
+    cleanup is ignored so that the tables are rebuilt."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+
+    def handler(signum, frame):
+        for sig in previous:
+            signal.signal(sig, signal.SIG_IGN)
+        raise Stopped(signum)
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        previous[sig] = signal.signal(sig, handler)
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def wants_trace(cell: Cell, policy: str, first_seed: int | None) -> bool:
+    """Whether the traces policy (``all``, ``first-seed``, ``none``) keeps this cell's trace."""
+    if policy == "all":
+        return True
+    if policy == "first-seed":
+        return cell.seed == first_seed
+    if policy == "none":
+        return False
+    raise ValueError(f"traces policy must be one of all, first-seed, none; got {policy!r}")
 
 
 @dataclass
@@ -42,10 +95,11 @@ class RunOutcome:
     computed: list[str] = field(default_factory=list)
     lost: list[tuple[str, str]] = field(default_factory=list)   # (cell, why) not stored
     interrupted: bool = False
+    signal: int | None = None        # SIGTERM/SIGHUP that stopped the run (None: Ctrl-C or none)
     elapsed_s: float = 0.0
 
 
-def run_config(matrix: Matrix, traces: bool) -> dict[str, Any]:
+def run_config(matrix: Matrix, traces: bool | str) -> dict[str, Any]:
     """``config.json``: the resolved matrix, for the report and for humans.
 
     ``plant`` and ``warmup_s`` are the thesis scenario's (the report's classical limit and
@@ -70,56 +124,74 @@ def run_config(matrix: Matrix, traces: bool) -> dict[str, Any]:
     }
 
 
-def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, traces: bool = True,
+def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, traces: bool | str = "first-seed",
                on_start: Callable[[int, int], None] | None = None,
                on_cell: Callable[[dict[str, Any]], None] | None = None,
                command: str = "") -> RunOutcome:
     """Run the cells of ``matrix`` that ``out_dir`` does not hold yet.
 
-    ``on_start(to_run, already_done)`` is called once the work is known; ``on_cell(row)`` after
-    each stored cell. ``executor`` is started here (only if there is work) and closed.
-    A KeyboardInterrupt stops the run after storing what finished; the outcome says so.
+    ``traces``: ``"all"``, ``"first-seed"`` (one trace per controller × scenario) or ``"none"``
+    (True/False mean all/none). ``on_start(to_run, already_done)`` is called once the work is
+    known; ``on_cell(row)`` after each stored cell. ``executor`` is started here (only if there
+    is work) and closed. A KeyboardInterrupt, SIGTERM or SIGHUP stops the run after storing what
+    finished; the outcome says so.
+
+    Raises
+    ------
+    RunDirConflict
+        ``out_dir`` holds cells of another matrix definition (nothing is written).
+    OSError
+        The run directory cannot be written (full disk ...); what was stored stays stored.
     """
+    policy = {True: "all", False: "none"}.get(traces, traces)  # type: ignore[call-overload]
     t0 = time.perf_counter()
     store = ResultsStore(out_dir)
     cells = matrix.cells()
-    with store.lock():
+    first_seed = matrix.seeds[0] if matrix.seeds else None
+    trace_of = {c.cell_id: wants_trace(c, policy, first_seed) for c in cells}
+    with _stop_on_signals(), store.lock():
+        store.check_matrix(cells)
         store.clean_temporaries()
-        todo: list[Cell] = [c for c in cells if not store.is_done(c, traces)]
+        todo: list[Cell] = [c for c in cells if not store.is_done(c, trace_of[c.cell_id])]
         outcome = RunOutcome(pd.DataFrame(), len(cells), len(cells) - len(todo))
-        if todo:
-            executor.workers = max(1, min(executor.workers, len(todo)))
-            executor.start()    # an unreachable scheduler fails here, before anything is written
-        if on_start:
-            on_start(len(todo), outcome.skipped)
-        meta = run_metadata(command=command, executor=executor.describe() if todo else {"executor": None},
-                            cells=len(cells), to_run=len(todo))
+        started = False
+        meta: dict[str, Any] = {}
         try:
-            store.write_json("config.json", run_config(matrix, traces))
+            if todo:
+                executor.workers = max(1, min(executor.workers, len(todo)))
+                executor.start()    # an unreachable scheduler fails here, before anything is written
+                started = True
+            if on_start:
+                on_start(len(todo), outcome.skipped)
+            meta = run_metadata(command=command, executor=executor.describe() if todo else {"executor": None},
+                                cells=len(cells), to_run=len(todo))
+            store.write_json("config.json", run_config(matrix, policy))
             store.write_json("meta.json", meta)
             if todo:
-                calls = [(c, str(store.root), traces) for c in todo]
-                try:
-                    for i, row, exc in executor.map_unordered(run_cell, calls):
-                        if exc is not None:
-                            outcome.lost.append((todo[i].cell_id, f"{type(exc).__name__}: {exc}"))
-                            continue
-                        store.save(row)
-                        outcome.computed.append(row["cell"])
-                        if on_cell:
-                            on_cell(row)
-                except KeyboardInterrupt:
-                    outcome.interrupted = True
+                calls = [(c, str(store.root), trace_of[c.cell_id]) for c in todo]
+                for i, row, exc in executor.map_unordered(run_cell, calls, [kill_deadline(c) for c in todo]):
+                    if exc is not None:
+                        kind = exc.kind if isinstance(exc, CellFailure) else "crash"
+                        row = failure_row(todo[i], "crash" if kind == "raised" else kind,
+                                          str(exc) if isinstance(exc, CellFailure) else f"{type(exc).__name__}: {exc}")
+                    store.save(row)
+                    outcome.computed.append(row["cell"])
+                    if on_cell:
+                        on_cell(row)
+        except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (Stopped)
+            outcome.interrupted = True
+            outcome.signal = getattr(exc, "signum", None)
         finally:
-            if todo:
+            if started:
                 executor.close(cancel=True)
-            outcome.results = store.rebuild(cells)
-            outcome.elapsed_s = time.perf_counter() - t0
-            meta.update(finished_utc=_utc_now(), elapsed_s=round(outcome.elapsed_s, 3),
-                        computed=len(outcome.computed), lost=len(outcome.lost),
-                        interrupted=outcome.interrupted,
-                        cells_ok=int((outcome.results.get("status", pd.Series(dtype=str)) == "ok").sum()))
-            store.write_json("meta.json", meta)
+            if meta:   # the run got as far as writing: rebuild the tables from what is stored
+                outcome.results = store.rebuild(cells)
+                outcome.elapsed_s = time.perf_counter() - t0
+                meta.update(finished_utc=_utc_now(), elapsed_s=round(outcome.elapsed_s, 3),
+                            computed=len(outcome.computed), lost=len(outcome.lost),
+                            interrupted=outcome.interrupted, signal=outcome.signal,
+                            cells_ok=int((outcome.results.get("status", pd.Series(dtype=str)) == "ok").sum()))
+                store.write_json("meta.json", meta)
     return outcome
 
 

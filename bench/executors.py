@@ -1,15 +1,24 @@
-"""Where cells run: a local process pool (default) or a dask.distributed cluster.
+"""Where cells run: a local pool of per-cell processes (default) or a dask.distributed cluster.
 
 Both call the same pure :func:`bench.cells.run_cell` on the same :class:`~bench.cells.Cell`
 objects, and every random number comes from the cell's own seed, so the results are identical
 (apart from the runtime columns) whichever executor runs them and in whatever order.
 
-* ``local``: :class:`concurrent.futures.ProcessPoolExecutor` with ``workers`` processes
-  (default ``os.cpu_count()``), started by a forkserver that has the simulator imported.
+Crash isolation (both executors): every cell runs in a fresh child process
+(:func:`bench.isolation.call_isolated`) watched from outside with a wall-clock deadline, so a
+cell that dies (``os._exit``, segfault, OOM kill), hangs (also in C code) or raises anything
+yields a :class:`~bench.isolation.CellFailure` for that cell only; the other cells go on.
+
+* ``local``: a :class:`concurrent.futures.ThreadPoolExecutor` with ``workers`` threads, each of
+  which waits on one cell process at a time (default ``os.cpu_count()`` processes at once).
 * ``dask``: ``Client(address)`` for a running scheduler (``--scheduler``), else a
-  ``LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)``. Workers write the
-  artifacts (traces, series) into the run directory themselves, so with a remote cluster
-  ``DIR`` must be on a file system the workers share, and the workers need this package.
+  ``LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)`` (nanny-managed,
+  non-daemonic workers so that they may start the cell process). Tasks are submitted with
+  ``retries=0``. A worker that dies under a task (remote daemonic workers run the cell in the
+  worker itself) gives a failure for that cell; the nanny restarts the worker. A scheduler with no
+  worker after :data:`WORKER_WAIT_S` seconds is an :class:`ExecutorError`. Workers write the
+  artifacts (traces, series) into the run directory themselves, so with a remote cluster ``DIR``
+  must be on a file system the workers share, and the workers need this package.
 """
 
 from __future__ import annotations
@@ -18,17 +27,23 @@ import abc
 import logging
 import multiprocessing
 import os
+import re
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Any
+
+from bench.isolation import CellFailure, call_isolated, kill_all, ready, reopen
 
 from bench.errors import UserError
 
-__all__ = ["Executor", "LocalExecutor", "DaskExecutor", "ExecutorError", "make_executor", "EXECUTORS"]
+__all__ = ["Executor", "LocalExecutor", "DaskExecutor", "ExecutorError", "make_executor", "EXECUTORS",
+           "CellFailure", "WORKER_WAIT_S"]
 
 EXECUTORS = ("local", "dask")
-# What the forkserver imports once, so that each worker starts with the simulator loaded.
-_PRELOAD = ["bench.cells", "bench.runner", "bench.series", "bench.traces", "controllers"]
+# How long a scheduler may have no worker before the run gives up [s] (env SOLNIC_BENCH_WORKER_WAIT_S).
+WORKER_WAIT_S = 60.0
+# Schemes of distributed.comm's backends; a bare host:port means tcp.
+_SCHEDULER = re.compile(r"^(?:(tcp|tls|ws|wss|ucx|inproc)://)?(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)(?::(\d{1,5}))?/?$")
 
 
 class ExecutorError(UserError):
@@ -50,8 +65,14 @@ class Executor(abc.ABC):
 
     @abc.abstractmethod
     def map_unordered(self, fn: Callable[..., Any], calls: Sequence[tuple[Any, ...]],
+                      deadlines: Sequence[float | None] | None = None,
                       ) -> Iterator[tuple[int, Any, BaseException | None]]:
-        """Yield ``(index, result, None)`` or ``(index, None, exception)`` per call, as they finish."""
+        """Yield ``(index, result, None)`` or ``(index, None, exception)`` per call, as they finish.
+
+        Each call runs in its own process; ``deadlines[i]`` (wall seconds, None = none) is enforced
+        from outside it. A failed call's exception is a :class:`CellFailure` (or, on dask, what the
+        cluster raised for a lost worker).
+        """
         raise NotImplementedError
 
     @abc.abstractmethod
@@ -71,17 +92,19 @@ class Executor(abc.ABC):
 
 
 class LocalExecutor(Executor):
-    """A process pool on this machine."""
+    """Per-cell processes on this machine, ``workers`` at a time."""
 
     kind = "local"
 
     def start(self) -> None:
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(_PRELOAD)
-        self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
+        reopen()
+        ready()
+        self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="cell")
 
-    def map_unordered(self, fn, calls):
-        futures = {self._pool.submit(fn, *args): i for i, args in enumerate(calls)}
+    def map_unordered(self, fn, calls, deadlines=None):
+        deadlines = list(deadlines) if deadlines is not None else [None] * len(calls)
+        futures = {self._pool.submit(call_isolated, fn, tuple(args), limit): i
+                   for i, (args, limit) in enumerate(zip(calls, deadlines))}
         for fut in as_completed(futures):
             exc = fut.exception()
             yield futures[fut], (None if exc else fut.result()), exc
@@ -89,8 +112,21 @@ class LocalExecutor(Executor):
     def close(self, cancel: bool = False) -> None:
         pool = getattr(self, "_pool", None)
         if pool is not None:
+            if cancel:
+                kill_all()    # the waiting threads see their process die and return
             pool.shutdown(wait=True, cancel_futures=cancel)
             self._pool = None
+
+
+def _dask_task(fn, args, deadline):
+    """Runs on a dask worker: the cell in its own process when the worker may have children."""
+    if multiprocessing.current_process().daemon:
+        return ("ok", fn(*args))
+    try:
+        ready()
+        return ("ok", call_isolated(fn, tuple(args), deadline))
+    except CellFailure as exc:
+        return ("failed", exc.kind, exc.message)
 
 
 class DaskExecutor(Executor):
@@ -104,32 +140,51 @@ class DaskExecutor(Executor):
         self._client = self._cluster = None
 
     def start(self) -> None:
+        import dask
         from distributed import Client, LocalCluster
 
+        wait_s = float(os.environ.get("SOLNIC_BENCH_WORKER_WAIT_S", WORKER_WAIT_S))
         if self.address:
             try:
                 self._client = Client(self.address, timeout="15s", set_as_default=False)
             except (OSError, TimeoutError, ValueError) as exc:
                 raise ExecutorError(f"--scheduler {self.address}: cannot connect: {exc}") from None
+            try:
+                self._client.wait_for_workers(1, timeout=wait_s)
+            except (TimeoutError, OSError):
+                self.close()
+                raise ExecutorError(f"--scheduler {self.address}: no worker joined within {wait_s:g} s; "
+                                    f"start one with `dask worker {self.address}`") from None
             self.workers = len(self._client.scheduler_info().get("workers", {})) or self.workers
         else:
-            self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, silence_logs=logging.ERROR)
+            with dask.config.set({"distributed.worker.daemon": False}):
+                self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                             dashboard_address=None, silence_logs=logging.ERROR)
             self._client = Client(self._cluster, set_as_default=False)
 
-    def map_unordered(self, fn, calls):
+    def map_unordered(self, fn, calls, deadlines=None):
         from distributed import as_completed as dask_as_completed
 
-        futures = {self._client.submit(fn, *args, pure=False): i for i, args in enumerate(calls)}
+        deadlines = list(deadlines) if deadlines is not None else [None] * len(calls)
+        futures = {self._client.submit(_dask_task, fn, args, limit, pure=False, retries=0): i
+                   for i, (args, limit) in enumerate(zip(calls, deadlines))}
         for fut in dask_as_completed(list(futures), loop=self._client.loop):
             try:
-                yield futures[fut], fut.result(), None
-            except Exception as exc:  # a lost worker; the cell is left for the next run
-                yield futures[fut], None, exc
+                answer = fut.result()
+            except Exception as exc:  # a lost worker (KilledWorker) or an error outside the cell
+                yield futures[fut], None, CellFailure("crash", f"dask: {type(exc).__name__}: {exc}")
+                continue
+            if answer[0] == "ok":
+                yield futures[fut], answer[1], None
+            else:
+                yield futures[fut], None, CellFailure(answer[1], answer[2])
 
     def close(self, cancel: bool = False) -> None:
         if self._client is not None:
-            self._client.close()
+            try:
+                self._client.close()
+            except Exception:  # closing a half-connected client must not mask the real error
+                pass
             self._client = None
         if self._cluster is not None:
             self._cluster.close()
@@ -151,7 +206,12 @@ def make_executor(kind: str, workers: int | None = None, scheduler: str | None =
         raise ExecutorError(f"--executor must be one of {list(EXECUTORS)}, got {kind!r}")
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ExecutorError(f"--workers must be an integer >= 1, got {workers!r}")
-    if scheduler and kind != "dask":
+    if scheduler is not None and kind != "dask":
         raise ExecutorError("--scheduler needs --executor dask")
+    if scheduler is not None:
+        m = _SCHEDULER.match(scheduler)
+        if not m or (m.group(3) is not None and not 0 < int(m.group(3)) < 65536):
+            raise ExecutorError(f"--scheduler {scheduler!r}: expected [tcp|tls|ws|wss|ucx|inproc://]HOST[:PORT], "
+                                f"e.g. tcp://127.0.0.1:8786")
     n = workers if workers is not None else (os.cpu_count() or 1)
     return DaskExecutor(n, scheduler) if kind == "dask" else LocalExecutor(n)

@@ -36,7 +36,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from bench.cells import Cell, ControllerSpec, load_plugins
+from bench.cells import Cell, ControllerSpec, load_plugins, plugin_digest
 from bench.errors import UserError
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
 from plant.params import PlantParams
@@ -45,6 +45,8 @@ __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matr
            "DEFAULT_TIME_LIMIT_S"]
 
 DEFAULT_TIME_LIMIT_S = 600.0
+MAX_TIME_LIMIT_S = 7 * 86400.0     # a week of wall clock per cell
+_MAX_MATRIX_BYTES = 1_000_000
 _MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
                 "description")
 _PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
@@ -75,8 +77,10 @@ class Matrix:
     variants: dict[str, ControllerSpec] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
-        """Every cell, in matrix order: controller, then scenario, then seed."""
-        return [Cell(c, s, seed, self.time_limit_s, self.plugins, self.plugin_dirs)
+        """Every cell, in matrix order: controller, then scenario, then seed. Each carries a
+        digest of the plugins' source (an edited plugin gives new config hashes)."""
+        source = plugin_digest(self.plugins, self.plugin_dirs)
+        return [Cell(c, s, seed, self.time_limit_s, self.plugins, self.plugin_dirs, plugin_source=source)
                 for c in self.controllers for s in self.scenarios for seed in self.seeds]
 
     def to_json(self) -> dict[str, Any]:
@@ -96,8 +100,9 @@ def builtin_matrix_path(quick: bool = False) -> Path:
     return Path(str(resources.files("bench").joinpath("matrices", name)))
 
 
-def load_matrix(path: str | Path) -> Matrix:
-    """Read and validate a matrix file.
+def load_matrix(path: str | Path, *, check_resets: bool = True) -> Matrix:
+    """Read and validate a matrix file (``check_resets=False`` skips the dry controller resets,
+    for listings).
 
     Raises
     ------
@@ -107,7 +112,13 @@ def load_matrix(path: str | Path) -> Matrix:
     path = Path(path)
     label = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        if not path.is_file():   # a directory, /dev/zero, a FIFO: never read
+            raise MatrixError(f"{label}: not a regular file" if path.exists() else f"{label}: no such file")
+        with path.open("rb") as fh:
+            raw = fh.read(_MAX_MATRIX_BYTES + 1)
+        if len(raw) > _MAX_MATRIX_BYTES:
+            raise MatrixError(f"{label}: larger than {_MAX_MATRIX_BYTES} bytes; not a matrix file")
+        text = raw.decode("utf-8-sig")   # a UTF-8 byte-order mark is allowed
     except (OSError, UnicodeDecodeError) as exc:
         raise MatrixError(f"{label}: cannot read the matrix file: {exc}") from None
     try:
@@ -121,7 +132,7 @@ def load_matrix(path: str | Path) -> Matrix:
         else:
             where = label
         raise MatrixError(f"{where}: invalid TOML: {exc}") from None
-    return parse_matrix(data, label, base_dir=path.resolve().parent)
+    return parse_matrix(data, label, base_dir=path.resolve().parent, check_resets=check_resets)
 
 
 def _fail(source: str, key: str, message: str) -> MatrixError:
@@ -156,7 +167,8 @@ def _field_of(message: str, prefix: str) -> str | None:
     return m.group(1) if m else None
 
 
-def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Path | None = None) -> Matrix:
+def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Path | None = None,
+                 check_resets: bool = True) -> Matrix:
     """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages."""
     unknown = sorted(set(data) - {"matrix", "scenarios", "controllers"})
     if unknown:
@@ -195,6 +207,8 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     warmup = _number(source, "matrix.warmup_s", m["warmup_s"], positive=True) if "warmup_s" in m else None
     limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
                     positive=True, allow_zero=False)
+    if limit > MAX_TIME_LIMIT_S:
+        raise _fail(source, "matrix.time_limit_s", f"must be <= {MAX_TIME_LIMIT_S:g} s (a week), got {limit!r}")
     description = m.get("description", "")
     if not isinstance(description, str):
         raise _fail(source, "matrix.description", f"must be a string, got {description!r}")
@@ -222,8 +236,49 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         except ValueError as exc:
             key = "matrix.warmup_s" if warmup is not None else "matrix.duration_s"
             raise _fail(source, key, f"scenario {name!r}: {exc}") from None
+    for scenario in chosen_scenarios:
+        _check_samples(source, scenario, duration is not None, warmup is not None)
+    if check_resets:
+        _check_resets(source, chosen_controllers, chosen_scenarios, set(variants))
     return Matrix(source, tuple(chosen_controllers), tuple(chosen_scenarios), tuple(seeds), limit,
                   tuple(plugins), plugin_dirs, duration, warmup, description, variants)
+
+
+def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matrix_warmup: bool) -> None:
+    """The run length and warm-up in whole samples, as the runner counts them: at least one
+    sample, and a scoring window of at least one sample."""
+    tau = scenario.params.sample_period
+    n = round(scenario.duration_s / tau)
+    n_warm = round(scenario.warmup_s / tau)
+    where = "matrix" if matrix_duration or matrix_warmup else f"scenarios.{scenario.name}"
+    if n < 1:
+        raise _fail(source, f"{where}.duration_s", f"scenario {scenario.name!r}: {scenario.duration_s!r} s is "
+                                                   f"less than half a sample period ({tau} s)")
+    if n_warm >= n:
+        raise _fail(source, f"{where}.warmup_s", f"scenario {scenario.name!r}: warmup_s = {scenario.warmup_s!r} s "
+                                                 f"leaves no sample to score before duration_s = "
+                                                 f"{scenario.duration_s!r} s (sample period {tau} s)")
+
+
+def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: list[Scenario],
+                  variants: set[str]) -> None:
+    """Reset every controller on every scenario's plant once, so that an option the controller
+    rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now, not an
+    ``error`` row in every cell later."""
+    import numpy as np
+
+    for cs in controllers:
+        for scenario in scenarios:
+            try:
+                cs.build().reset(scenario.params, np.random.default_rng(0))
+            except Exception as exc:   # the controller's own validation message
+                msg = str(exc)
+                named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
+                key = f"controllers.{cs.name}" if cs.name in variants else f"matrix.controllers"
+                if named and cs.name in variants:
+                    key += f".{named[0]}"
+                raise _fail(source, key, f"rejected on scenario {scenario.name!r}: "
+                                         f"{type(exc).__name__}: {msg}") from None
 
 
 def _scenarios(source: str, table: Any) -> dict[str, Scenario]:

@@ -12,6 +12,16 @@ Layout of ``DIR``:
 
 A cell counts as done when its file holds the same ``config_hash`` (and, when traces are wanted,
 its trace exists); anything else — missing, unreadable, another configuration — is recomputed.
+An ``error`` row is done only if its cause was the configuration (``error_kind`` ``run``) and it
+ran under the same ``time_limit_s``; a time-limit stop, a dead cell process or a failed artifact
+depend on the machine and are run again.
+
+A run directory belongs to one matrix definition (:meth:`ResultsStore.check_matrix`): every
+stored cell must be a cell of the new matrix with the same *definition hash* (controller,
+options, scenario, plant, seed, run length, warm-up, plugins). A second, different matrix into the
+same directory is refused as a user error before anything is written; a grown matrix (more
+seeds, controllers or scenarios) and changed code (edited simulator or plugin source: same
+definition, new config hash, so the cell is recomputed) are accepted.
 """
 
 from __future__ import annotations
@@ -31,11 +41,29 @@ import pandas as pd
 from bench.cells import LEADING_COLUMNS, Cell
 from bench.errors import UserError
 
-__all__ = ["ResultsStore", "StoreBusy", "write_atomic", "results_frame"]
+__all__ = ["ResultsStore", "StoreBusy", "RunDirConflict", "write_atomic", "results_frame", "check_layout"]
 
 
 class StoreBusy(UserError):
     """Another run holds the directory's lock."""
+
+
+class RunDirConflict(UserError):
+    """The run directory holds results of another matrix definition."""
+
+
+def check_layout(root: Path) -> None:
+    """The run directory's entries have the right types (a user error otherwise, before any write)."""
+    root = Path(root)
+    for name, want_dir in (("cells", True), ("traces", True), ("series", True), ("results.parquet", False),
+                           ("results.csv", False), ("config.json", False), ("meta.json", False),
+                           ("report.html", False), (".lock", False)):
+        p = root / name
+        if p.exists() or p.is_symlink():
+            if want_dir and not p.is_dir():
+                raise UserError(f"{p}: exists and is not a directory; move it away or use another --out")
+            if not want_dir and not p.is_file():
+                raise UserError(f"{p}: exists and is not a regular file; move it away or use another --out")
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -64,15 +92,22 @@ def _column(values: list[Any]) -> pd.Series:
     present = [v for v in values if not _missing(v)]
     if all(isinstance(v, bool) for v in present) and present:
         return pd.Series([pd.NA if _missing(v) else v for v in values], dtype="boolean")
-    if all(isinstance(v, int) and not isinstance(v, bool) for v in present) and present:
+    if (present and all(isinstance(v, int) and not isinstance(v, bool) and -2**63 <= v < 2**63 for v in present)):
         return pd.Series([pd.NA if _missing(v) else v for v in values], dtype="Int64")
     if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
-        return pd.Series([math.nan if _missing(v) else float(v) for v in values], dtype=float)
+        return pd.Series([math.nan if _missing(v) else _float(v) for v in values], dtype=float)
     return pd.Series([None if _missing(v) else str(v) for v in values], dtype="string")
 
 
+def _float(v: int | float) -> float:
+    try:
+        return float(v)
+    except OverflowError:  # an integer beyond 1.8e308
+        return math.inf if v > 0 else -math.inf
+
+
 _TEXT = ("cell", "controller", "scenario", "status", "message", "controller_base", "scenario_base",
-         "config_hash", "code_version")
+         "config_hash", "code_version", "error_kind", "definition_hash")
 
 
 def results_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
@@ -117,12 +152,49 @@ class ResultsStore:
         return row
 
     def is_done(self, cell: Cell, traces: bool) -> bool:
-        """Stored with the same hash (and its trace, if wanted). A cell stopped by the wall-clock
-        limit is not done: that outcome depends on machine load, so a resume runs it again."""
+        """Stored with the same hash (and its trace, if wanted). An ``error`` row is done only if
+        the configuration caused it (``error_kind`` ``run``) under the same ``time_limit_s``: a
+        wall-clock stop, a dead process or a failed artifact depend on the machine, and an error
+        under another limit may not recur, so a resume runs those again."""
         row = self.load(cell)
         if row is None or (traces and not self.trace_path(cell.cell_id).is_file()):
             return False
-        return not (row.get("status") == "error" and "time limit" in str(row.get("message", "")))
+        if row.get("status") != "error":
+            return True
+        kind = row.get("error_kind")
+        if kind is None:   # a row of an older version: the message is all there is
+            return "time limit" not in str(row.get("message", ""))
+        limit = row.get("time_limit_s")
+        same_limit = (cell.time_limit_s is None and _missing(limit)) or limit == cell.time_limit_s
+        return kind == "run" and same_limit
+
+    def check_matrix(self, cells: Iterable[Cell]) -> None:
+        """Refuse a matrix that would overwrite or drop stored cells of another definition.
+
+        Raises
+        ------
+        RunDirConflict
+            A stored cell is not in ``cells``, or has another definition hash.
+        """
+        wanted = {c.cell_id: c for c in cells}
+        if not self.cells_dir.is_dir():
+            return
+        for path in sorted(self.cells_dir.glob("*.json")):
+            try:
+                row = json.loads(path.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                continue    # unreadable: it will be recomputed or ignored
+            if not isinstance(row, dict):
+                continue
+            cell_id = str(row.get("cell", path.stem))
+            cell = wanted.get(cell_id)
+            hint = "use another --out (a run directory holds one matrix; it may only grow)"
+            if cell is None:
+                raise RunDirConflict(f"{self.root}: holds cell {cell_id!r}, which this matrix does not have; {hint}")
+            stored = row.get("definition_hash")
+            if stored is not None and stored != cell.definition_hash:
+                raise RunDirConflict(f"{self.root}: cell {cell_id!r} was run with another definition "
+                                     f"({_difference(row, cell)}); {hint}")
 
     def save(self, row: dict[str, Any]) -> Path:
         """Store one finished cell atomically."""
@@ -173,6 +245,15 @@ class ResultsStore:
             yield
         finally:
             fh.close()
+
+
+def _difference(row: dict[str, Any], cell: Cell) -> str:
+    """A short description of how a stored row differs from ``cell`` (for the refusal message)."""
+    for key, now in (("duration_s", cell.duration_s), ("warmup_s", cell.warmup_s),
+                     ("controller_base", cell.controller.base), ("scenario_base", cell.scenario.base)):
+        if key in row and row[key] != now:
+            return f"{key} {row[key]!r}, now {now!r}"
+    return "controller options, plant parameters or plugins differ"
 
 
 @contextlib.contextmanager

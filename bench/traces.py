@@ -18,10 +18,17 @@ entity                 value                                                   i
 Samples and events are merged and sorted by time (samples first at equal times). At a sample
 instant ``drive/u`` is the level in force just before it; at an event, the level after it.
 Open a trace with ``rerun DIR/traces/<cell>.rrd`` (several files open as several recordings).
+
+:class:`TraceRecorder` is the runner's streaming recorder (``bench.runner.Recorder``): it
+buffers at most :data:`CHUNK_SAMPLES` sample intervals and then sends them to rerun's file
+sink as columns, so a cell's memory stays constant however long it runs. The file is written
+under a temporary name and renamed on :meth:`TraceRecorder.close` (a killed cell leaves no
+half-written trace). :func:`write_trace` writes an already recorded run the same way.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from pathlib import Path
@@ -30,7 +37,13 @@ import numpy as np
 
 from bench.runner import RunResult
 
-__all__ = ["write_trace", "PLANT_ENTITIES", "TIMELINE", "APPLICATION_ID"]
+__all__ = ["write_trace", "TraceRecorder", "TeeRecorder", "PLANT_ENTITIES", "TIMELINE", "APPLICATION_ID",
+           "CHUNK_SAMPLES", "TRACE_POLICIES"]
+
+# Sample intervals buffered before a chunk goes to the file (10 s of a 100 Hz run).
+CHUNK_SAMPLES = 1000
+# --traces: every cell, the first seed of each controller x scenario, or none.
+TRACE_POLICIES = ("all", "first-seed", "none")
 
 TIMELINE = "time"
 APPLICATION_ID = "solnic-bench"
@@ -99,3 +112,121 @@ def write_trace(path: str | Path, result: RunResult, *, recording_id: str) -> Pa
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+class TraceRecorder:
+    """Streams a run into ``path`` as it happens (the runner's ``Recorder`` protocol).
+
+    Memory is bounded by :data:`CHUNK_SAMPLES` sample intervals (their samples, events and
+    controller internals), whatever the run length.
+    """
+
+    def __init__(self, path: str | Path, *, recording_id: str, chunk: int = CHUNK_SAMPLES) -> None:
+        import rerun as rr
+
+        self._rr = rr
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}-{threading.get_ident()}.tmp")
+        self._chunk = chunk
+        self._rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+        self._rec.save(self._tmp)
+        self._samples: dict[str, list[float]] = {}
+        self._events: list[dict[str, np.ndarray]] = []
+        self._internals: dict[str, tuple[list[int], list[float]]] = {}
+        self._n = 0          # samples seen
+        self._closed = False
+
+    def sample(self, row: dict[str, float]) -> None:
+        if self._samples and len(self._samples["t"]) >= self._chunk:
+            self._flush(before=row["t"])
+        for k, v in row.items():
+            self._samples.setdefault(k, []).append(v)
+        self._n += 1
+
+    def events(self, ev: dict[str, np.ndarray]) -> None:
+        if len(ev["t"]):
+            self._events.append({k: np.asarray(ev[k]) for k in ("t", *{e for pair in PLANT_ENTITIES.values()
+                                                                       for e in pair})})
+
+    def internals(self, values: dict[str, float]) -> None:
+        for k, v in values.items():
+            times, vals = self._internals.setdefault(k, ([], []))
+            times.append(self._n - 1)
+            vals.append(float(v))
+
+    def _flush(self, before: float = math.inf) -> None:
+        """Send the buffered samples and the events before ``before`` [s] (the next sample's
+        time: events at that instant go after it, as in the merged order)."""
+        rr = self._rr
+        if not self._samples:
+            return
+        s = {k: np.asarray(v, dtype=float) for k, v in self._samples.items()}
+        if self._events:
+            ev = {k: np.concatenate([e[k] for e in self._events]) for k in self._events[0]}
+            now = ev["t"] < before
+            keep = {k: v[~now] for k, v in ev.items()}
+            ev = {k: v[now] for k, v in ev.items()}
+            self._events = [keep] if len(keep["t"]) else []
+        else:
+            ev = {"t": np.empty(0)}
+        t, order = _merged(s, ev)
+        index = [rr.TimeColumn(TIMELINE, duration=_ns(t))]
+        for entity, (skey, ekey) in PLANT_ENTITIES.items():
+            values = np.concatenate([s[skey], np.asarray(ev.get(ekey, ()), float)])[order]
+            self._rec.send_columns(entity, indexes=index, columns=rr.Scalars.columns(scalars=values))
+        first = self._n - len(s["t"])
+        self._rec.send_columns("sensor/y", indexes=[rr.TimeColumn(TIMELINE, duration=_ns(s["t"]))],
+                               columns=rr.Scalars.columns(scalars=s["y"]))
+        for key in sorted(self._internals):
+            steps, vals = self._internals[key]
+            if steps:
+                at = s["t"][np.asarray(steps, dtype=np.int64) - first]
+                self._rec.send_columns(f"controller/{key}", indexes=[rr.TimeColumn(TIMELINE, duration=_ns(at))],
+                                       columns=rr.Scalars.columns(scalars=np.asarray(vals, float)))
+            self._internals[key] = ([], [])
+        self._samples = {}
+
+    def close(self) -> None:
+        """Send what is buffered and move the file into place (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._flush()
+            self._rec.flush()
+            self._rec.disconnect()
+            os.replace(self._tmp, self.path)
+        finally:
+            self._tmp.unlink(missing_ok=True)
+
+    def discard(self) -> None:
+        """Drop the recording (a cell whose trace must not be kept)."""
+        self._closed = True
+        try:
+            self._rec.disconnect()
+        finally:
+            self._tmp.unlink(missing_ok=True)
+
+
+class TeeRecorder:
+    """Feeds several recorders (e.g. a trace on disk and the memory a figure series needs)."""
+
+    def __init__(self, *recorders) -> None:
+        self.recorders = [r for r in recorders if r is not None]
+
+    def sample(self, row):
+        for r in self.recorders:
+            r.sample(row)
+
+    def events(self, ev):
+        for r in self.recorders:
+            r.events(ev)
+
+    def internals(self, values):
+        for r in self.recorders:
+            r.internals(values)
+
+    def close(self):
+        for r in self.recorders:
+            r.close()

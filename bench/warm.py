@@ -1,0 +1,36 @@
+"""Compile the plant's kernels once in the process that forks the cell processes.
+
+Imported by the forkserver (``bench.isolation.PRELOAD``): a few sample intervals of the closed
+loop, with and without noise, with a held level and with pulses, so that every cell process
+starts with the numba kernels compiled (or loaded from numba's cache) instead of compiling
+them inside its own wall-clock limit. Results do not depend on it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plant.drive import DriveCommand, DriveType
+from plant.interval import advance
+from plant.params import PlantParams
+from plant.randomness import NoiseStream
+from plant.state import SimOptions, initial_state
+
+
+def warm() -> None:
+    """Advance a few intervals through each kernel path (noise on/off, record on/off)."""
+    params = PlantParams()
+    commands = [DriveCommand.hold(0.0, DriveType.LINEAR), DriveCommand.hold(0.5 * params.u_max, DriveType.LINEAR),
+                DriveCommand(((0.0, params.u_max), (0.3 * params.sample_period, 0.0)), DriveType.BRIDGE)]
+    for noise in (True, False):
+        for record in (False, True):
+            state = initial_state(params, x5=0.0)
+            stream = NoiseStream(np.random.default_rng(0)) if noise else None
+            for command in commands:
+                state = advance(state, command, params, stream, SimOptions(noise=noise), record=record).state
+
+
+try:
+    warm()
+except Exception:  # a warm-up must never stop the cells; they compile on their own then
+    pass
