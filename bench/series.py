@@ -11,8 +11,8 @@ instant:
 * every scalar of the controller's ``internals()`` after the step at that instant (held
   between updates), under its own key;
 * ``<q>_hat_pct`` for every internal named ``<q>_hat`` whose truth the runner records (a
-  sample field ``<q>_true`` or ``<q>``, e.g. ``ks_hat`` → ``ks_true``, ``x4_hat`` → ``x4``):
-  the estimate as % of the true value at that instant;
+  sample field ``<q>_true`` or ``<q>``, e.g. ``ks_hat`` → ``ks_true``, ``x4_hat`` → ``x4``;
+  not the error x1 itself): the estimate as % of the true value at that instant;
 * the columns of ``report_series(t, warmup_s)`` (controller-derived series such as values
   held from logged events).
 
@@ -37,6 +37,7 @@ from bench.runner import RunResult
 __all__ = ["wants_series", "figure_series", "phase_peaks", "PHASE_PREFIX"]
 
 PHASE_PREFIX = "phase:"
+_NO_PERCENT = {"x1", "y"}
 
 
 def wants_series(controller: Any) -> bool:
@@ -68,7 +69,8 @@ def figure_series(result: RunResult, controller: Any, warmup_s: float = 0.0,
         frame[key] = col
         if key.endswith("_hat"):
             q = key[:-4]
-            truth = s.get(f"{q}_true", s.get(q))
+            # x1 is the error itself: a percentage of a zero-mean quantity means nothing
+            truth = s.get(f"{q}_true", s.get(q) if q not in _NO_PERCENT else None)
             if truth is not None:
                 frame[f"{key}_pct"] = _ratio_pct(col, np.asarray(truth, dtype=float)[:n])
     for key, values in controller.report_series(t, warmup_s).items():

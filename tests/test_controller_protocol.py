@@ -150,3 +150,17 @@ def test_controllers_do_not_import_bench():
     for path in sorted((ROOT / "controllers").rglob("*.py")):
         text = path.read_text(encoding="utf-8")
         assert not re.search(r"^\s*(from|import) bench\b", text, re.M), path
+
+
+def test_phase_peaks_assign_every_point_to_the_phase_that_owns_it():
+    from bench.runner import RunResult
+    from bench.series import phase_peaks
+
+    t = np.arange(10) * 0.1                               # samples 0.0 … 0.9 s
+    x1 = np.array([9, 1, 2, 3, 4, 5, 6, 7, 8, 0.5]) * 1e-6
+    ev = {"t": np.array([0.35, 0.55]), "x1": np.array([-9.5e-6, 20e-6])}
+    res = RunResult("ok", "", {}, samples={"t": t, "x1": x1}, events=ev)
+    # phase a owns [0.2, 0.5) and [0.8, end]; b owns [0.5, 0.8); warm-up 0.1 s drops t = 0.0
+    peaks = phase_peaks(res, {"phase:a": [0.2, 0.8], "phase:b": [0.5], "pulse": [0.3]}, 0.1)
+    assert peaks == {"peak_error_a_rad": 9.5e-6, "peak_error_b_rad": 20e-6}
+    assert phase_peaks(res, {"pulse": [0.3]}, 0.0) == {}
