@@ -9,5 +9,6 @@ from controllers.base import Controller, available_controllers, get_controller, 
 from controllers import linear as _linear  # noqa: E402,F401  (registers "linear")
 from controllers import dithered as _dithered  # noqa: E402,F401  (registers "dithered")
 from controllers import solnic as _solnic  # noqa: E402,F401  (registers "solnic")
+from controllers import oracle_pulse as _oracle_pulse  # noqa: E402,F401  (registers the "oracle-pulse" bound)
 
 __all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller"]
