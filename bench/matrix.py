@@ -23,6 +23,9 @@ Schema (public API, documented in the README)::
     [sweep.solnic]            # optional sweeps (see bench.sweep): each point is an ordinary cell
     a_c = [1e-6, 1e-5]
 
+    [frontier]                # optional settings of the report's frontier section (bench.frontier)
+    crossing_family = "solnic"
+
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
 e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0``.
 """
@@ -76,6 +79,7 @@ class Matrix:
     description: str = ""
     variants: dict[str, ControllerSpec] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
+    frontier: dict[str, Any] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
         """Every cell, in matrix order: controller, then scenario, then seed."""
@@ -90,7 +94,7 @@ class Matrix:
             "scenarios": [s.name for s in self.scenarios], "seeds": list(self.seeds),
             "duration_s": self.duration_s, "warmup_s": self.warmup_s,
             "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
-            "sweep": self.sweep,
+            "sweep": self.sweep, "frontier": self.frontier,
         }
 
 
@@ -164,7 +168,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
                  text: str | None = None) -> Matrix:
     """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages;
     with the file's ``text``, errors in ``[sweep.*]`` tables also name the line."""
-    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers", "sweep"})
+    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers", "sweep", "frontier"})
     if unknown:
         raise _fail(source, unknown[0], "unknown table; expected [matrix], [scenarios.NAME], "
                                         "[controllers.NAME] or [sweep.NAME]")
@@ -236,8 +240,12 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         return _fail(f"{source}:{line}" if line else source, key, message)
 
     plan = expand_sweeps(data.get("sweep"), chosen_controllers, chosen_scenarios, sweep_fail)
+    frontier = data.get("frontier", {})
+    if not isinstance(frontier, dict):
+        raise _fail(source, "frontier", "must be a table (settings of the report's frontier section)")
     return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
-                  tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json())
+                  tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
+                  frontier)
 
 
 def _scenarios(source: str, table: Any) -> dict[str, Scenario]:

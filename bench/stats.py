@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["N_RESAMPLES", "SEED", "CONFIDENCE", "MedianCI", "PairedRatio", "median_ci", "paired_ratio",
+           "crossing_level", "crossing_ci",
            "pareto_front", "METHOD_TEXT"]
 
 N_RESAMPLES = 2000
@@ -137,3 +138,43 @@ def pareto_front(x, y) -> np.ndarray:
         elif front and x[i] == x[front[-1]] and y[i] == y[front[-1]]:
             front.append(int(i))          # an exact duplicate of a front point: neither dominates
     return np.asarray(front, dtype=int)
+
+
+def crossing_level(levels, medians, threshold: float) -> float:
+    """The level at which ``medians`` (one per increasing level) first reach ``threshold``.
+
+    Linear interpolation between the last level below the threshold and the first at or above
+    it. ``-inf`` when the first level is already at or above it (it never beats the threshold
+    in the swept range), ``+inf`` when no level reaches it (it beats it everywhere swept).
+    """
+    x = np.asarray(levels, dtype=float)
+    m = np.asarray(medians, dtype=float)
+    above = np.flatnonzero(m >= threshold)
+    if above.size == 0:
+        return math.inf
+    k = int(above[0])
+    if k == 0:
+        return -math.inf
+    x0, x1, m0, m1 = x[k - 1], x[k], m[k - 1], m[k]
+    return float(x0 + (threshold - m0) * (x1 - x0) / (m1 - m0)) if m1 != m0 else float(x1)
+
+
+def crossing_ci(levels, values, threshold: float, *, confidence: float = CONFIDENCE,
+                n_resamples: int = N_RESAMPLES, random_state: int = SEED) -> tuple[float, float, float]:
+    """:func:`crossing_level` of the per-level medians of ``values`` [seed, level] and a
+    percentile-bootstrap CI that resamples whole seeds (rows), keeping the pairing across levels.
+
+    Rows with a NaN anywhere are dropped. Infinite crossings enter the percentiles as ±inf.
+    """
+    v = np.asarray(values, dtype=float)
+    v = v[np.all(np.isfinite(v), axis=1)]
+    if v.shape[0] == 0:
+        return math.nan, math.nan, math.nan
+    point = crossing_level(levels, np.median(v, axis=0), threshold)
+    rng = np.random.default_rng(random_state)
+    idx = rng.integers(0, v.shape[0], size=(n_resamples, v.shape[0]))
+    meds = np.median(v[idx], axis=1)                          # [resample, level]
+    boot = np.array([crossing_level(levels, row, threshold) for row in meds])
+    alpha = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(boot, [alpha, 1.0 - alpha], method="inverted_cdf")
+    return point, float(lo), float(hi)

@@ -6,6 +6,7 @@ per point. Every point is an ordinary cell (same store, resume, executors, trace
 
     [sweep.solnic]                  # one or two option fields; two give the cross product
     a_c = [1e-6, 1e-5, 1e-4]
+    include_default = true          # optional: also keep the unswept controller (its defaults)
 
     [sweep.linear]
     crossover = [40.0, 60.0]
@@ -23,7 +24,8 @@ protocol-v2 controllers type-check them in :func:`controllers.base.resolve_optio
 ``**kwargs`` controllers validate them in their constructor; either failure is a
 :class:`~bench.matrix.MatrixError` naming ``sweep.<controller>.<field>`` (and the line).
 
-A swept controller is *replaced* by its points. Scenario points are *added* after the matrix's
+A swept controller is *replaced* by its points (preceded by itself with
+``include_default = true``). Scenario points are *added* after the matrix's
 scenarios (named ``<scenario>[field=value,...]``); a point whose plant equals a scenario already in
 the matrix is that scenario and is not run twice.
 """
@@ -143,10 +145,16 @@ def expand_sweeps(sweep: Any, controllers: list[ControllerSpec], scenarios: list
             continue
         if name not in by_name:
             raise fail(key, f"sweeps {name!r}, which is not in matrix.controllers {sorted(by_name)}")
+        table = dict(table)
+        keep = table.pop("include_default", False)
+        if not isinstance(keep, bool):
+            raise fail(f"{key}.include_default", f"must be true or false, got {keep!r}")
         if len(table) > MAX_FIELDS:
             raise fail(key, f"sweeps {len(table)} fields; at most {MAX_FIELDS} (their cross product)")
         parent = by_name[name]
-        points = []
+        points = [parent] if keep else []
+        if keep:
+            plan.controller_points[name] = {"parent": name, "base": parent.base, "knobs": {}}
         for point in _grid(fail, key, table, "product"):
             spec = ControllerSpec(point_name(name, point), parent.base, {**parent.options, **point})
             try:
