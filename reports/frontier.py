@@ -154,10 +154,11 @@ def pareto_figure(points: pd.DataFrame, scenario: str, limits: PlantLimits | Non
                                  visible=not is_front, thickness=1),
                     text=pts["controller"].tolist()))
         if limits is not None:
-            lines = d[d.get("crossover_rad_s", pd.Series(dtype=float)).notna()] \
-                if "crossover_rad_s" in d.columns else d.iloc[0:0]
+            # (2-6) at the crossover of every point that reports one (the linear designs)
+            has = "crossover_rad_s" in d.columns
+            lines = d[d["crossover_rad_s"].notna() & (d["crossover_rad_s"] > 0)] if has else d.iloc[0:0]
             traces.append(dict(x=(lines[f"{xc}_median"] * xs).tolist(),
-                               y=[limits.bound_at(w) * 1e6 for w in lines["crossover_rad_s"]],
+                               y=[limits.bound_at(w) * 1e6 for w in lines["crossover_rad_s"]] if has else [],
                                text=lines["controller"].tolist()))
         per_combo.append(traces)
     first = per_combo[0]
