@@ -51,7 +51,7 @@ class OraclePulseOptions:
         Where a pulse aims on the leading side, as a fraction of b, in (0, 1].
     """
 
-    band: float = 1e-6
+    band: float = 4e-6
     landing_fraction: float = 1.0
 
     def __post_init__(self) -> None:
