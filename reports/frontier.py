@@ -312,10 +312,8 @@ def crossing_rows(results: pd.DataFrame, points: pd.DataFrame, config: Mapping[s
         picks = []
         if grp in names:
             picks.append(("default", grp))
-        knobbed = [(n, next(iter(g.loc[g["controller"] == n, "knobs"].iloc[0].values()), None)) for n in names]
-        knobbed = [(n, v) for n, v in knobbed if isinstance(v, (int, float))]
-        if knobbed:
-            n, v = min(knobbed, key=lambda t: t[1])
+        n = _smallest_knob(g.drop_duplicates("controller"))
+        if n is not None:
             picks.append((f"smallest knob ({n})", n))
         for what, name in picks:
             values = _per_seed(results, name, scenarios, "peak_error_rad")
@@ -366,28 +364,39 @@ def crossing_claims(rows: list[dict[str, Any]], table_sigma2: float, limit_rad: 
     return out
 
 
+def _smallest_knob(g: pd.DataFrame) -> str | None:
+    """The point of group ``g`` with the smallest value of its first numeric knob (e.g. a_c → 0)."""
+    knobbed = [(r["controller"], next(iter(r["knobs"].values()), None)) for _, r in g.iterrows()]
+    knobbed = [(n, v) for n, v in knobbed if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    return min(knobbed, key=lambda t: t[1])[0] if knobbed else None
+
+
 def paired_comparisons(results: pd.DataFrame, points: pd.DataFrame, scenario: str,
                        current: str = "mean_abs_current", error: str = "peak_error_rad") -> list[dict[str, Any]]:
-    """For every pair of real groups: each one's best point against the other's point with the
-    nearest median current (equal current), paired over seeds: ratio of peak errors, CI, P(lower)."""
-    d = points[(points["scenario"] == scenario) & ~points["bound"] & points[f"{error}_median"].notna()]
+    """Equal-current comparisons, paired over seeds: for every real group, its most accurate point
+    and its smallest-knob point against every other group's point with the nearest median current;
+    the geometric-mean ratio of peak errors with its CI and P(A lower)."""
+    d = points[(points["scenario"] == scenario) & ~points["bound"] & points[f"{error}_median"].notna()
+               & (points[f"{current}_median"] > 0)]
     groups = list(dict.fromkeys(d["group"]))
     out = []
     for a in groups:
         ga = d[d["group"] == a]
-        best = ga.loc[ga[f"{error}_median"].idxmin()]
-        for b in groups:
-            if b == a:
-                continue
-            gb = d[d["group"] == b]
-            near = gb.loc[(np.log(gb[f"{current}_median"].clip(lower=1e-300))
-                           - math.log(max(best[f"{current}_median"], 1e-300))).abs().idxmin()]
-            pa = _per_seed(results, best["controller"], [scenario], error)[:, 0]
-            pb = _per_seed(results, near["controller"], [scenario], error)[:, 0]
-            r = paired_ratio(pa, pb)
-            out.append({"a": best["controller"], "b": near["controller"], "a_current": best[f"{current}_median"],
-                        "b_current": near[f"{current}_median"], "ratio": r.ratio, "low": r.low, "high": r.high,
-                        "p": r.p_improvement, "n": r.n})
+        picks = [ga.loc[ga[f"{error}_median"].idxmin(), "controller"], _smallest_knob(ga)]
+        for pick in dict.fromkeys(p for p in picks if p is not None):
+            pa_row = ga[ga["controller"] == pick].iloc[0]
+            for b in groups:
+                if b == a:
+                    continue
+                gb = d[d["group"] == b]
+                gap = (np.log(gb[f"{current}_median"]) - math.log(pa_row[f"{current}_median"])).abs()
+                near = gb.loc[gap.idxmin()]
+                pa = _per_seed(results, pick, [scenario], error)[:, 0]
+                pb = _per_seed(results, near["controller"], [scenario], error)[:, 0]
+                r = paired_ratio(pa, pb)
+                out.append({"a": pick, "b": near["controller"], "a_current": pa_row[f"{current}_median"],
+                            "b_current": near[f"{current}_median"], "ratio": r.ratio, "low": r.low,
+                            "high": r.high, "p": r.p_improvement, "n": r.n})
     return out
 
 
