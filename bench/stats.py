@@ -164,16 +164,23 @@ def crossing_ci(levels, values, threshold: float, *, confidence: float = CONFIDE
     """:func:`crossing_level` of the per-level medians of ``values`` [seed, level] and a
     percentile-bootstrap CI that resamples whole seeds (rows), keeping the pairing across levels.
 
-    Rows with a NaN anywhere are dropped. Infinite crossings enter the percentiles as ±inf.
+    ``values`` [seed, level, point] crosses the *best* median over the points at each level
+    (the best a controller reaches over its knob); the bootstrap takes that minimum in every
+    resample. Rows with a NaN anywhere are dropped. Infinite crossings enter the percentiles
+    as ±inf.
     """
     v = np.asarray(values, dtype=float)
-    v = v[np.all(np.isfinite(v), axis=1)]
+    v = v[np.all(np.isfinite(v.reshape(v.shape[0], -1)), axis=1)]
     if v.shape[0] == 0:
         return math.nan, math.nan, math.nan
-    point = crossing_level(levels, np.median(v, axis=0), threshold)
+
+    def best(med: np.ndarray) -> np.ndarray:
+        return med.min(axis=-1) if v.ndim == 3 else med
+
+    point = crossing_level(levels, best(np.median(v, axis=0)), threshold)
     rng = np.random.default_rng(random_state)
     idx = rng.integers(0, v.shape[0], size=(n_resamples, v.shape[0]))
-    meds = np.median(v[idx], axis=1)                          # [resample, level]
+    meds = best(np.median(v[idx], axis=1))                    # [resample, level]
     boot = np.array([crossing_level(levels, row, threshold) for row in meds])
     alpha = (1.0 - confidence) / 2.0
     lo, hi = np.quantile(boot, [alpha, 1.0 - alpha], method="inverted_cdf")

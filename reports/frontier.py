@@ -315,12 +315,16 @@ def crossing_rows(results: pd.DataFrame, points: pd.DataFrame, config: Mapping[s
         n = _smallest_knob(g.drop_duplicates("controller"))
         if n is not None:
             picks.append((f"smallest knob ({n})", n))
+        picks.append(("best over its knob", names))
         for what, name in picks:
-            values = _per_seed(results, name, scenarios, "peak_error_rad")
+            many = isinstance(name, list)
+            values = (np.stack([_per_seed(results, n, scenarios, "peak_error_rad") for n in name], axis=-1)
+                      if many else _per_seed(results, name, scenarios, "peak_error_rad"))
             point, lo, hi = crossing_ci(levels, values, limit_rad)
-            rows.append({"group": grp, "family": family, "what": what, "controller": name,
+            key = f"{grp}-best" if many else name
+            rows.append({"group": grp, "family": family, "what": what, "controller": key,
                          "crossing": point, "low": lo, "high": hi, "levels": levels,
-                         "n": int(np.all(np.isfinite(values), axis=1).sum())})
+                         "n": int(np.all(np.isfinite(values.reshape(values.shape[0], -1)), axis=1).sum())})
     return rows
 
 

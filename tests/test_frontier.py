@@ -180,7 +180,8 @@ def test_report_frontier_section_and_crossing_claim(tmp_path):
     expected = (limit * 1e6 - 4.0) / 10.0 * 4e-4
     assert crossing["default"]["crossing"] == pytest.approx(expected, rel=0.05)
     assert crossing["default"]["low"] <= expected <= crossing["default"]["high"]
-    assert [c.verdict for c in ctx["claims"]] == ["not reproduced"] * 2    # crossing < Table 2-1's σ2²
+    assert crossing["best over its knob"]["crossing"] == pytest.approx(expected, rel=0.05)
+    assert [c.verdict for c in ctx["claims"]] == ["not reproduced"] * 3    # crossing < Table 2-1's σ2²
     budget = ctx["tables"][0]["budget"]
     assert budget[-1]["best"]["controller"].startswith("solnic")        # 4 µrad beats linear's 50
     assert budget[0]["bound"]["controller"].startswith("oracle-pulse")
@@ -209,3 +210,12 @@ def test_frontier_report_renders_offline_in_a_browser(tmp_path):
     frontier = {k: v for k, v in status.items() if "frontier" in k or "noise" in k}
     assert len(frontier) == 4 and all(frontier.values()), status
     assert page_network_requests(netlog) == []
+
+
+def test_crossing_of_the_best_over_points_takes_the_minimum_per_level():
+    levels = np.array([0.0, 1.0, 2.0])
+    # point 0: 1, 3, 5; point 1: 2, 2.5, 6 → best 1, 2.5, 5 → crosses 4.0 at 1 + 1.5/2.5
+    base = np.array([[1.0, 2.0], [3.0, 2.5], [5.0, 6.0]])
+    values = np.repeat(base[None], 10, axis=0)
+    point, lo, hi = crossing_ci(levels, values, 4.0)
+    assert point == pytest.approx(1.6) and lo == hi == pytest.approx(1.6)
