@@ -166,10 +166,15 @@ def _synthetic_frontier(tmp_path):
     return out
 
 
-def test_report_frontier_section_and_crossing_claim(tmp_path):
+@pytest.fixture(scope="module")
+def synthetic_run(tmp_path_factory):
+    return _synthetic_frontier(tmp_path_factory.mktemp("frontier"))
+
+
+def test_report_frontier_section_and_crossing_claim(synthetic_run):
     from reports import build_report_from_dir
     from reports.frontier import frontier_context
-    run = _synthetic_frontier(tmp_path)
+    run = synthetic_run
     results = pd.read_parquet(run / "results.parquet")
     config = json.loads((run / "config.json").read_text())
     ctx = frontier_context(results, config)
@@ -197,13 +202,13 @@ def test_report_without_sweeps_has_no_frontier_section(tmp_path):
     assert 'id="frontier"' not in html
 
 
-def test_frontier_report_renders_offline_in_a_browser(tmp_path):
+def test_frontier_report_renders_offline_in_a_browser(synthetic_run, tmp_path):
     from reports import build_report_from_dir
     from reports.browser import dump_dom, find_chromium, page_network_requests, plot_render_status
     chromium = find_chromium()
     if chromium is None:
         pytest.skip("Chromium not installed")
-    report = build_report_from_dir(_synthetic_frontier(tmp_path))
+    report = build_report_from_dir(synthetic_run)
     netlog = tmp_path / "netlog.json"
     dom = dump_dom(report, netlog=netlog, chromium=chromium)
     status = plot_render_status(dom)
