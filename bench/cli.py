@@ -6,7 +6,9 @@ Commands (one function each; a new command is one more ``@app.command`` function
 * ``report DIR`` — rebuild ``DIR/report.html`` from stored results;
 * ``list`` — registered controllers and built-in scenarios;
 * ``check-bound`` — the empirical check of inequality (2-6) and the lag limit (2-1) (SPEC §6);
-* ``speed`` — the work-precision comparison behind the ≥ 1000× claim (SPEC §8).
+* ``speed`` — the work-precision comparison behind the ≥ 1000× claim (SPEC §8);
+* ``frontier`` — every controller swept over its knob, the oracle floor and the noise sweeps
+  (:mod:`bench.frontier`).
 
 Exit codes: 0 done (cells with status ``error`` are results, not failures of the command — also a
 cell whose process died or hung); 1 the run directory could not be written (full disk ...) or the
@@ -286,9 +288,11 @@ def _drive(base: str) -> str:
 # The sweep and the speed comparison live in their own modules; one line each registers them.
 from bench.bound import check_bound_command  # noqa: E402
 from bench.speed import speed_command  # noqa: E402
+from bench.frontier import frontier_command  # noqa: E402
 
 app.command("check-bound")(_user_errors(check_bound_command))
 app.command("speed")(_user_errors(speed_command))
+app.command("frontier")(_user_errors(frontier_command))
 
 
 def main(argv: list[str] | None = None) -> None:

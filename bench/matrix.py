@@ -20,6 +20,12 @@ Schema (public API, documented in the README)::
     base = "solnic"           # of the base's ``Options`` dataclass (controller protocol v2)
     preset = "high-error-cost"
 
+    [sweep.solnic]            # optional sweeps (see bench.sweep): each point is an ordinary cell
+    a_c = [1e-6, 1e-5]
+
+    [frontier]                # optional settings of the report's frontier section (bench.frontier)
+    crossing_family = "solnic"
+
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
 e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0`` or
 ``matrix.toml: controllers.lin.crossuver: unknown option 'crossuver' of 'linear'; options: [...]``.
@@ -75,6 +81,8 @@ class Matrix:
     warmup_s: float | None = None
     description: str = ""
     variants: dict[str, ControllerSpec] = field(default_factory=dict)
+    sweep: dict[str, Any] = field(default_factory=dict)
+    frontier: dict[str, Any] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
         """Every cell, in matrix order: controller, then scenario, then seed. Each carries a
@@ -91,6 +99,7 @@ class Matrix:
             "scenarios": [s.name for s in self.scenarios], "seeds": list(self.seeds),
             "duration_s": self.duration_s, "warmup_s": self.warmup_s,
             "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
+            "sweep": self.sweep, "frontier": self.frontier,
         }
 
 
@@ -132,7 +141,7 @@ def load_matrix(path: str | Path, *, check_resets: bool = True) -> Matrix:
         else:
             where = label
         raise MatrixError(f"{where}: invalid TOML: {exc}") from None
-    return parse_matrix(data, label, base_dir=path.resolve().parent, check_resets=check_resets)
+    return parse_matrix(data, label, base_dir=path.resolve().parent, check_resets=check_resets, text=text)
 
 
 def _fail(source: str, key: str, message: str) -> MatrixError:
@@ -168,12 +177,13 @@ def _field_of(message: str, prefix: str) -> str | None:
 
 
 def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Path | None = None,
-                 check_resets: bool = True) -> Matrix:
-    """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages."""
-    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers"})
+                 check_resets: bool = True, text: str | None = None) -> Matrix:
+    """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages;
+    with the file's ``text``, errors in ``[sweep.*]`` tables also name the line."""
+    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers", "sweep", "frontier"})
     if unknown:
-        raise _fail(source, unknown[0], "unknown table; expected [matrix], [scenarios.NAME] or "
-                                        "[controllers.NAME]")
+        raise _fail(source, unknown[0], "unknown table; expected [matrix], [scenarios.NAME], "
+                                        "[controllers.NAME] or [sweep.NAME]")
     m = data.get("matrix")
     if not isinstance(m, dict):
         raise _fail(source, "matrix", "missing [matrix] table")
@@ -236,12 +246,24 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         except ValueError as exc:
             key = "matrix.warmup_s" if warmup is not None else "matrix.duration_s"
             raise _fail(source, key, f"scenario {name!r}: {exc}") from None
-    for scenario in chosen_scenarios:
+    from bench.sweep import expand_sweeps, locate_key
+
+    def sweep_fail(key: str, message: str) -> MatrixError:
+        parts = key.split(".")
+        line = locate_key(text, ".".join(parts[:2]), parts[2] if len(parts) > 2 else None) if text else None
+        return _fail(f"{source}:{line}" if line else source, key, message)
+
+    plan = expand_sweeps(data.get("sweep"), chosen_controllers, chosen_scenarios, sweep_fail)
+    frontier = data.get("frontier", {})
+    if not isinstance(frontier, dict):
+        raise _fail(source, "frontier", "must be a table (settings of the report's frontier section)")
+    for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
     if check_resets:
-        _check_resets(source, chosen_controllers, chosen_scenarios, set(variants))
-    return Matrix(source, tuple(chosen_controllers), tuple(chosen_scenarios), tuple(seeds), limit,
-                  tuple(plugins), plugin_dirs, duration, warmup, description, variants)
+        _check_resets(source, plan.controllers, plan.scenarios, set(variants))
+    return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
+                  tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
+                  frontier)
 
 
 def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matrix_warmup: bool) -> None:

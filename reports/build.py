@@ -27,10 +27,12 @@ import plotly.offline
 
 from reports import claims as _claims
 from reports import figures as _fig
+from reports import frontier as _frontier
 from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
 from reports.limits import PlantLimits, limits_from_config
+from bench.stats import METHOD_TEXT, median_ci
 from bench.store import write_atomic
 
 __all__ = ["build_report", "build_report_from_dir", "render_html", "REPORT_NAME"]
@@ -134,7 +136,8 @@ def _aggregate_table(results: pd.DataFrame) -> dict[str, Any]:
     header = ["controller", "scenario", "ok / cells"]
     has_peak = "peak_error_rad" in results.columns
     if has_peak:
-        header += ["peak mean [µrad]", "peak worst [µrad]", "peak spread (sd) [µrad]"]
+        header += ["peak median [95 % CI] [µrad]", "peak mean [µrad]", "peak worst [µrad]",
+                   "peak spread (sd) [µrad]"]
     means = [(c, lbl, k) for c, lbl, k in _RESULT_COLUMNS[1:] if c in results.columns]
     header += [f"{lbl} (mean)" for _, lbl, _ in means]
     rows = []
@@ -145,6 +148,9 @@ def _aggregate_table(results: pd.DataFrame) -> dict[str, Any]:
                        "num" if len(ok) == len(g) else "num bad")]
         if has_peak:
             p = ok["peak_error_rad"].dropna() * 1e6
+            ci = median_ci(p.to_numpy())
+            cells.append(_cell(f"{_num(ci.median)} [{_num(ci.low)}, {_num(ci.high)}]" if ci.n else "—",
+                               ci.median, "num"))
             sd = float(p.std(ddof=1)) if len(p) > 1 else math.nan
             for v in (p.mean() if len(p) else math.nan, p.max() if len(p) else math.nan, sd):
                 cells.append(_cell(_num(v), v, "num"))
@@ -315,6 +321,9 @@ def render_html(inputs: ReportInputs) -> str:
     rows = _claims.evaluate_claims(results=inputs.results, limits=limits, series=inputs.series,
                                    bound=inputs.bound, hunting=inputs.hunting,
                                    speed=inputs.speed, selection=selection, warmup_s=warmup)
+    frontier = _frontier.frontier_context(inputs.results, config)
+    if frontier is not None:
+        rows = list(rows) + list(frontier["claims"])
     by_key = {r.key: r for r in rows}
     typical = _typical_run(inputs.series, selection)
 
@@ -365,6 +374,8 @@ def render_html(inputs: ReportInputs) -> str:
         "counts": counts,
         "results_table": _results_table(inputs.results),
         "aggregate_table": _aggregate_table(inputs.results),
+        "stats_method": METHOD_TEXT,
+        "frontier": frontier,
         "n_cells": len(inputs.results),
         "n_ok": int((inputs.results["status"] == "ok").sum()) if len(inputs.results) else 0,
         "figs": figs,

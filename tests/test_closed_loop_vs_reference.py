@@ -34,9 +34,13 @@ class _Recording(Controller):
     def __init__(self, inner: Controller) -> None:
         self.inner, self.commands = inner, []
         self.drive = inner.drive
+        self.privileged = inner.privileged      # a bound (oracle) still gets the true state
 
     def reset(self, params, rng):
         self.inner.reset(params, rng)
+
+    def observe_truth(self, state):
+        self.inner.observe_truth(state)
 
     def step(self, y):
         cmd = self.inner.step(y)

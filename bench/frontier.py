@@ -1,0 +1,137 @@
+"""``solnic-bench frontier``: every registered controller swept over its knob (issue 14).
+
+The built-in matrices ``bench/matrices/frontier.toml`` and ``frontier-quick.toml`` declare the
+scenarios, the shared seeds, the noise sweeps and explicit sweeps for controllers that do not
+declare ``knobs`` yet. :func:`frontier_matrix_data` completes them from the registry:
+
+* every registered controller is in the matrix (the ``privileged`` bounds too, drawn as floors);
+* a controller whose class declares ``knobs`` is swept over them (the full frontier: their
+  cross product; ``--quick``: the first, middle and last value of the first knob), replacing
+  the file's explicit sweep; one without knobs keeps the file's sweep, or runs at its defaults;
+* real controllers also keep their default point (``include_default``).
+
+The completed matrix is written to ``DIR/frontier-matrix.toml`` (what ran, for provenance and
+``solnic-bench run --matrix`` reuse) and run like any matrix: same store, resume, executors; rerun
+traces are off unless ``--traces``.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from bench.errors import UserError
+
+__all__ = ["frontier_matrix_path", "frontier_matrix_data", "to_toml", "frontier_command", "thin"]
+
+
+def frontier_matrix_path(quick: bool = False) -> Path:
+    """``bench/matrices/frontier-quick.toml`` or ``frontier.toml`` (package data)."""
+    name = "frontier-quick.toml" if quick else "frontier.toml"
+    return Path(str(resources.files("bench").joinpath("matrices", name)))
+
+
+def thin(values: tuple | list) -> list:
+    """First, middle and last of ``values`` (all of them when there are at most three)."""
+    values = list(values)
+    if len(values) <= 3:
+        return values
+    return [values[0], values[len(values) // 2], values[-1]]
+
+
+def frontier_matrix_data(quick: bool = False) -> dict[str, Any]:
+    """The frontier matrix as TOML data, completed from the controller registry (module doc)."""
+    from controllers.base import available_controllers
+
+    path = frontier_matrix_path(quick)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    matrix = data["matrix"]
+    sweep = data.setdefault("sweep", {})
+    names = list(matrix["controllers"])
+    registered = available_controllers()
+    names += [n for n in registered if n not in names]
+    matrix["controllers"] = names
+    for name in names:
+        cls = registered.get(name)
+        if cls is None:
+            continue
+        knobs = dict(getattr(cls, "knobs", {}) or {})
+        if knobs:
+            fields = list(knobs)[:1] if quick else list(knobs)[:2]
+            table = {f: (thin(knobs[f]) if quick else list(knobs[f])) for f in fields}
+            table = {f: [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in vs]
+                     for f, vs in table.items()}
+            sweep[name] = table
+        if name in sweep and not getattr(cls, "privileged", False):
+            sweep[name]["include_default"] = True
+    return data
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as a TOML value")
+
+
+def _toml_key(k: str) -> str:
+    return k if k and all(c.isalnum() or c in "-_" for c in k) else json.dumps(k)
+
+
+def to_toml(data: dict[str, Any], header: str = "") -> str:
+    """TOML text of matrix ``data`` (tables of scalars and lists, one nesting level of
+    ``[table.name]``), which ``tomllib`` reads back to the same data."""
+    out = [header] if header else []
+
+    def emit(path: list[str], table: dict[str, Any]) -> None:
+        scalars = {k: v for k, v in table.items() if not isinstance(v, dict)}
+        subs = {k: v for k, v in table.items() if isinstance(v, dict)}
+        if scalars or not subs:
+            out.append(f"[{'.'.join(_toml_key(p) for p in path)}]")
+            out.extend(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in scalars.items())
+            out.append("")
+        for k, v in subs.items():
+            emit(path + [k], v)
+
+    for name, table in data.items():
+        emit([name], table)
+    return "\n".join(out) + "\n"
+
+
+def frontier_command(
+    quick: bool = typer.Option(False, "--quick", help="The quick frontier (at most 3 min on 2 cores)."),
+    out: Path = typer.Option(Path("frontier"), "--out", help="Run directory; a re-run resumes it."),
+    executor: str = typer.Option("local", "--executor", help="local (process pool) or dask."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="dask scheduler address (default: a LocalCluster)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: CPU count)."),
+    traces: bool = typer.Option(False, "--traces", help="Also write a rerun trace per cell (off: thousands of cells)."),
+) -> None:
+    """Every registered controller over its knob, with the oracle floor and the noise sweeps:
+    DIR/results.{parquet,csv}, DIR/frontier-matrix.toml, DIR/report.html with a frontier section."""
+    from bench.cli import _writable_dir, run
+    from bench.matrix import parse_matrix
+
+    data = frontier_matrix_data(quick)
+    source = frontier_matrix_path(quick)
+    parse_matrix(data, str(source))          # a bad registry knob is a user error before anything runs
+    _writable_dir(out)
+    path = out / "frontier-matrix.toml"
+    text = to_toml(data, f"# Generated by `solnic-bench frontier{' --quick' if quick else ''}` "
+                         f"from {source.name} and the controller registry.")
+    try:
+        if not path.is_file() or path.read_text(encoding="utf-8") != text:
+            path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"--out {out}: cannot write {path.name}: {exc.strerror or exc}") from None
+    run(matrix=path, quick=False, out=out, executor=executor, scheduler=scheduler, workers=workers,
+        no_traces=not traces)

@@ -1,0 +1,171 @@
+"""``oracle-pulse``: a BOUND, not a real controller — the floor of pulse control.
+
+It reads what no real controller can: the true plant state through the privileged
+:meth:`~controllers.base.Controller.observe_truth` hook (the runner calls it only for classes
+with ``privileged = True``), and the true pulse law — :func:`plant.pulse.pulse_response` on the
+true parameters with the true effective friction kc = k̄c + x5, ks = k̄s + x5 (section 5.3).
+It pulses on the same switched bridge (±u_max for Δt_u, then flyback) as solnic.
+
+Policy (band ``b`` [rad], the knob). While the shaft is stuck the error drifts as
+ẋ1 = −x4. The oracle lets x1 drift across the whole band [−b, +b] and, at the exact instant
+(inside the sample interval) the drift reaches the trailing edge −sign(x4)·b, fires the pulse
+whose *noise-free* motion lands the shaft at ``landing_fraction``·b on the leading side, counting
+the drift during the pulse (x1 after = x1 + Δc − x4·t_stop). With an exact pulse law this is
+optimal for pulse control: the peak error is b and the time between pulses 2b/|x4| is the
+longest any policy with peak b can have, so the current per second is the least. A noisy pulse
+that lands beyond the leading edge is left to drift back (the peak has happened; a return pulse
+could only risk a larger one); one short of the trailing edge is corrected at once. The friction noise w2 still
+acts on every pulse, which is what makes this a floor *under each noise level*: nothing that
+pulses can do better with less knowledge.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.base import Controller, register
+from plant.drive import DriveCommand, DriveType
+from plant.params import PlantParams
+from plant.pulse import pulse_response
+from plant.state import X1, X3, X4, X5
+
+__all__ = ["OraclePulse", "OraclePulseOptions"]
+
+_BISECTIONS = 48
+_FIT = 1.0 - 1e-9     # a segment must start strictly inside the interval
+
+
+@dataclass(frozen=True)
+class OraclePulseOptions:
+    """Options of the oracle bound.
+
+    Attributes
+    ----------
+    band : float
+        Half-width b of the error band [rad]; the peak error of a noise-free run is ≈ b.
+    landing_fraction : float
+        Where a pulse aims on the leading side, as a fraction of b, in (0, 1].
+    """
+
+    band: float = 4e-6
+    landing_fraction: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.band) and self.band > 0):
+            raise ValueError(f"OraclePulseOptions.band must be > 0 rad, got {self.band!r}")
+        if not (math.isfinite(self.landing_fraction) and 0 < self.landing_fraction <= 1):
+            raise ValueError(f"OraclePulseOptions.landing_fraction must be in (0, 1], "
+                             f"got {self.landing_fraction!r}")
+
+
+def _max_on_time(params: PlantParams) -> float:
+    """Largest Δt_u [s] whose current is back to zero within one sample period."""
+    tau, ts = params.motor_time_constant, params.sample_period
+    lo, hi = 0.0, ts
+    for _ in range(80):          # t_cz(Δt) = Δt + τ3·ln(2 − e^(−Δt/τ3)), increasing
+        mid = 0.5 * (lo + hi)
+        if mid + tau * math.log(2.0 - math.exp(-mid / tau)) < ts:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@register("oracle-pulse")
+class OraclePulse(Controller):
+    """BOUND (privileged): pulses with the true state and the true pulse law; see the module."""
+
+    family = "bound"
+    drive = DriveType.BRIDGE
+    description = "BOUND, not a controller: true state + true pulse law, optimal band pulsing"
+    Options = OraclePulseOptions
+    knobs = {"band": (0.5e-6, 1e-6, 2e-6, 4e-6, 8e-6, 16e-6, 32e-6)}
+    counter = "pulses"
+    privileged = True
+
+    def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
+        self.params = params
+        self.dtu_max = _max_on_time(params)
+        self._truth = None
+        self._law: tuple[float, PlantParams] | None = None
+        self._t_stop_guess = 0.0
+        self.pulses = 0
+        self._last_dtu = 0.0
+
+    def observe_truth(self, state: Any) -> None:
+        self._truth = state
+
+    def _true_law(self, x5: float) -> PlantParams:
+        """Table parameters with the effective friction of this moment (x5 frozen while stuck)."""
+        if self._law is None or self._law[0] != x5:
+            p = self.params
+            kc = max(p.coulomb + x5, 0.0)
+            ks = max(p.stiction + x5, kc)
+            self._law = (x5, p.replace(coulomb=kc, stiction=ks))
+        return self._law[1]
+
+    def _dtu_for(self, law: PlantParams, motion: float) -> tuple[float, float, float]:
+        """(Δt_u, |Δc|, t_stop) of the noise-free pulse whose |Δc| is closest to ``motion``."""
+        t_b = -law.motor_time_constant * math.log1p(-law.stiction / law.u_max)
+        lo, hi = t_b, self.dtu_max
+        r_hi = pulse_response(law, hi)
+        if r_hi.delta_c <= motion:
+            return hi, r_hi.delta_c, r_hi.t_stop
+        for _ in range(_BISECTIONS):           # Δc(Δt_u) increases past breakaway
+            mid = 0.5 * (lo + hi)
+            if pulse_response(law, mid).delta_c < motion:
+                lo = mid
+            else:
+                hi = mid
+        r = pulse_response(law, hi)
+        return hi, r.delta_c, r.t_stop
+
+    def step(self, y: float) -> DriveCommand:
+        s = self._truth
+        if s is None:
+            raise RuntimeError("oracle-pulse needs observe_truth before step (privileged hook)")
+        self._truth = None
+        off = DriveCommand.hold(0.0, DriveType.BRIDGE)
+        x = s.x
+        if s.mode != 2 or s.flyback or x[X3] != 0.0:
+            return off                          # wait until the shaft is stuck and current is zero
+        ts = self.params.sample_period
+        b = self.options.band
+        x1, x4 = float(x[X1]), float(x[X4])
+        lead = 1.0 if x4 >= 0 else -1.0         # x1 drifts towards −lead·b
+        if lead * x1 > b:
+            return off                          # overshot to the leading side: the drift brings it back,
+                                                # and a return pulse could only risk a larger peak
+        if lead * x1 < -b:
+            offset = 0.0                        # beyond the trailing edge: correct at once
+        elif x4 != 0.0:
+            offset = (x1 + lead * b) / x4       # x1 − x4·τ = −lead·b
+            if not 0.0 <= offset < ts:
+                return off
+        else:
+            return off
+        law = self._true_law(float(x[X5]))
+        target = lead * self.options.landing_fraction * b
+        t_stop = self._t_stop_guess
+        for _ in range(2):                      # the drift during the pulse depends on Δt_u
+            x1_fire = x1 - x4 * offset
+            need = target - x1_fire + x4 * t_stop
+            dtu, dc, t_stop = self._dtu_for(law, abs(need))
+            if offset + dtu > _FIT * ts:
+                offset = max(0.0, _FIT * ts - dtu)   # fire earlier so the on-time ends inside the interval
+        if dc > 2.0 * abs(need) and abs(x1) <= b:
+            return off                          # the smallest pulse would overshoot: keep drifting
+        self._t_stop_guess = t_stop
+        self.pulses += 1
+        self._last_dtu = dtu
+        return DriveCommand.pulse(offset, dtu, math.copysign(self.params.u_max, need))
+
+    def internals(self) -> dict[str, float]:
+        return {"dtu": self._last_dtu}
+
+    def summary(self) -> dict[str, Any]:
+        return {"pulses": getattr(self, "pulses", 0), "bound": True}
