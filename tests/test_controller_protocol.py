@@ -41,8 +41,12 @@ def test_hooks_have_their_documented_types(name):
     cls = get_controller(name)
     assert cls.family and isinstance(cls.counter, str)
     c = cls()
-    c.reset(PlantParams(), np.random.default_rng(0))
+    p = PlantParams()
+    c.reset(p, np.random.default_rng(0))
     for _ in range(3):
+        if cls.privileged:
+            from plant.state import initial_state
+            c.observe_truth(initial_state(p, x5=0.0))
         c.step(0.0)
     if cls.counter:
         assert isinstance(c.summary()[cls.counter], int)
