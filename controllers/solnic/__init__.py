@@ -5,11 +5,11 @@
 * :mod:`~controllers.solnic.friction_filter` — modified Kalman filter on (k̂c, k̂s);
 * :mod:`~controllers.solnic.cost` — the cycle cost (6-1)–(6-5) and the a_c calibration;
 * :mod:`~controllers.solnic.strategy` — sizes, the optimiser (6-9), (6-10), the trigger;
-* :mod:`~controllers.solnic.presets` — option sets and validation;
+* :mod:`~controllers.solnic.options` — :class:`SolnicOptions`, presets and the a_c knob;
 * :mod:`~controllers.solnic.controller` — :class:`SolnicController`, registered as ``"solnic"``.
 """
 
 from controllers.solnic.controller import SolnicController
-from controllers.solnic.presets import PRESETS
+from controllers.solnic.options import PRESETS, SolnicOptions
 
-__all__ = ["SolnicController", "PRESETS"]
+__all__ = ["SolnicController", "SolnicOptions", "PRESETS"]

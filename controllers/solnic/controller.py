@@ -54,7 +54,7 @@ from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.predictor import Predictor, PulsePrediction
-from controllers.solnic.presets import resolve_options
+from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
                                          SizeSchedule, plan_trigger)
 
@@ -110,23 +110,34 @@ class SolnicController(Controller):
 
     Parameters
     ----------
+    options : SolnicOptions, optional
+        A complete option set (positional); or
     preset : str
-        ``"thesis"`` (default) or ``"high-error-cost"``; see :mod:`controllers.solnic.presets`.
-    **options
-        Any key of :data:`controllers.solnic.presets.DEFAULTS`, e.g. ``a_c``, ``a_cov``,
-        ``initial_friction_factor``, ``initial_increment_factor``, ``friction_noise_in_filter``.
+        ``"thesis"`` (the default when no options object is given) or ``"high-error-cost"``;
+        see :mod:`controllers.solnic.options`.
+    **fields
+        Overrides of any :class:`~controllers.solnic.options.SolnicOptions` field, e.g. ``a_c``.
 
     Raises
     ------
     ValueError
-        Naming the offending option.
+        Naming the offending preset or option.
     """
 
     drive = DriveType.BRIDGE
+    family = "solnic"
+    counter = "pulses"
     description = "solnic: semi-open-loop nonlinear identification and control (Acker 1967)"
+    Options = SolnicOptions
+    presets = PRESETS
+    knobs = KNOBS
 
-    def __init__(self, preset: str = "thesis", **options: Any) -> None:
-        self.options = resolve_options(preset, **options)
+    def __init__(self, options: SolnicOptions | None = None, /, *, preset: str | None = None,
+                 **fields: Any) -> None:
+        if options is None and preset is None:
+            preset = "thesis"
+        Controller.__init__(self, options, preset=preset, **fields)
+        self.preset = preset if preset is not None else "custom"
         self._ready = False
 
     # ------------------------------------------------------------------ run set-up
@@ -134,29 +145,30 @@ class SolnicController(Controller):
         o = self.options
         self.params = params
         self.rng = rng
-        self.predictor = Predictor(params, fd_step=o["fd_step"])
-        f = o["initial_friction_factor"]
+        self.predictor = Predictor(params, fd_step=o.fd_step)
+        f = o.initial_friction_factor
         kc0, ks0 = f * params.coulomb, f * params.stiction
         ks0 = min(ks0, 0.999 * params.u_max)
         kc0 = min(kc0, ks0)
-        s = o["friction_prior_std_fraction"]
+        s = o.friction_prior_std_fraction
         self.friction = FrictionFilter(kc0, ks0, np.diag([(s * kc0) ** 2, (s * ks0) ** 2]),
-                                       params.u_max, a=o["a_cov"],
-                                       max_correction_fraction=o["max_correction_fraction"])
+                                       params.u_max, a=o.a_cov,
+                                       max_correction_fraction=o.max_correction_fraction)
         self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq,
                                  params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9,
-                                 [0.0, 0.0], np.diag([o["x1_prior_std"] ** 2, o["x4_prior_std"] ** 2]))
-        if o["dtu_inc_initial"] is not None:
-            inc0 = o["dtu_inc_initial"]
+                                 [0.0, 0.0], np.diag([o.x1_prior_std ** 2, o.x4_prior_std ** 2]))
+        if o.dtu_inc_initial is not None:
+            inc0 = o.dtu_inc_initial
             self.adjusted = (_NAN, _NAN)
         else:
-            self.adjusted = adjusted_increment(params, o["a_c"], o["a_ratio"])
-            inc0 = o["initial_increment_factor"] * self.adjusted[1]
-        self.schedule = SizeSchedule(dtu_opt=o["dtu_opt_initial"], dtu_inc=inc0)
+            self.adjusted = adjusted_increment(params, o.a_c, o.a_ratio)
+            inc0 = o.initial_increment_factor * self.adjusted[1]
+        self.schedule = SizeSchedule(dtu_opt=o.dtu_opt_initial, dtu_inc=inc0)
         self.dtu_max = _max_on_time(params)
-        self.z_motion = NormalDist().inv_cdf(o["motion_confidence"])
+        self.z_motion = NormalDist().inv_cdf(o.motion_confidence)
         self._n = 0
         self._t_max = -math.inf
+        self._samples_since_launch = 0
         self._pending: _Cycle | None = None
         self._costs = (_NAN, _NAN, _NAN)
         self._dc_ratio = _NAN
@@ -176,9 +188,24 @@ class SolnicController(Controller):
         if t >= self._t_max and math.isfinite(y):
             self.mode2.update(y)
             self.counts["samples_used"] += 1
+            self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
+        if (self._pending is not None and self._outcome_sets_next_size()
+                and self._samples_since_launch >= self.options.evaluation_samples):
+            # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
+            # is re-optimised by (6-9), (6-10); start-up sizes react to significance), so the
+            # cycle is evaluated as soon as its samples are in and the trigger is planned with
+            # the new size, not with the stale one.
+            self._evaluate(t)
         return self._plan(t)
+
+    def _outcome_sets_next_size(self) -> bool:
+        """Whether the pending cycle's evaluation changes the size of the next pulse."""
+        if self.options.legacy_set_boundary:
+            return False
+        sch = self.schedule
+        return sch.set_complete or sch.size in (STARTUP_RAISE, STARTUP_SETTLE)
 
     def _next_dtu(self) -> float:
         sch = self.schedule
@@ -203,7 +230,7 @@ class SolnicController(Controller):
             x1, x4 = self.mode2.x
             trig = plan_trigger(x1, x4, self.mode2.drift_std(), abs(pred.delta_c), horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
-                                overshoot_factor=self.options["overshoot_factor"])
+                                overshoot_factor=self.options.overshoot_factor)
             if trig is None:
                 return DriveCommand.hold(0.0, DriveType.BRIDGE)
             if self._pending is not None and attempt == 0:
@@ -223,8 +250,9 @@ class SolnicController(Controller):
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
         self.mode2.add_motion(sign * dc, var_dc)                                    # (5-6)
         sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
-        k = self.options["stuck_confidence_sigmas"]
+        k = self.options.stuck_confidence_sigmas
         self._t_max = t_a + pred.t_nominal + k * sd_t                               # (5-11)
+        self._samples_since_launch = 0
         moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
         self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
@@ -242,24 +270,24 @@ class SolnicController(Controller):
         P = self.mode2.P
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
-        if self.options["dce_variance"] == "exact":
+        if self.options.dce_variance == "exact":
             var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
         else:
             var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
         var_meas = var_e
         dc_meas = dc_e
-        if self.options["dc_measurement"] == "data-only":
+        if self.options.dc_measurement == "data-only":
             # significance from the posterior of d; the k̂ update from the samples alone
             dc_e, var_e = self.mode2.motion_mean, self.mode2.motion_var
             dc_meas, var_meas = self.mode2.motion_likelihood()
-        if self.options["friction_noise_in_filter"]:
+        if self.options.friction_noise_in_filter:
             p = self.params
             var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
         sd = math.sqrt(max(var_e, 1e-300))
         z = c.sign * dc_e / sd
         significant = z >= self.z_motion
         self.counts["cycles_evaluated"] += 1
-        entry = dict(t_a=c.t_a, t_b=t_b, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
+        entry = dict(t_a=c.t_a, t_b=t_b, x1_a=c.x1_a, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
                      dc_p=c.delta_c, dc_e=c.sign * dc_e, sd_e=sd, significant=float(significant),
                      ks_before=self.friction.ks, kc_before=self.friction.kc)
         if significant:
@@ -289,15 +317,15 @@ class SolnicController(Controller):
             dtu = min(dtu, self.dtu_max)
             pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
             var_dc = var_x1 = 0.0
-            if o["cost_variances"]:
+            if o.cost_variances:
                 var_dc = self.friction.motion_variance(pred.H_b)
                 var_x1 = float(self.mode2.P[0, 0])
-            costs.append(cycle_cost(dtu, abs(pred.delta_c), x4, o["a_c"], p, var_dc, var_x1).total)
+            costs.append(cycle_cost(dtu, abs(pred.delta_c), x4, o.a_c, p, var_dc, var_x1).total)
             motions.append(abs(pred.delta_c))
         ratio = motions[2] / motions[0] if motions[0] > 0 else math.inf
         self._costs = tuple(costs)
         self._dc_ratio = ratio
-        sch.reoptimise(*costs, ratio, o["a_gain"], o["a_ratio"], o["min_inc_factor"])
+        sch.reoptimise(*costs, ratio, o.a_gain, o.a_ratio, o.min_inc_factor)
         self.counts["cost_evaluations"] += 1
 
     # ------------------------------------------------------------------ reporting
@@ -318,9 +346,9 @@ class SolnicController(Controller):
 
     def summary(self) -> dict[str, Any]:
         if not self._ready:
-            return {"preset": self.options["preset"], "a_c": self.options["a_c"]}
+            return {"preset": self.preset, "a_c": self.options.a_c}
         out: dict[str, Any] = {
-            "preset": self.options["preset"], "a_c": self.options["a_c"],
+            "preset": self.preset, "a_c": self.options.a_c,
             "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,
             "P_kc_kc": float(self.friction.P[0, 0]), "P_ks_ks": float(self.friction.P[1, 1]),
             "P_kc_ks": float(self.friction.P[0, 1]),
