@@ -53,6 +53,7 @@ from plant.params import PlantParams
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.mode2_filter import Mode2Filter
+from controllers.solnic.noise_model import pulse_noise
 from controllers.solnic.predictor import Predictor, PulsePrediction
 from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
@@ -102,6 +103,7 @@ class _Cycle:
     peak_torque: float
     moving_time: float
     overshoot: bool
+    noise_var: float = 0.0    # VAR[Δc] from w2 (noise-aware model) [rad²]
 
 
 @register("solnic")
@@ -153,7 +155,8 @@ class SolnicController(Controller):
         s = o.friction_prior_std_fraction
         self.friction = FrictionFilter(kc0, ks0, np.diag([(s * kc0) ** 2, (s * ks0) ** 2]),
                                        params.u_max, a=o.a_cov,
-                                       max_correction_fraction=o.max_correction_fraction)
+                                       max_correction_fraction=o.max_correction_fraction,
+                                       constraints=o.friction_constraints)
         self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq,
                                  params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9,
                                  [0.0, 0.0], np.diag([o.x1_prior_std ** 2, o.x4_prior_std ** 2]))
@@ -169,13 +172,18 @@ class SolnicController(Controller):
         self._n = 0
         self._t_max = -math.inf
         self._samples_since_launch = 0
+        self._undecided = 0
+        self._posterior = (0.0, 0.0, o.x1_prior_std**2, 0.0, o.x4_prior_std**2)
+        self._nis: list[float] = []
+        self._noise_memo: dict[tuple[float, float, float], tuple[float, float]] = {}
         self._pending: _Cycle | None = None
         self._costs = (_NAN, _NAN, _NAN)
         self._dc_ratio = _NAN
         self.log: list[dict[str, float]] = []
         self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
-                           cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0)
+                           cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
+                           undecided_cycles=0)
         self._ready = True
 
     # ------------------------------------------------------------------ per sample
@@ -191,6 +199,8 @@ class SolnicController(Controller):
             self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
+        self._posterior = (float(self.mode2.x[0]), float(self.mode2.x[1]), float(self.mode2.P[0, 0]),
+                           float(self.mode2.P[0, 1]), float(self.mode2.P[1, 1]))
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
@@ -228,7 +238,10 @@ class SolnicController(Controller):
             dtu = self._next_dtu()
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
             x1, x4 = self.mode2.x
-            trig = plan_trigger(x1, x4, self.mode2.drift_std(), abs(pred.delta_c), horizon=ts,
+            dc_plan = abs(pred.delta_c)
+            if self.options.noise_aware_model:
+                dc_plan += self._pulse_noise(pred, dtu)[0]
+            trig = plan_trigger(x1, x4, self.mode2.drift_std(), dc_plan, horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
                                 overshoot_factor=self.options.overshoot_factor)
             if trig is None:
@@ -246,8 +259,13 @@ class SolnicController(Controller):
         x1_a, var_x1_a = float(self.mode2.x[0]), float(self.mode2.P[0, 0])
         self.mode2.set_anchor()
         dc = abs(pred.delta_c)
+        noise_var = 0.0
+        if self.options.noise_aware_model:
+            bias, noise_var = self._pulse_noise(pred, dtu)
+            dc += bias                                      # E[Δc] with the w2 push and tail
         p_zero = self.friction.prob_no_motion(pred.peak_torque)
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
+        var_dc += noise_var                                 # noise-aware: w2 over T_m
         self.mode2.add_motion(sign * dc, var_dc)                                    # (5-6)
         sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
         k = self.options.stuck_confidence_sigmas
@@ -256,13 +274,28 @@ class SolnicController(Controller):
         moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
         self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
-                               np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot)
+                               np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
+                               noise_var)
         if self.schedule.size in (STARTUP_RAISE, STARTUP_SETTLE):
             self.counts["startup_cycles"] += 1
         self.schedule.launched(dtu)
         self.counts["pulses"] += 1
         self.counts["overshoot_corrections"] += int(overshoot)
         return DriveCommand.pulse(offset, dtu, sign * self.params.u_max)
+
+    def _pulse_noise(self, pred: PulsePrediction, dtu: float) -> tuple[float, float]:
+        """(bias, variance) of |Δc| from w2 for the pulse ``pred`` [rad, rad²], memoised."""
+        key = (self.friction.ks, self.friction.kc, dtu)
+        hit = self._noise_memo.get(key)
+        if hit is None:
+            ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
+            n = pulse_noise(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
+                            pred.t_current_zero, pred.t_nominal)
+            hit = (n.bias, n.variance)
+            if len(self._noise_memo) > 512:
+                self._noise_memo.clear()
+            self._noise_memo[key] = hit
+        return hit
 
     def _evaluate(self, t_b: float) -> None:
         c, self._pending = self._pending, None
@@ -280,26 +313,49 @@ class SolnicController(Controller):
             # significance from the posterior of d; the k̂ update from the samples alone
             dc_e, var_e = self.mode2.motion_mean, self.mode2.motion_var
             dc_meas, var_meas = self.mode2.motion_likelihood()
-        if self.options.friction_noise_in_filter:
+        if self.options.noise_aware_model:
+            var_meas += c.noise_var                         # the friction filter's R
+        elif self.options.friction_noise_in_filter:
             p = self.params
             var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
         sd = math.sqrt(max(var_e, 1e-300))
         z = c.sign * dc_e / sd
         significant = z >= self.z_motion
+        decision = "moved" if significant else "none"
+        if not significant and self.options.motion_decision == "three-way":
+            # "no motion" only if the test could have seen the predicted motion: power of the
+            # one-sided test against Δc_p; otherwise undecided (keep the schedule, no k̂ update)
+            power = NormalDist().cdf(c.delta_c / sd - self.z_motion)
+            if power < self.options.no_motion_power:
+                self._undecided += 1
+                if self._undecided <= self.options.max_undecided_cycles:
+                    decision = "undecided"
+        if decision != "undecided":
+            self._undecided = 0
         self.counts["cycles_evaluated"] += 1
+        self.counts["undecided_cycles"] += int(decision == "undecided")
         entry = dict(t_a=c.t_a, t_b=t_b, x1_a=c.x1_a, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
                      dc_p=c.delta_c, dc_e=c.sign * dc_e, sd_e=sd, significant=float(significant),
                      ks_before=self.friction.ks, kc_before=self.friction.kc)
         if significant:
             self.counts["significant_cycles"] += 1
         if significant and math.isfinite(var_meas):
-            upd = self.friction.update(c.H_b, c.sign * dc_meas - c.delta_c, var_meas, c.peak_torque)
+            residual = c.sign * dc_meas - c.delta_c
+            upd = self.friction.update(c.H_b, residual, var_meas, c.peak_torque)
+            self._nis.append(residual**2 / upd.innovation_var)
+            entry["nis"] = residual**2 / upd.innovation_var
             self.counts["friction_updates"] += 1
             self.counts["shrinks"] += upd.shrinks
             self.counts["clipped_updates"] += int(upd.clipped)
-        entry.update(ks=self.friction.ks, kc=self.friction.kc)
+        elif decision == "none" and self.options.censored_no_motion:
+            # no breakaway: censored evidence k_s ≥ peak torque, on the distribution
+            self.friction.condition(np.array([0.0, -1.0]), -c.peak_torque)
+        entry.update(ks=self.friction.ks, kc=self.friction.kc, decision=decision)
         self.log.append(entry)
-        self.schedule.evaluated(significant, c.size, c.dt_u)
+        if decision == "undecided":
+            self.schedule.undecided(c.size, c.dt_u)
+        else:
+            self.schedule.evaluated(significant, c.size, c.dt_u)
         if self.schedule.set_complete:
             self._reoptimise()
 
@@ -342,6 +398,9 @@ class SolnicController(Controller):
             "cost_small": self._costs[0], "cost_medium": self._costs[1], "cost_large": self._costs[2],
             "dc_ratio": self._dc_ratio, "cycle_size": float(sch.size),
             "x1_hat": float(self.mode2.x[0]), "x4_hat": float(self.mode2.x[1]),
+            # the mode-2 filter at the sample instant (before any pulse of this step), for NEES
+            "m2_x1": self._posterior[0], "m2_x4": self._posterior[1], "m2_P11": self._posterior[2],
+            "m2_P14": self._posterior[3], "m2_P44": self._posterior[4],
         }
 
     def summary(self) -> dict[str, Any]:
@@ -357,4 +416,5 @@ class SolnicController(Controller):
             "x4_hat": float(self.mode2.x[1]), "model_runs": self.predictor.n_model_runs,
         }
         out.update(self.counts)
+        out["dc_nis_mean"] = float(np.mean(self._nis)) if self._nis else _NAN
         return out

@@ -107,6 +107,13 @@ class SolnicOptions:
         against the predicted motion Δc_p; in (0.5, 1).
     cost_variances : bool
         Keep VAR(Δc_p) + VAR[x̂1] in C1 (6-1).
+    friction_constraints : {"clip", "distribution"}
+        "clip" (the text, section 5.3): k̂s ≤ applied torque by shrinking its quasipartial, then
+        k̂s ≥ k̂c by raising k̂s, P untouched. "distribution": each constraint conditions the
+        Gaussian N(k̂, P_b) on the half-plane (moment-matched truncation), mean and P.
+    censored_no_motion : bool
+        A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
+        half-plane condition on N(k̂, P_b).
     """
 
     a_c: float = A_C_THESIS
@@ -136,6 +143,8 @@ class SolnicOptions:
     max_undecided_cycles: int = 3
     no_motion_power: float = 0.9
     cost_variances: bool = False
+    friction_constraints: Literal["clip", "distribution"] = "clip"
+    censored_no_motion: bool = False
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -167,6 +176,8 @@ class SolnicOptions:
             raise _bad("dc_measurement", "'faithful' or 'data-only'", self.dc_measurement)
         if self.motion_decision not in ("two-way", "three-way"):
             raise _bad("motion_decision", "'two-way' or 'three-way'", self.motion_decision)
+        if self.friction_constraints not in ("clip", "distribution"):
+            raise _bad("friction_constraints", "'clip' or 'distribution'", self.friction_constraints)
         for name in ("evaluation_samples", "max_undecided_cycles"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
