@@ -325,11 +325,14 @@ class SolnicController(Controller):
         if not significant and self.options.motion_decision == "three-way":
             # "no motion" only if the test could have seen the predicted motion: power of the
             # one-sided test against Δc_p; otherwise undecided (keep the schedule, no k̂ update)
-            power = NormalDist().cdf(c.delta_c / sd - self.z_motion)
+            # Δc itself is uncertain (k̂ spread H P_b H', w2 scatter): marginal power
+            spread = math.sqrt(sd * sd + self.friction.motion_variance(c.H_b) + c.noise_var)
+            power = NormalDist().cdf((c.delta_c - self.z_motion * sd) / spread)
             if power < self.options.no_motion_power:
                 self._undecided += 1
-                if self._undecided <= self.options.max_undecided_cycles:
-                    decision = "undecided"
+                # past the bound: fall back to the start-up sizes, but this is no evidence
+                decision = ("undecided" if self._undecided <= self.options.max_undecided_cycles
+                            else "fallback")
         if decision != "undecided":
             self._undecided = 0
         self.counts["cycles_evaluated"] += 1
@@ -348,6 +351,7 @@ class SolnicController(Controller):
             self.counts["shrinks"] += upd.shrinks
             self.counts["clipped_updates"] += int(upd.clipped)
         elif decision == "none" and self.options.censored_no_motion:
+            # (a powerful test saw nothing; the fallback after undecided cycles is not evidence)
             # no breakaway: censored evidence k_s ≥ peak torque, on the distribution
             self.friction.condition(np.array([0.0, -1.0]), -c.peak_torque)
         entry.update(ks=self.friction.ks, kc=self.friction.kc, decision=decision)
@@ -372,12 +376,16 @@ class SolnicController(Controller):
                 continue
             dtu = min(dtu, self.dtu_max)
             pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
+            dc, noise_var = abs(pred.delta_c), 0.0
+            if o.noise_aware_model and dc > 0:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] in (6-1), (6-3)
             var_dc = var_x1 = 0.0
             if o.cost_variances:
-                var_dc = self.friction.motion_variance(pred.H_b)
+                var_dc = self.friction.motion_variance(pred.H_b) + noise_var
                 var_x1 = float(self.mode2.P[0, 0])
-            costs.append(cycle_cost(dtu, abs(pred.delta_c), x4, o.a_c, p, var_dc, var_x1).total)
-            motions.append(abs(pred.delta_c))
+            costs.append(cycle_cost(dtu, dc, x4, o.a_c, p, var_dc, var_x1).total)
+            motions.append(dc)
         ratio = motions[2] / motions[0] if motions[0] > 0 else math.inf
         self._costs = tuple(costs)
         self._dc_ratio = ratio
