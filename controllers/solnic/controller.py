@@ -199,8 +199,8 @@ class SolnicController(Controller):
             self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
-        self._posterior = (float(self.mode2.x[0]), float(self.mode2.x[1]), float(self.mode2.P[0, 0]),
-                           float(self.mode2.P[0, 1]), float(self.mode2.P[1, 1]))
+        m = self.mode2
+        self._posterior = (m.x1, m.x4, m.p11, m.p14, m.p44)
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
@@ -237,7 +237,7 @@ class SolnicController(Controller):
         for attempt in range(2):
             dtu = self._next_dtu()
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
-            x1, x4 = self.mode2.x
+            x1, x4 = self.mode2.x1, self.mode2.x4
             dc_plan = abs(pred.delta_c)
             if self.options.noise_aware_model:
                 dc_plan += self._pulse_noise(pred, dtu)[0]
@@ -256,7 +256,7 @@ class SolnicController(Controller):
                 pred: PulsePrediction) -> DriveCommand:
         t_a = t + offset
         self.mode2.predict(t_a)
-        x1_a, var_x1_a = float(self.mode2.x[0]), float(self.mode2.P[0, 0])
+        x1_a, var_x1_a = self.mode2.x1, self.mode2.p11
         self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         noise_var = 0.0
