@@ -52,6 +52,7 @@ from plant.params import PlantParams
 
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
+from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import pulse_noise
 from controllers.solnic.predictor import Predictor, PulsePrediction
@@ -157,9 +158,17 @@ class SolnicController(Controller):
                                        params.u_max, a=o.a_cov,
                                        max_correction_fraction=o.max_correction_fraction,
                                        constraints=o.friction_constraints)
-        self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq,
-                                 params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9,
-                                 [0.0, 0.0], np.diag([o.x1_prior_std ** 2, o.x4_prior_std ** 2]))
+        sigma1 = params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9
+        prior = np.diag([o.x1_prior_std ** 2, o.x4_prior_std ** 2])
+        self.joint: JointFilter | None = None
+        if o.friction_estimator == "joint-ekf":
+            self.joint = JointFilter(params.command_velocity_tau, params.sigma4_sq, sigma1, [0.0, 0.0],
+                                     prior, [kc0, ks0], self.friction.P, params.u_max)
+            self.mode2 = self.joint
+            self.friction = self.joint.friction
+        else:
+            self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
+                                     [0.0, 0.0], prior)
         if o.dtu_inc_initial is not None:
             inc0 = o.dtu_inc_initial
             self.adjusted = (_NAN, _NAN)
@@ -257,7 +266,8 @@ class SolnicController(Controller):
         t_a = t + offset
         self.mode2.predict(t_a)
         x1_a, var_x1_a = self.mode2.x1, self.mode2.p11
-        self.mode2.set_anchor()
+        if self.joint is None:
+            self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         noise_var = 0.0
         if self.options.noise_aware_model:
@@ -266,7 +276,10 @@ class SolnicController(Controller):
         p_zero = self.friction.prob_no_motion(pred.peak_torque)
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
         var_dc += noise_var                                 # noise-aware: w2 over T_m
-        self.mode2.add_motion(sign * dc, var_dc)                                    # (5-6)
+        if self.joint is not None:      # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
+            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero)
+        else:
+            self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
         sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
         k = self.options.stuck_confidence_sigmas
         self._t_max = t_a + pred.t_nominal + k * sd_t                               # (5-11)
@@ -303,7 +316,12 @@ class SolnicController(Controller):
         P = self.mode2.P
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
-        if self.options.dce_variance == "exact":
+        if self.joint is not None:
+            # the samples' own evidence about d (prior divided out) for the decision
+            dc_e, var_e = self.joint.motion_likelihood()
+            if not math.isfinite(var_e):
+                dc_e, var_e = 0.0, math.inf
+        elif self.options.dce_variance == "exact":
             var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
         else:
             var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
@@ -319,7 +337,7 @@ class SolnicController(Controller):
             p = self.params
             var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
         sd = math.sqrt(max(var_e, 1e-300))
-        z = c.sign * dc_e / sd
+        z = c.sign * dc_e / sd if math.isfinite(sd) else 0.0
         significant = z >= self.z_motion
         decision = "moved" if significant else "none"
         if not significant and self.options.motion_decision == "three-way":
@@ -342,7 +360,18 @@ class SolnicController(Controller):
                      ks_before=self.friction.ks, kc_before=self.friction.kc)
         if significant:
             self.counts["significant_cycles"] += 1
-        if significant and math.isfinite(var_meas):
+        if self.joint is not None:
+            prior_mean, prior_var = self.joint.motion_prior
+            if math.isfinite(var_e):
+                nis = (c.sign * dc_e - c.sign * prior_mean) ** 2 / (var_e + prior_var)
+                self._nis.append(nis)
+                entry["nis"] = nis
+            if decision == "moved":
+                self.joint.moved(c.peak_torque)
+                self.counts["friction_updates"] += 1
+            elif decision == "none":
+                self.joint.no_motion(c.peak_torque)      # d = 0, then k_s ≥ peak (censored)
+        elif significant and math.isfinite(var_meas):
             residual = c.sign * dc_meas - c.delta_c
             upd = self.friction.update(c.H_b, residual, var_meas, c.peak_torque)
             self._nis.append(residual**2 / upd.innovation_var)

@@ -111,6 +111,11 @@ class SolnicOptions:
         "clip" (the text, section 5.3): k̂s ≤ applied torque by shrinking its quasipartial, then
         k̂s ≥ k̂c by raising k̂s, P untouched. "distribution": each constraint conditions the
         Gaussian N(k̂, P_b) on the half-plane (moment-matched truncation), mean and P.
+    friction_estimator : {"modified-kalman", "joint-ekf"}
+        "modified-kalman": the text's two filters, (5-1)–(5-18). "joint-ekf": one Gaussian on
+        (x1, x4, k_c, k_s, d) (:mod:`controllers.solnic.joint_filter`), the prediction used once,
+        constraints and "no motion" on the distribution; ``dc_measurement``,
+        ``friction_constraints``, ``a_cov`` and ``max_correction_fraction`` do not apply.
     censored_no_motion : bool
         A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
         half-plane condition on N(k̂, P_b).
@@ -145,6 +150,7 @@ class SolnicOptions:
     cost_variances: bool = False
     friction_constraints: Literal["clip", "distribution"] = "clip"
     censored_no_motion: bool = False
+    friction_estimator: Literal["modified-kalman", "joint-ekf"] = "modified-kalman"
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -178,6 +184,8 @@ class SolnicOptions:
             raise _bad("motion_decision", "'two-way' or 'three-way'", self.motion_decision)
         if self.friction_constraints not in ("clip", "distribution"):
             raise _bad("friction_constraints", "'clip' or 'distribution'", self.friction_constraints)
+        if self.friction_estimator not in ("modified-kalman", "joint-ekf"):
+            raise _bad("friction_estimator", "'modified-kalman' or 'joint-ekf'", self.friction_estimator)
         for name in ("evaluation_samples", "max_undecided_cycles"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
