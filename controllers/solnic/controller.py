@@ -370,7 +370,8 @@ class SolnicController(Controller):
                 self.joint.moved(c.peak_torque)
                 self.counts["friction_updates"] += 1
             elif decision == "none":
-                self.joint.no_motion(c.peak_torque)      # d = 0, then k_s ≥ peak (censored)
+                # d = 0, then (censored_no_motion) k_s ≥ peak torque
+                self.joint.no_motion(c.peak_torque, censor=self.options.censored_no_motion)
         elif significant and math.isfinite(var_meas):
             residual = c.sign * dc_meas - c.delta_c
             upd = self.friction.update(c.H_b, residual, var_meas, c.peak_torque)

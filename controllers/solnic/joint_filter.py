@@ -201,8 +201,8 @@ class JointFilter:
         R = 1.0 / info
         return R * (self.motion_mean / post_var - prior_mean / prior_var), R
 
-    def no_motion(self, peak_torque: float) -> None:
-        """The shaft did not move: d = 0 (pseudo-measurement), then censored k_s ≥ peak."""
+    def no_motion(self, peak_torque: float, censor: bool = True) -> None:
+        """The shaft did not move: d = 0 (pseudo-measurement), then (``censor``) k_s ≥ peak."""
         col = self.P[:, D].copy()
         if col[D] > 0:
             K = col / col[D]
@@ -210,9 +210,10 @@ class JointFilter:
             self.P -= np.outer(K, col)
             self.P = 0.5 * (self.P + self.P.T)
         self.z[D] = 0.0
-        c = np.zeros(5)
-        c[KS] = -1.0
-        self.condition(c, -peak_torque)
+        if censor:
+            c = np.zeros(5)
+            c[KS] = -1.0
+            self.condition(c, -peak_torque)
         self._valid()
 
     def moved(self, peak_torque: float) -> None:
