@@ -317,17 +317,15 @@ class SolnicController(Controller):
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
         if self.joint is not None:
-            # the samples' own evidence about d (prior divided out) for the decision
-            dc_e, var_e = self.joint.motion_likelihood()
-            if not math.isfinite(var_e):
-                dc_e, var_e = 0.0, math.inf
+            # confidence that the pulse moved the shaft: the posterior of d (prior × samples)
+            dc_e, var_e = self.joint.motion_mean, self.joint.motion_var
         elif self.options.dce_variance == "exact":
             var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
         else:
             var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
         var_meas = var_e
         dc_meas = dc_e
-        if self.options.dc_measurement == "data-only":
+        if self.options.dc_measurement == "data-only" and self.joint is None:
             # significance from the posterior of d; the k̂ update from the samples alone
             dc_e, var_e = self.mode2.motion_mean, self.mode2.motion_var
             dc_meas, var_meas = self.mode2.motion_likelihood()
@@ -361,9 +359,11 @@ class SolnicController(Controller):
         if significant:
             self.counts["significant_cycles"] += 1
         if self.joint is not None:
+            # normalised innovation of Δc: the samples' evidence against the prediction
             prior_mean, prior_var = self.joint.motion_prior
-            if math.isfinite(var_e):
-                nis = (c.sign * dc_e - c.sign * prior_mean) ** 2 / (var_e + prior_var)
+            m, R = self.joint.motion_likelihood()
+            if math.isfinite(R):
+                nis = (m - prior_mean) ** 2 / (R + prior_var)
                 self._nis.append(nis)
                 entry["nis"] = nis
             if decision == "moved":
