@@ -82,3 +82,24 @@ def test_predict_backwards_is_an_error():
     f.predict(1.0)
     with pytest.raises(ValueError, match="backwards"):
         f.predict(0.5)
+
+
+def test_no_motion_equals_a_filter_that_never_had_the_pulse():
+    """Undo + replay: after ``no_motion`` (uncensored) the state equals a filter fed the same
+    samples without any pulse (x1, x4 and k alike)."""
+    f, g = _joint(), _joint()
+    rng = np.random.default_rng(5)
+    t = 0.0
+    for n in range(30):
+        t += 0.01
+        for h in (f, g):
+            h.predict(t)
+        if n == 8:
+            f.add_motion(1, 3e-6, np.array([2e-6, -3e-6]), 1e-12)
+        y = rng.normal(0, SIG1)
+        f.update(y)
+        g.update(y)
+    f.no_motion(5.0, censor=False)
+    g._valid()                    # no_motion ends with the constraints on the distribution
+    np.testing.assert_allclose(f.z[:4], g.z[:4], rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(f.P[:4, :4], g.P[:4, :4], rtol=1e-10, atol=1e-24)

@@ -12,6 +12,19 @@ Every sample the controller
 3. launches the pulse, possibly inside the interval at the predicted trigger time, and resets
    x̂1 and its variance from the prediction, (5-6) and (5-9).
 
+Set-boundary fix (a bug, not a reading of the text): the next pulse's size depends on the
+outcome of the last cycle of a set of twelve ((6-9), (6-10) re-optimise) and of every start-up
+cycle (section 7.2). Such a cycle is evaluated as soon as ``evaluation_samples`` samples past
+t_max are in, and the trigger is planned with the new size. Before the fix the first trigger
+after a set was planned with the finished set's *large* Δc_p, so the controller waited for
+x̂1 = −Δc_large/2 and then fired a small pulse (thesis seed 3: a 12.6 µrad pulse from
+x̂1 = −40.2 µrad). ``legacy_set_boundary=True`` reproduces it for the regression test.
+
+Errata handled here and in the modules: (6-10) as printed steps uphill, we use the vertex of
+the parabola (:mod:`controllers.solnic.strategy`); the text's k̂s ≥ k̂c is a clip of the mean
+that leaves P_b untouched (:mod:`controllers.solnic.friction_filter`; the options
+``friction_constraints="distribution"`` and the joint EKF condition the distribution instead).
+
 Interpretation of (5-14): the printed formula, VAR[x̂1(t_b)] + VAR[x̂1(t_a)] +
 2·COV[x̂1(t_b), x̂1(t_a)]·(t_b − t_a) + VAR[x̂4(t_b)](t_b − t_a)², is garbled (the third term
 has the wrong units and the sign of the x̂1(t_b)–x̂1(t_a) covariance is wrong for a
