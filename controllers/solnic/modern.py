@@ -17,8 +17,13 @@ on seeds 0–9 (README, "solnic-modern"):
   the predicted Δc (its spread included) / undecided (schedule kept), at most
   ``max_undecided_cycles`` = 3 undecided cycles in a row before falling back to start-up.
 
+Held-out result (seeds 0–9, README table): thesis peak median/worst 21.9/67.5 µrad against
+21.5/78.0 for the fixed ``solnic``, mode-2 NEES median 1.29 (0.57–3.23) against ~2900; the
+peaks are not lower (single-pulse tails and start-up identification on the k_s/k_c ridge).
+
 Measured and not turned on: ``censored_no_motion`` (a wrong "no motion" after a badly
-predicted pulse pins k̂s above the peak torque: seed 100 peak 17 → 36 µrad); six undecided
+predicted pulse pins k̂s above the peak torque: seed 100 peak 17 → 36 µrad, measured with the
+earlier d = 0 pseudo-measurement); six undecided
 cycles instead of three (one 45 µrad outlier in five seeds); the text's two filters with
 ``dc_measurement="data-only"`` and ``friction_constraints="distribution"`` (lower thesis peaks
 on the tuning seeds, median 13.9 vs 17.1 µrad, but x̂4 inconsistent, NEES 3.5–230).
