@@ -290,7 +290,9 @@ class SolnicController(Controller):
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
         var_dc += noise_var                                 # noise-aware: w2 over T_m
         if self.joint is not None:      # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
-            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero)
+            limit = (self.options.max_correction_fraction * self.friction.ks
+                     if self.options.joint_correction_limit else math.inf)
+            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
         else:
             self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
         sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))

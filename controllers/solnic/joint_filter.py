@@ -169,8 +169,14 @@ class JointFilter:
         return innovation
 
     # -- pulses --------------------------------------------------------------------------
-    def add_motion(self, sign: int, delta_c: float, H_b: np.ndarray, noise_var: float) -> None:
-        """A pulse: d = sign·(Δc + H_b(k − k̂)) + n replaces the old d; x1 ← x1 + d."""
+    def add_motion(self, sign: int, delta_c: float, H_b: np.ndarray, noise_var: float,
+                   max_correction: float = math.inf) -> None:
+        """A pulse: d = sign·(Δc + H_b(k − k̂)) + n replaces the old d; x1 ← x1 + d.
+
+        ``max_correction`` [ozf·in] limits large corrections (section 5.3) the conservative
+        way, by a fictitious extra variance of n: a residual of the whole Δc in d moves no
+        component of k̂ by more than it (more variance only removes information).
+        """
         self._snapshot = (self.z.copy(), self.P.copy(), self.t)
         self._since = []
         h = np.zeros(5)
@@ -179,7 +185,12 @@ class JointFilter:
         self.z[D] = sign * delta_c
         self.P[D, :] = Ph
         self.P[:, D] = Ph
-        self.P[D, D] = float(h @ Ph) + noise_var
+        var_d = float(h @ Ph) + noise_var
+        if math.isfinite(max_correction) and max_correction > 0:
+            # |Δk_i| ≈ |P_kd,i|·|Δc| / VAR[d] ≤ max_correction
+            need = float(np.max(np.abs(Ph[KC:KS + 1]))) * abs(delta_c) / max_correction
+            var_d = max(var_d, need)
+        self.P[D, D] = var_d
         self.motion_prior = (float(self.z[D]), float(self.P[D, D]))
         # x1 ← x1 + d:  J = I + e_x1 e_d'
         self.z[X1] += self.z[D]

@@ -23,7 +23,8 @@ peaks are not lower (single-pulse tails and start-up identification on the k_s/k
 
 Measured and not turned on: ``censored_no_motion`` (a wrong "no motion" after a badly
 predicted pulse pins k̂s above the peak torque: seed 100 peak 17 → 36 µrad, measured with the
-earlier d = 0 pseudo-measurement); six undecided
+earlier d = 0 pseudo-measurement); ``joint_correction_limit``
+(tuning seeds: thesis median 18.4 vs 17.6 µrad, NEES above 2 on 4 of 10 seeds); six undecided
 cycles instead of three (one 45 µrad outlier in five seeds); the text's two filters with
 ``dc_measurement="data-only"`` and ``friction_constraints="distribution"`` (lower thesis peaks
 on the tuning seeds, median 13.9 vs 17.1 µrad, but x̂4 inconsistent, NEES 3.5–230).

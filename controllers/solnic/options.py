@@ -116,6 +116,9 @@ class SolnicOptions:
         (x1, x4, k_c, k_s, d) (:mod:`controllers.solnic.joint_filter`), the prediction used once,
         constraints and "no motion" on the distribution; ``dc_measurement``,
         ``friction_constraints``, ``a_cov`` and ``max_correction_fraction`` do not apply.
+    joint_correction_limit : bool
+        With "joint-ekf": limit large k̂ corrections by a fictitious variance of the motion d
+        (``max_correction_fraction`` × k̂s for a residual of the whole Δc), section 5.3.
     censored_no_motion : bool
         A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
         half-plane condition on N(k̂, P_b).
@@ -150,6 +153,7 @@ class SolnicOptions:
     cost_variances: bool = False
     friction_constraints: Literal["clip", "distribution"] = "clip"
     censored_no_motion: bool = False
+    joint_correction_limit: bool = False
     friction_estimator: Literal["modified-kalman", "joint-ekf"] = "modified-kalman"
 
     def __post_init__(self) -> None:
