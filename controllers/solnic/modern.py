@@ -9,7 +9,7 @@ on seeds 0–9 (README, "solnic-modern"):
 * ``friction_estimator="joint-ekf"``: one Gaussian on (x1, x4, k_c, k_s, d)
   (:mod:`controllers.solnic.joint_filter`): the prediction is used once, the friction is
   identified from the samples through the correlation each pulse creates, and the constraints
-  act on the distribution. With it the mode-2 NEES on thesis is ≈ 1 (0.6–1.3 on 9 of the 10
+  act on the distribution. With it the mode-2 NEES on thesis is ≈ 1 (0.61–1.92 on the ten
   tuning seeds); the text's two filters give 3.5–230 with the same other flags;
 * ``noise_aware_model``: Δc_p carries the w2 bias and variance over the moving time
   (:mod:`controllers.solnic.noise_model`), in the trigger, in (5-6)/(5-9) and in the costs;
@@ -27,7 +27,7 @@ earlier d = 0 pseudo-measurement); ``joint_correction_limit``
 (tuning seeds: thesis median 18.4 vs 17.6 µrad, NEES above 2 on 4 of 10 seeds); six undecided
 cycles instead of three (one 45 µrad outlier in five seeds); the text's two filters with
 ``dc_measurement="data-only"`` and ``friction_constraints="distribution"`` (lower thesis peaks
-on the tuning seeds, median 13.9 vs 17.1 µrad, but x̂4 inconsistent, NEES 3.5–230).
+on the tuning seeds, median 13.9 vs 17.6 µrad, but x̂4 inconsistent, NEES 3.5–230).
 """
 
 from __future__ import annotations
