@@ -166,7 +166,7 @@ USER_ERRORS = {
                             ["bad.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0"]),
     "bad-controller-option": ("[matrix]\ncontrollers = [\"solnic-x\"]\nscenarios = [\"thesis\"]\nseeds = [0]\n"
                               "[controllers.solnic-x]\nbase = \"solnic\"\npreset = \"nope\"\n", (),
-                              ["bad.toml: controllers.solnic-x.preset: preset must be one of"]),
+                              ["bad.toml: controllers.solnic-x.preset: unknown preset 'nope'"]),
     "bad-workers": (None, ("--quick", "--workers", "0"), ["--workers must be an integer >= 1, got 0"]),
 }
 

@@ -8,7 +8,7 @@ from scipy.optimize import minimize_scalar
 
 from controllers.solnic.cost import (calibrate_error_cost, charge, cost_curve, cycle_cost,
                                      cycle_period)
-from controllers.solnic.presets import A_C_HIGH_ERROR_COST, A_C_THESIS
+from controllers.solnic.options import A_C_HIGH_ERROR_COST, A_C_THESIS
 from plant import PlantParams, pulse_response
 
 P = PlantParams()

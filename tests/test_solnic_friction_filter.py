@@ -75,3 +75,22 @@ def test_errors():
         FrictionFilter(1.0, 2.0, P0, 20.0, max_correction_fraction=0.0)
     with pytest.raises(ValueError, match="finite"):
         _filter().update([math.nan, 0.0], 0.0, 1.0, 5.0)
+
+
+def test_condition_matches_monte_carlo_truncation():
+    """Half-plane conditioning (constraints on the distribution) against rejection sampling.
+
+    Tolerance: 200 000 draws, kept fraction ≈ 0.3; mean within 0.01 and covariance within
+    0.01 (absolute, ozf·in and ozf²·in²; MC standard errors ≈ 0.002).
+    """
+    from controllers.solnic.friction_filter import FrictionFilter
+    k0 = np.array([0.7, 1.05])
+    P0 = np.array([[0.49, 0.2], [0.2, 1.1]])
+    f = FrictionFilter(k0[0], k0[1], P0, 20.0)
+    c, b = np.array([1.0, -1.0]), -0.5             # k_s ≥ k_c + 0.5
+    f.condition(c, b)
+    draws = np.random.default_rng(1).multivariate_normal(k0, P0, 200_000)
+    kept = draws[draws @ c <= b]
+    assert 0.2 < len(kept) / len(draws) < 0.5
+    np.testing.assert_allclose(f.k, kept.mean(axis=0), atol=0.01)
+    np.testing.assert_allclose(f.P, np.cov(kept.T), atol=0.01)

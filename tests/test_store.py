@@ -79,7 +79,7 @@ def test_a_second_run_on_the_same_directory_is_refused(tmp_path):
 def test_a_failing_cell_is_a_row_not_an_exception(tmp_path, cell):
     bad = dataclasses.replace(cell, controller=ControllerSpec("solnic", "solnic", {"preset": "nope"}))
     row = run_cell(bad, tmp_path, traces=False)
-    assert row["status"] == "error" and "preset must be one of" in row["message"]
+    assert row["status"] == "error" and "unknown preset" in row["message"]
     assert math.isnan(row["peak_error_rad"])
     slow = dataclasses.replace(cell, scenario=cell.scenario.with_durations(duration_s=30.0), time_limit_s=0.05)
     row = run_cell(slow, tmp_path, traces=False)

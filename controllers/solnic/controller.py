@@ -12,6 +12,19 @@ Every sample the controller
 3. launches the pulse, possibly inside the interval at the predicted trigger time, and resets
    x̂1 and its variance from the prediction, (5-6) and (5-9).
 
+Set-boundary fix (a bug, not a reading of the text): the next pulse's size depends on the
+outcome of the last cycle of a set of twelve ((6-9), (6-10) re-optimise) and of every start-up
+cycle (section 7.2). Such a cycle is evaluated as soon as ``evaluation_samples`` samples past
+t_max are in, and the trigger is planned with the new size. Before the fix the first trigger
+after a set was planned with the finished set's *large* Δc_p, so the controller waited for
+x̂1 = −Δc_large/2 and then fired a small pulse (thesis seed 3: a 12.6 µrad pulse from
+x̂1 = −40.2 µrad). ``legacy_set_boundary=True`` reproduces it for the regression test.
+
+Errata handled here and in the modules: (6-10) as printed steps uphill, we use the vertex of
+the parabola (:mod:`controllers.solnic.strategy`); the text's k̂s ≥ k̂c is a clip of the mean
+that leaves P_b untouched (:mod:`controllers.solnic.friction_filter`; the options
+``friction_constraints="distribution"`` and the joint EKF condition the distribution instead).
+
 Interpretation of (5-14): the printed formula, VAR[x̂1(t_b)] + VAR[x̂1(t_a)] +
 2·COV[x̂1(t_b), x̂1(t_a)]·(t_b − t_a) + VAR[x̂4(t_b)](t_b − t_a)², is garbled (the third term
 has the wrong units and the sign of the x̂1(t_b)–x̂1(t_a) covariance is wrong for a
@@ -52,9 +65,11 @@ from plant.params import PlantParams
 
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
+from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
+from controllers.solnic.noise_model import pulse_noise
 from controllers.solnic.predictor import Predictor, PulsePrediction
-from controllers.solnic.presets import resolve_options
+from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.series import cycle_event_times, log_series
 from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
                                          SizeSchedule, plan_trigger)
@@ -103,6 +118,7 @@ class _Cycle:
     peak_torque: float
     moving_time: float
     overshoot: bool
+    noise_var: float = 0.0    # VAR[Δc] from w2 (noise-aware model) [rad²]
 
 
 @register("solnic")
@@ -111,24 +127,34 @@ class SolnicController(Controller):
 
     Parameters
     ----------
+    options : SolnicOptions, optional
+        A complete option set (positional); or
     preset : str
-        ``"thesis"`` (default) or ``"high-error-cost"``; see :mod:`controllers.solnic.presets`.
-    **options
-        Any key of :data:`controllers.solnic.presets.DEFAULTS`, e.g. ``a_c``, ``a_cov``,
-        ``initial_friction_factor``, ``initial_increment_factor``, ``friction_noise_in_filter``.
+        ``"thesis"`` (the default when no options object is given) or ``"high-error-cost"``;
+        see :mod:`controllers.solnic.options`.
+    **fields
+        Overrides of any :class:`~controllers.solnic.options.SolnicOptions` field, e.g. ``a_c``.
 
     Raises
     ------
     ValueError
-        Naming the offending option.
+        Naming the offending preset or option.
     """
 
     drive = DriveType.BRIDGE
-    description = "solnic: semi-open-loop nonlinear identification and control (Acker 1967)"
+    family = "solnic"
     counter = "pulses"
+    description = "solnic: semi-open-loop nonlinear identification and control (Acker 1967)"
+    Options = SolnicOptions
+    presets = PRESETS
+    knobs = KNOBS
 
-    def __init__(self, preset: str = "thesis", **options: Any) -> None:
-        self.options = resolve_options(preset, **options)
+    def __init__(self, options: SolnicOptions | None = None, /, *, preset: str | None = None,
+                 **fields: Any) -> None:
+        if options is None and preset is None:
+            preset = "thesis"
+        Controller.__init__(self, options, preset=preset, **fields)
+        self.preset = preset if preset is not None else "custom"
         self._ready = False
 
     # ------------------------------------------------------------------ run set-up
@@ -136,36 +162,51 @@ class SolnicController(Controller):
         o = self.options
         self.params = params
         self.rng = rng
-        self.predictor = Predictor(params, fd_step=o["fd_step"])
-        f = o["initial_friction_factor"]
+        self.predictor = Predictor(params, fd_step=o.fd_step)
+        f = o.initial_friction_factor
         kc0, ks0 = f * params.coulomb, f * params.stiction
         ks0 = min(ks0, 0.999 * params.u_max)
         kc0 = min(kc0, ks0)
-        s = o["friction_prior_std_fraction"]
+        s = o.friction_prior_std_fraction
         self.friction = FrictionFilter(kc0, ks0, np.diag([(s * kc0) ** 2, (s * ks0) ** 2]),
-                                       params.u_max, a=o["a_cov"],
-                                       max_correction_fraction=o["max_correction_fraction"])
-        self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq,
-                                 params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9,
-                                 [0.0, 0.0], np.diag([o["x1_prior_std"] ** 2, o["x4_prior_std"] ** 2]))
-        if o["dtu_inc_initial"] is not None:
-            inc0 = o["dtu_inc_initial"]
+                                       params.u_max, a=o.a_cov,
+                                       max_correction_fraction=o.max_correction_fraction,
+                                       constraints=o.friction_constraints)
+        sigma1 = params.measurement_noise_std if params.measurement_noise_std > 0 else 1e-9
+        prior = np.diag([o.x1_prior_std ** 2, o.x4_prior_std ** 2])
+        self.joint: JointFilter | None = None
+        if o.friction_estimator == "joint-ekf":
+            self.joint = JointFilter(params.command_velocity_tau, params.sigma4_sq, sigma1, [0.0, 0.0],
+                                     prior, [kc0, ks0], self.friction.P, params.u_max)
+            self.mode2 = self.joint
+            self.friction = self.joint.friction
+        else:
+            self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
+                                     [0.0, 0.0], prior)
+        if o.dtu_inc_initial is not None:
+            inc0 = o.dtu_inc_initial
             self.adjusted = (_NAN, _NAN)
         else:
-            self.adjusted = adjusted_increment(params, o["a_c"], o["a_ratio"])
-            inc0 = o["initial_increment_factor"] * self.adjusted[1]
-        self.schedule = SizeSchedule(dtu_opt=o["dtu_opt_initial"], dtu_inc=inc0)
+            self.adjusted = adjusted_increment(params, o.a_c, o.a_ratio)
+            inc0 = o.initial_increment_factor * self.adjusted[1]
+        self.schedule = SizeSchedule(dtu_opt=o.dtu_opt_initial, dtu_inc=inc0)
         self.dtu_max = _max_on_time(params)
-        self.z_motion = NormalDist().inv_cdf(o["motion_confidence"])
+        self.z_motion = NormalDist().inv_cdf(o.motion_confidence)
         self._n = 0
         self._t_max = -math.inf
+        self._samples_since_launch = 0
+        self._undecided = 0
+        self._posterior = (0.0, 0.0, o.x1_prior_std**2, 0.0, o.x4_prior_std**2)
+        self._nis: list[float] = []
+        self._noise_memo: dict[tuple[float, float, float], tuple[float, float]] = {}
         self._pending: _Cycle | None = None
         self._costs = (_NAN, _NAN, _NAN)
         self._dc_ratio = _NAN
         self.log: list[dict[str, float]] = []
         self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
-                           cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0)
+                           cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
+                           undecided_cycles=0)
         self._ready = True
 
     # ------------------------------------------------------------------ per sample
@@ -178,9 +219,26 @@ class SolnicController(Controller):
         if t >= self._t_max and math.isfinite(y):
             self.mode2.update(y)
             self.counts["samples_used"] += 1
+            self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
+        m = self.mode2
+        self._posterior = (m.x1, m.x4, m.p11, m.p14, m.p44)
+        if (self._pending is not None and self._outcome_sets_next_size()
+                and self._samples_since_launch >= self.options.evaluation_samples):
+            # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
+            # is re-optimised by (6-9), (6-10); start-up sizes react to significance), so the
+            # cycle is evaluated as soon as its samples are in and the trigger is planned with
+            # the new size, not with the stale one.
+            self._evaluate(t)
         return self._plan(t)
+
+    def _outcome_sets_next_size(self) -> bool:
+        """Whether the pending cycle's evaluation changes the size of the next pulse."""
+        if self.options.legacy_set_boundary:
+            return False
+        sch = self.schedule
+        return sch.set_complete or sch.size in (STARTUP_RAISE, STARTUP_SETTLE)
 
     def _next_dtu(self) -> float:
         sch = self.schedule
@@ -202,10 +260,13 @@ class SolnicController(Controller):
         for attempt in range(2):
             dtu = self._next_dtu()
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
-            x1, x4 = self.mode2.x
-            trig = plan_trigger(x1, x4, self.mode2.drift_std(), abs(pred.delta_c), horizon=ts,
+            x1, x4 = self.mode2.x1, self.mode2.x4
+            dc_plan = abs(pred.delta_c)
+            if self.options.noise_aware_model:
+                dc_plan += self._pulse_noise(pred, dtu)[0]
+            trig = plan_trigger(x1, x4, self.mode2.drift_std(), dc_plan, horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
-                                overshoot_factor=self.options["overshoot_factor"])
+                                overshoot_factor=self.options.overshoot_factor)
             if trig is None:
                 return DriveCommand.hold(0.0, DriveType.BRIDGE)
             if self._pending is not None and attempt == 0:
@@ -218,19 +279,32 @@ class SolnicController(Controller):
                 pred: PulsePrediction) -> DriveCommand:
         t_a = t + offset
         self.mode2.predict(t_a)
-        x1_a, var_x1_a = float(self.mode2.x[0]), float(self.mode2.P[0, 0])
-        self.mode2.set_anchor()
+        x1_a, var_x1_a = self.mode2.x1, self.mode2.p11
+        if self.joint is None:
+            self.mode2.set_anchor()
         dc = abs(pred.delta_c)
+        noise_var = 0.0
+        if self.options.noise_aware_model:
+            bias, noise_var = self._pulse_noise(pred, dtu)
+            dc += bias                                      # E[Δc] with the w2 push and tail
         p_zero = self.friction.prob_no_motion(pred.peak_torque)
         var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
-        self.mode2.add_motion(sign * dc, var_dc)                                    # (5-6)
+        var_dc += noise_var                                 # noise-aware: w2 over T_m
+        if self.joint is not None:      # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
+            limit = (self.options.max_correction_fraction * self.friction.ks
+                     if self.options.joint_correction_limit else math.inf)
+            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
+        else:
+            self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
         sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
-        k = self.options["stuck_confidence_sigmas"]
+        k = self.options.stuck_confidence_sigmas
         self._t_max = t_a + pred.t_nominal + k * sd_t                               # (5-11)
+        self._samples_since_launch = 0
         moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
         self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
-                               np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot)
+                               np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
+                               noise_var)
         if self.schedule.size in (STARTUP_RAISE, STARTUP_SETTLE):
             self.counts["startup_cycles"] += 1
         self.schedule.launched(dtu)
@@ -238,42 +312,100 @@ class SolnicController(Controller):
         self.counts["overshoot_corrections"] += int(overshoot)
         return DriveCommand.pulse(offset, dtu, sign * self.params.u_max)
 
+    def _pulse_noise(self, pred: PulsePrediction, dtu: float) -> tuple[float, float]:
+        """(bias, variance) of |Δc| from w2 for the pulse ``pred`` [rad, rad²], memoised."""
+        key = (self.friction.ks, self.friction.kc, dtu)
+        hit = self._noise_memo.get(key)
+        if hit is None:
+            ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
+            n = pulse_noise(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
+                            pred.t_current_zero, pred.t_nominal)
+            hit = (n.bias, n.variance)
+            if len(self._noise_memo) > 512:
+                self._noise_memo.clear()
+            self._noise_memo[key] = hit
+        return hit
+
     def _evaluate(self, t_b: float) -> None:
         c, self._pending = self._pending, None
         x1_b, x4_b = (float(v) for v in self.mode2.x)
         P = self.mode2.P
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
-        if self.options["dce_variance"] == "exact":
+        if self.joint is not None:
+            # confidence that the pulse moved the shaft: the posterior of d (prior × samples)
+            dc_e, var_e = self.joint.motion_mean, self.joint.motion_var
+        elif self.options.dce_variance == "exact":
             var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
         else:
             var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
         var_meas = var_e
         dc_meas = dc_e
-        if self.options["dc_measurement"] == "data-only":
+        if self.options.dc_measurement == "data-only" and self.joint is None:
             # significance from the posterior of d; the k̂ update from the samples alone
             dc_e, var_e = self.mode2.motion_mean, self.mode2.motion_var
             dc_meas, var_meas = self.mode2.motion_likelihood()
-        if self.options["friction_noise_in_filter"]:
+        if self.options.noise_aware_model:
+            var_meas += c.noise_var                         # the friction filter's R
+        elif self.options.friction_noise_in_filter:
             p = self.params
             var_meas += p.alpha**2 * p.sigma2_sq * c.moving_time**3 / 3.0
         sd = math.sqrt(max(var_e, 1e-300))
-        z = c.sign * dc_e / sd
+        z = c.sign * dc_e / sd if math.isfinite(sd) else 0.0
         significant = z >= self.z_motion
+        decision = "moved" if significant else "none"
+        if not significant and self.options.motion_decision == "three-way":
+            # "no motion" only if the test could have seen the predicted motion: power of the
+            # one-sided test against Δc_p; otherwise undecided (keep the schedule, no k̂ update)
+            # Δc itself is uncertain (k̂ spread H P_b H', w2 scatter): marginal power
+            spread = math.sqrt(sd * sd + self.friction.motion_variance(c.H_b) + c.noise_var)
+            power = NormalDist().cdf((c.delta_c - self.z_motion * sd) / spread)
+            if power < self.options.no_motion_power:
+                self._undecided += 1
+                # past the bound: fall back to the start-up sizes, but this is no evidence
+                decision = ("undecided" if self._undecided <= self.options.max_undecided_cycles
+                            else "fallback")
+        if decision != "undecided":
+            self._undecided = 0
         self.counts["cycles_evaluated"] += 1
-        entry = dict(t_a=c.t_a, t_b=t_b, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
+        self.counts["undecided_cycles"] += int(decision == "undecided")
+        entry = dict(t_a=c.t_a, t_b=t_b, x1_a=c.x1_a, size=float(c.size), dt_u=c.dt_u, sign=float(c.sign),
                      dc_p=c.delta_c, dc_e=c.sign * dc_e, sd_e=sd, significant=float(significant),
                      ks_before=self.friction.ks, kc_before=self.friction.kc)
         if significant:
             self.counts["significant_cycles"] += 1
-        if significant and math.isfinite(var_meas):
-            upd = self.friction.update(c.H_b, c.sign * dc_meas - c.delta_c, var_meas, c.peak_torque)
+        if self.joint is not None:
+            # normalised innovation of Δc: the samples' evidence against the prediction
+            prior_mean, prior_var = self.joint.motion_prior
+            m, R = self.joint.motion_likelihood()
+            if math.isfinite(R):
+                nis = (m - prior_mean) ** 2 / (R + prior_var)
+                self._nis.append(nis)
+                entry["nis"] = nis
+            if decision == "moved":
+                self.joint.moved(c.peak_torque)
+                self.counts["friction_updates"] += 1
+            elif decision == "none":
+                # d = 0, then (censored_no_motion) k_s ≥ peak torque
+                self.joint.no_motion(c.peak_torque, censor=self.options.censored_no_motion)
+        elif significant and math.isfinite(var_meas):
+            residual = c.sign * dc_meas - c.delta_c
+            upd = self.friction.update(c.H_b, residual, var_meas, c.peak_torque)
+            self._nis.append(residual**2 / upd.innovation_var)
+            entry["nis"] = residual**2 / upd.innovation_var
             self.counts["friction_updates"] += 1
             self.counts["shrinks"] += upd.shrinks
             self.counts["clipped_updates"] += int(upd.clipped)
-        entry.update(ks=self.friction.ks, kc=self.friction.kc)
+        elif decision == "none" and self.options.censored_no_motion:
+            # (a powerful test saw nothing; the fallback after undecided cycles is not evidence)
+            # no breakaway: censored evidence k_s ≥ peak torque, on the distribution
+            self.friction.condition(np.array([0.0, -1.0]), -c.peak_torque)
+        entry.update(ks=self.friction.ks, kc=self.friction.kc, decision=decision)
         self.log.append(entry)
-        self.schedule.evaluated(significant, c.size, c.dt_u)
+        if decision == "undecided":
+            self.schedule.undecided(c.size, c.dt_u)
+        else:
+            self.schedule.evaluated(significant, c.size, c.dt_u)
         if self.schedule.set_complete:
             self._reoptimise()
 
@@ -290,16 +422,20 @@ class SolnicController(Controller):
                 continue
             dtu = min(dtu, self.dtu_max)
             pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
+            dc, noise_var = abs(pred.delta_c), 0.0
+            if o.noise_aware_model and dc > 0:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] in (6-1), (6-3)
             var_dc = var_x1 = 0.0
-            if o["cost_variances"]:
-                var_dc = self.friction.motion_variance(pred.H_b)
+            if o.cost_variances:
+                var_dc = self.friction.motion_variance(pred.H_b) + noise_var
                 var_x1 = float(self.mode2.P[0, 0])
-            costs.append(cycle_cost(dtu, abs(pred.delta_c), x4, o["a_c"], p, var_dc, var_x1).total)
-            motions.append(abs(pred.delta_c))
+            costs.append(cycle_cost(dtu, dc, x4, o.a_c, p, var_dc, var_x1).total)
+            motions.append(dc)
         ratio = motions[2] / motions[0] if motions[0] > 0 else math.inf
         self._costs = tuple(costs)
         self._dc_ratio = ratio
-        sch.reoptimise(*costs, ratio, o["a_gain"], o["a_ratio"], o["min_inc_factor"])
+        sch.reoptimise(*costs, ratio, o.a_gain, o.a_ratio, o.min_inc_factor)
         self.counts["cost_evaluations"] += 1
 
     # ------------------------------------------------------------------ reporting
@@ -321,6 +457,9 @@ class SolnicController(Controller):
             "dt_opt_rel_error": (abs(sch.dtu_opt - self.adjusted[0]) / self.adjusted[0]
                                  if self.adjusted[0] > 0 else _NAN),
             "n_cost_updates": float(self.counts["cost_evaluations"]),
+            # the mode-2 filter at the sample instant (before any pulse of this step), for NEES
+            "m2_x1": self._posterior[0], "m2_x4": self._posterior[1], "m2_P11": self._posterior[2],
+            "m2_P14": self._posterior[3], "m2_P44": self._posterior[4],
         }
 
     def event_times(self) -> dict[str, np.ndarray]:
@@ -338,9 +477,9 @@ class SolnicController(Controller):
 
     def summary(self) -> dict[str, Any]:
         if not self._ready:
-            return {"preset": self.options["preset"], "a_c": self.options["a_c"]}
+            return {"preset": self.preset, "a_c": self.options.a_c}
         out: dict[str, Any] = {
-            "preset": self.options["preset"], "a_c": self.options["a_c"],
+            "preset": self.preset, "a_c": self.options.a_c,
             "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,
             "P_kc_kc": float(self.friction.P[0, 0]), "P_ks_ks": float(self.friction.P[1, 1]),
             "P_kc_ks": float(self.friction.P[0, 1]),
@@ -349,4 +488,5 @@ class SolnicController(Controller):
             "x4_hat": float(self.mode2.x[1]), "model_runs": self.predictor.n_model_runs,
         }
         out.update(self.counts)
+        out["dc_nis_mean"] = float(np.mean(self._nis)) if self._nis else _NAN
         return out

@@ -68,6 +68,9 @@ def mode2_transition(h: float, tau4: float, sigma4_sq: float) -> tuple[np.ndarra
 class Mode2Filter:
     """Kalman filter on (x1, x4), time-stamped.
 
+    The 2×2 algebra is written out in Python floats (a numpy 2×2 product costs ~1 µs, the
+    filter runs at every sample); :attr:`x` and :attr:`P` return numpy copies.
+
     Parameters
     ----------
     tau4 : float
@@ -94,25 +97,64 @@ class Mode2Filter:
         self.tau4 = float(tau4)
         self.sigma4_sq = float(sigma4_sq)
         self.R = float(sigma1) ** 2
-        self.x = np.array(x0, dtype=float).reshape(2)
-        self.P = np.array(P0, dtype=float).reshape(2, 2)
+        x = np.array(x0, dtype=float).reshape(2)
+        P = np.array(P0, dtype=float).reshape(2, 2)
+        self.x1, self.x4 = float(x[0]), float(x[1])
+        self.p11, self.p14, self.p44 = float(P[0, 0]), float(0.5 * (P[0, 1] + P[1, 0])), float(P[1, 1])
         self.t = float(t0)
-        self._cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self.anchor_cov: np.ndarray | None = None   # COV[e(t), e1(t_a)], shape (2,)
+        self._cache: dict[float, tuple[float, float, float, float, float, float]] = {}
+        self._anchor: tuple[float, float] | None = None   # COV[e(t), e1(t_a)]
         self.anchor_var = math.nan                  # VAR[e1(t_a)]
         self.anchor_t = math.nan
         self.motion_mean = math.nan                 # d̂, estimate of the last correction's Δc
         self.motion_var = math.nan                  # VAR[e_d]
-        self.motion_cov: np.ndarray | None = None   # COV[e(t), e_d], shape (2,)
+        self._motion: tuple[float, float] | None = None   # COV[e(t), e_d]
         self.motion_prior = (math.nan, math.nan)    # (Δc_p,cond, its variance)
 
-    def _transition(self, h: float) -> tuple[np.ndarray, np.ndarray]:
+    # -- numpy views ------------------------------------------------------------------
+    @property
+    def x(self) -> np.ndarray:
+        """(x̂1, x̂4) as a new array."""
+        return np.array([self.x1, self.x4])
+
+    @property
+    def P(self) -> np.ndarray:
+        """The 2×2 covariance as a new array."""
+        return np.array([[self.p11, self.p14], [self.p14, self.p44]])
+
+    @property
+    def anchor_cov(self) -> np.ndarray | None:
+        """COV[e(t), e1(t_a)], shape (2,), or None before :meth:`set_anchor`."""
+        return None if self._anchor is None else np.array(self._anchor)
+
+    @property
+    def motion_cov(self) -> np.ndarray | None:
+        """COV[e(t), e_d], shape (2,), or None before :meth:`add_motion`."""
+        return None if self._motion is None else np.array(self._motion)
+
+    # -- time update ------------------------------------------------------------------
+    def _transition(self, h: float) -> tuple[float, float, float, float, float, float]:
+        """(Φ12, Φ22, q11, q14, q44, 0) of :func:`mode2_transition`, memoised by h."""
         hit = self._cache.get(h)
         if hit is None:
-            hit = mode2_transition(h, self.tau4, self.sigma4_sq)
-            if len(self._cache) < 64:
-                self._cache[h] = hit
+            Phi, Q = mode2_transition(h, self.tau4, self.sigma4_sq)
+            hit = (float(Phi[0, 1]), float(Phi[1, 1]), float(Q[0, 0]), float(Q[0, 1]), float(Q[1, 1]), 0.0)
+            if len(self._cache) >= 256:
+                self._cache.clear()
+            self._cache[h] = hit
         return hit
+
+    def _propagated(self, h: float) -> tuple[float, float, float, float, float]:
+        f12, f22, q11, q14, q44, _ = self._transition(h)
+        x1 = self.x1 + f12 * self.x4
+        x4 = f22 * self.x4
+        # Φ P Φ' + Q with Φ = [[1, f12], [0, f22]]
+        a11 = self.p11 + f12 * self.p14
+        a12 = self.p14 + f12 * self.p44
+        p11 = a11 + f12 * a12 + q11
+        p14 = f22 * a12 + q14
+        p44 = f22 * f22 * self.p44 + q44
+        return x1, x4, p11, p14, p44
 
     def predicted(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(x̂, P) propagated to time ``t`` ≥ self.t, without changing the filter."""
@@ -120,26 +162,31 @@ class Mode2Filter:
         if h < -1e-12:
             raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
         if h <= 0:
-            return self.x.copy(), self.P.copy()
-        Phi, Q = self._transition(h)
-        return Phi @ self.x, Phi @ self.P @ Phi.T + Q
+            return self.x, self.P
+        x1, x4, p11, p14, p44 = self._propagated(h)
+        return np.array([x1, x4]), np.array([[p11, p14], [p14, p44]])
 
     def predict(self, t: float) -> None:
         """Time update to ``t``:  x̂ = Φx̂,  P = ΦPΦ' + COV[N]."""
         h = t - self.t
-        if h > 0 and (self.anchor_cov is not None or self.motion_cov is not None):
-            Phi = self._transition(h)[0]
-            if self.anchor_cov is not None:
-                self.anchor_cov = Phi @ self.anchor_cov
-            if self.motion_cov is not None:
-                self.motion_cov = Phi @ self.motion_cov
-        self.x, self.P = self.predicted(t)
-        self.t = max(self.t, float(t))
+        if h < -1e-12:
+            raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
+        if h <= 0:
+            return
+        f12, f22 = self._transition(h)[:2]
+        if self._anchor is not None:
+            c0, c1 = self._anchor
+            self._anchor = (c0 + f12 * c1, f22 * c1)
+        if self._motion is not None:
+            m0, m1 = self._motion
+            self._motion = (m0 + f12 * m1, f22 * m1)
+        self.x1, self.x4, self.p11, self.p14, self.p44 = self._propagated(h)
+        self.t = float(t)
 
     def set_anchor(self) -> None:
         """Freeze x̂1 now as x̂1(t_a) and start tracking COV[e(t), e1(t_a)]."""
-        self.anchor_cov = self.P[:, 0].copy()
-        self.anchor_var = float(self.P[0, 0])
+        self._anchor = (self.p11, self.p14)
+        self.anchor_var = self.p11
         self.anchor_t = self.t
 
     def motion_variance(self, t_b: float | None = None) -> float:
@@ -148,28 +195,33 @@ class Mode2Filter:
         With a = (1, t_b − t_a, −1) on (e1(t_b), e4(t_b), e1(t_a)): a'Σa, including the
         covariances of the current errors with the frozen one.
         """
-        if self.anchor_cov is None:
+        if self._anchor is None:
             raise ValueError("no anchor: call set_anchor() at the pulse start")
         dt = (self.t if t_b is None else t_b) - self.anchor_t
-        P, c = self.P, self.anchor_cov
-        return float(P[0, 0] + 2 * dt * P[0, 1] + dt * dt * P[1, 1] + self.anchor_var
-                     - 2.0 * (c[0] + dt * c[1]))
+        c0, c1 = self._anchor
+        return (self.p11 + 2 * dt * self.p14 + dt * dt * self.p44 + self.anchor_var
+                - 2.0 * (c0 + dt * c1))
 
     def update(self, y: float) -> float:
         """Measurement update with y = x1 + w1 at the filter's time; returns the innovation."""
-        innovation = float(y) - self.x[0]
-        S = self.P[0, 0] + self.R
-        K = self.P[:, 0] / S
-        if self.anchor_cov is not None:
-            self.anchor_cov = self.anchor_cov - K * self.anchor_cov[0]    # (I − KH)·c
-        if self.motion_cov is not None:                                   # augmented state d
-            k_d = self.motion_cov[0] / S
+        innovation = float(y) - self.x1
+        p11, p14, p44 = self.p11, self.p14, self.p44
+        S = p11 + self.R
+        k1, k4 = p11 / S, p14 / S
+        if self._anchor is not None:                                      # (I − KH)·c
+            c0, c1 = self._anchor
+            self._anchor = (c0 - k1 * c0, c1 - k4 * c0)
+        if self._motion is not None:                                      # augmented state d
+            m0, m1 = self._motion
+            k_d = m0 / S
             self.motion_mean += k_d * innovation
-            self.motion_var -= k_d * self.motion_cov[0]
-            self.motion_cov = self.motion_cov - K * self.motion_cov[0]
-        self.x = self.x + K * innovation
-        self.P = self.P - np.outer(K, self.P[0, :])
-        self.P = 0.5 * (self.P + self.P.T)
+            self.motion_var -= k_d * m0
+            self._motion = (m0 - k1 * m0, m1 - k4 * m0)
+        self.x1 += k1 * innovation
+        self.x4 += k4 * innovation
+        self.p11 = p11 - k1 * p11
+        self.p14 = p14 - k1 * p14
+        self.p44 = p44 - k4 * p14
         return innovation
 
     def add_motion(self, delta_c: float, variance: float) -> None:
@@ -182,11 +234,11 @@ class Mode2Filter:
         """
         if not variance >= 0:
             raise ValueError(f"variance must be >= 0, got {variance!r}")
-        self.x[0] += float(delta_c)
-        self.P[0, 0] += float(variance)
+        self.x1 += float(delta_c)
+        self.p11 += float(variance)
         self.motion_mean = float(delta_c)
         self.motion_var = float(variance)
-        self.motion_cov = np.array([float(variance), 0.0])
+        self._motion = (float(variance), 0.0)
         self.motion_prior = (float(delta_c), float(variance))
 
     def motion_likelihood(self) -> tuple[float, float]:
@@ -207,4 +259,4 @@ class Mode2Filter:
 
     def drift_std(self) -> float:
         """√P44, the std of x̂4 [rad/s]."""
-        return math.sqrt(max(self.P[1, 1], 0.0))
+        return math.sqrt(max(self.p44, 0.0))

@@ -179,6 +179,16 @@ class SizeSchedule:
             self.dtu_startup = max(dtu_of_cycle, self.dtu_opt)
             self.cycles_done = 0
 
+    def undecided(self, size_of_cycle: int, dtu_of_cycle: float) -> None:
+        """The last cycle's outcome is undecided (three-way decision): keep the schedule.
+
+        A normal size goes on with its set; a start-up size repeats the same Δt_u.
+        """
+        if size_of_cycle == STARTUP_RAISE:
+            self.dtu_startup = max(dtu_of_cycle - self.dtu_inc, 0.0)
+        elif size_of_cycle == STARTUP_SETTLE:
+            self.dtu_startup = dtu_of_cycle
+
     def _new_set(self) -> None:
         self.size = SMALL
         self.cycles_done = 0

@@ -1,0 +1,67 @@
+"""The noise-aware Δc model against Monte-Carlo of the exact noisy plant (pulse_response).
+
+2000 noisy pulses per case, Δt_u in {0.95, 1.2, 1.5} ms and x5 in {−0.6, 0, +0.6} ozf·in
+(friction shifted as ks = k̄s + x5, kc = k̄c + x5; x5's own diffusion off so w2 is the only noise).
+
+Stated tolerances: the mean within 3 Monte-Carlo standard errors (SD/√2000) plus 6 % of the SD
+(the push term uses the secant drift, a documented lower bound of the reflection push); the
+variance within ±15 % (the MC standard error of a variance from 2000 heavy-tailed draws is
+≈ 4–6 %). Short pulses that stop during the flyback (noise-free stop before the current is
+zero) are outside the derivation's coasting assumption: a strict xfail with the measured numbers.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.solnic.noise_model import pulse_noise
+from plant import PlantParams, pulse_response
+
+N = 2000
+BASE = PlantParams().replace(correlated_friction_std=0.0)
+CASES = [(x5, dtu) for x5 in (-0.6, 0.0, 0.6) for dtu in (0.95e-3, 1.2e-3, 1.5e-3)]
+FLYBACK_STOP = {(0.0, 0.95e-3), (0.6, 1.2e-3)}     # noise-free stop before current zero
+
+
+@pytest.fixture(scope="module")
+def monte_carlo():
+    out = {}
+    for x5, dtu in CASES:
+        q = BASE.replace(stiction=BASE.stiction + x5, coulomb=BASE.coulomb + x5)
+        r0 = pulse_response(q, dtu)
+        d = np.array([pulse_response(q, dtu, seed=1000 + i).delta_c for i in range(N)])
+        out[(x5, dtu)] = (q, r0, d)
+    return out
+
+
+def _check(monte_carlo, x5, dtu):
+    q, r0, d = monte_carlo[(x5, dtu)]
+    n = pulse_noise(BASE, q.stiction, q.coulomb, dtu, r0.t_breakaway, r0.t_current_zero, r0.t_stop)
+    if r0.t_breakaway is None:
+        assert np.all(d == 0.0) and n.bias == 0.0 and n.variance == 0.0
+        return
+    sd = d.std(ddof=1)
+    mean_err = (r0.delta_c + n.bias) - d.mean()
+    assert abs(mean_err) <= 3.0 * sd / math.sqrt(N) + 0.06 * sd, (mean_err * 1e6, sd * 1e6)
+    assert 0.85 <= n.variance / sd**2 <= 1.15, (math.sqrt(n.variance) * 1e6, sd * 1e6)
+
+
+@pytest.mark.parametrize("x5,dtu", [c for c in CASES if c not in FLYBACK_STOP])
+def test_mean_and_variance_match_monte_carlo(monte_carlo, x5, dtu):
+    _check(monte_carlo, x5, dtu)
+
+
+@pytest.mark.xfail(strict=True, reason="stop during flyback: measured bias 0.34/0.23 µrad vs model "
+                                       "0.49/0.43, SD 0.71/0.52 vs model 0.93/0.93 µrad (absorption while "
+                                       "the torque falls through kc is not in the coasting derivation)")
+@pytest.mark.parametrize("x5,dtu", sorted(FLYBACK_STOP))
+def test_flyback_stop_cases(monte_carlo, x5, dtu):
+    _check(monte_carlo, x5, dtu)
+
+
+def test_no_friction_noise_gives_zero():
+    q = BASE.replace(friction_noise_psd=0.0)
+    r0 = pulse_response(q, 1.4e-3)
+    n = pulse_noise(q, q.stiction, q.coulomb, 1.4e-3, r0.t_breakaway, r0.t_current_zero, r0.t_stop)
+    assert n.bias == 0.0 and n.variance == 0.0
