@@ -37,8 +37,8 @@ def _cases(tmp: Path) -> dict[str, tuple[list[str], int, list[str]]]:
     tiny = matrix("tiny.toml", TINY)
     out = str(tmp / "out")
     return {
-        "dev-zero": (["run", "--matrix", "/dev/zero", "--out", out], 2, ["/dev/zero: not a regular file"]),
-        "matrix-dir": (["run", "--matrix", str(tmp), "--out", out], 2, [f"{tmp}: not a regular file"]),
+        "dev-zero": (["run", "--matrix", "/dev/zero", "--out", out], 2, ["/dev/zero: cannot read the matrix file: not a regular file"]),
+        "matrix-dir": (["run", "--matrix", str(tmp), "--out", out], 2, [f"{tmp}: cannot read the matrix file: not a regular file"]),
         "parquet-is-dir": (["run", "--matrix", tiny, "--out", str(parquet_dir)], 2,
                            [f"{parquet_dir / 'results.parquet'}: exists and is not a regular file"]),
         "cells-is-file": (["run", "--matrix", tiny, "--out", str(cells_file)], 2,
