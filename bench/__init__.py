@@ -4,8 +4,11 @@
 * :mod:`bench.scenarios` — built-in scenarios (thesis, quiet-friction, ratio-2);
 * :mod:`bench.matrix` — the TOML matrix file → cells;
 * :mod:`bench.cells` — one cell: config hash, :func:`~bench.cells.run_cell` (row + artifacts);
-* :mod:`bench.series`, :mod:`bench.traces` — figure series from the report hooks; rerun recordings;
-* :mod:`bench.executors` — local process pool, dask.distributed;
+* :mod:`bench.series`, :mod:`bench.traces` — figure series from the report hooks; rerun recordings streamed
+  to disk while a cell runs;
+* :mod:`bench.isolation`, :mod:`bench.warm` — each cell in a fresh process watched from outside
+  (death, hang, anything raised → an ``error`` row); the forkserver's kernel warm-up;
+* :mod:`bench.executors` — local per-cell processes, dask.distributed;
 * :mod:`bench.store`, :mod:`bench.driver` — atomic per-cell store, resume, rebuilt tables;
 * :mod:`bench.aggregate`, :mod:`bench.provenance`, :mod:`bench.cli` — the terminal table,
   ``meta.json``, the ``solnic-bench`` command;

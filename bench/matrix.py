@@ -122,7 +122,8 @@ def load_matrix(path: str | Path, *, check_resets: bool = True) -> Matrix:
     label = str(path)
     try:
         if not path.is_file():   # a directory, /dev/zero, a FIFO: never read
-            raise MatrixError(f"{label}: not a regular file" if path.exists() else f"{label}: no such file")
+            why = "not a regular file" if path.exists() else "no such file"
+            raise MatrixError(f"{label}: cannot read the matrix file: {why}")
         with path.open("rb") as fh:
             raw = fh.read(_MAX_MATRIX_BYTES + 1)
         if len(raw) > _MAX_MATRIX_BYTES:

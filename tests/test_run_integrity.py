@@ -258,20 +258,6 @@ def test_a_second_matrix_into_the_same_out_is_refused_and_a_grown_one_is_accepte
     assert (second["mean_abs_current"] != first["mean_abs_current"]).all()    # the new level was simulated
 
 
-def test_error_rows_from_a_bad_time_limit_are_retried_after_the_fix(tmp_path):
-    """A cell that needs 3 s under a 0.5 s limit, then under 100 s."""
-    env = {**os.environ, "T_HANG_S": "3"}
-    matrix = write_matrix(tmp_path, ["t-hang"], time_limit=0.5)
-    out = tmp_path / "run"
-    proc = cli("run", "--matrix", matrix, "--out", out, "--traces", "none", env=env)
-    assert proc.returncode == 0
-    assert pd.read_parquet(out / "results.parquet").iloc[0]["error_kind"] == "time_limit"
-    fixed = write_matrix(tmp_path, ["t-hang"], time_limit=100, name="fixed.toml")
-    proc = cli("run", "--matrix", fixed, "--out", out, "--traces", "none", env=env)
-    assert proc.returncode == 0 and "1 computed, 0 resumed" in proc.stdout, proc.stdout
-    assert pd.read_parquet(out / "results.parquet").iloc[0]["status"] == "ok"
-
-
 def _mount_tmpfs(path: Path, size: str) -> bool:
     path.mkdir()
     try:
