@@ -28,6 +28,7 @@ plant.segments (torque events and integrals); this module drives them over one i
 from __future__ import annotations
 
 import math
+import threading
 from functools import lru_cache
 
 import numpy as np
@@ -307,6 +308,20 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
 
 
 _NO_EVENTS = np.empty((0, len(EVENT_FIELDS)))
+
+# The event records are written into a per-thread scratch buffer that only grows (the events
+# are copied out, so no result aliases it). A fresh small buffer per interval overflowed often,
+# and an exception raised inside a numba kernel leaks its array arguments: a dithered cell
+# recording its trace grew by ~2 MB per simulated second. Overflow now happens a few times per
+# process at most.
+_SCRATCH = threading.local()
+
+
+def _event_scratch() -> np.ndarray:
+    ev = getattr(_SCRATCH, "events", None)
+    if ev is None:
+        ev = _SCRATCH.events = np.empty((4096, len(EVENT_FIELDS)))
+    return ev
 _NO_NOISE = np.empty(0)
 
 
@@ -359,7 +374,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     noisy = options.noise and noise is not None
     o, TP, TL, BPh, BPw, BG, BC = _plan(params, options, noisy)
     out = np.empty(N_STATE + _SHEET)
-    ev = np.empty((16, len(EVENT_FIELDS))) if record else _NO_EVENTS
+    ev = _event_scratch() if record else _NO_EVENTS
     if noisy:
         z, pos = noise.window()
     else:
@@ -372,7 +387,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         except NoiseExhausted:
             z, pos = noise.grow(pos)
         except _RecordFull:
-            ev = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
+            ev = _SCRATCH.events = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
     if noisy:
         noise.consumed(pos_after)
     x_out = out[:N_STATE]
