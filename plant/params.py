@@ -185,6 +185,24 @@ class PlantParams:
             raise ValueError(f"PlantParams has no field {unknown[0]!r}; fields are {sorted(names)}")
         return dataclasses.replace(self, **changes)
 
+    def with_friction(self, stiction: float, coulomb: float) -> "PlantParams":
+        """``replace(stiction=..., coulomb=...)`` that re-checks only the friction fields.
+
+        The solnic predictor builds a plant per friction estimate (thousands per run); the other
+        fields are already valid. Invalid friction falls back to :meth:`replace`, which raises
+        the usual error naming the field.
+        """
+        ks, kc = float(stiction), float(coulomb)
+        if not (math.isfinite(ks) and math.isfinite(kc) and 0.0 <= kc <= ks < self.u_max):
+            return self.replace(stiction=ks, coulomb=kc)
+        new = object.__new__(PlantParams)
+        fields = new.__dict__
+        mine = self.__dict__
+        for name in _FIELD_NAMES:
+            fields[name] = mine[name]
+        fields["stiction"], fields["coulomb"] = ks, kc
+        return new
+
     def noise_free(self) -> "PlantParams":
         """The same plant with every noise source switched off."""
         return self.replace(measurement_noise_std=0.0, friction_noise_psd=0.0,

@@ -48,3 +48,14 @@ def test_non_numbers_and_unknown_fields_are_rejected():
         PlantParams(inertia="heavy")
     with pytest.raises(ValueError, match="no field 'mass'"):
         PlantParams().replace(mass=1.0)
+
+
+def test_with_friction_equals_replace_and_rejects_what_replace_rejects():
+    p = PlantParams()
+    q = p.with_friction(2.0, 1.2)
+    assert q == p.replace(stiction=2.0, coulomb=1.2)
+    assert q.kernel_record().tobytes() == p.replace(stiction=2.0, coulomb=1.2).kernel_record().tobytes()
+    assert (p.stiction, p.coulomb) == (PlantParams().stiction, PlantParams().coulomb)  # untouched
+    for ks, kc in ((1.0, 1.5), (p.u_max, 1.0), (2.0, -0.1), (float("nan"), 1.0)):
+        with pytest.raises(ValueError, match="PlantParams"):
+            p.with_friction(ks, kc)

@@ -65,3 +65,23 @@ def test_no_friction_noise_gives_zero():
     r0 = pulse_response(q, 1.4e-3)
     n = pulse_noise(q, q.stiction, q.coulomb, 1.4e-3, r0.t_breakaway, r0.t_current_zero, r0.t_stop)
     assert n.bias == 0.0 and n.variance == 0.0
+
+
+@pytest.mark.parametrize("b, s2, t", [(0.0, 1e-8, 2e-3), (1e-6, 1e-8, 2e-3), (3e-4, 2.5e-9, 1e-3),
+                                      (5e-2, 1e-8, 5e-3), (1e-3, 4e-10, 0.1)])
+def test_mean_running_max_closed_form_against_the_integrated_tail(b, s2, t):
+    # independent truth: ∫₀^∞ P(M_t > m) dm by adaptive quadrature of the reflection-principle tail
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    from controllers.solnic.noise_model import _mean_running_max
+
+    sd = math.sqrt(s2 * t)
+
+    def tail(m):
+        return norm.cdf((-m - b * t) / sd) + math.exp(-2.0 * b * m / s2) * norm.cdf((-m + b * t) / sd)
+
+    # in units of sd; beyond 40 sd both terms are below 1e-300
+    truth, _ = quad(lambda x: tail(x * sd), 0.0, 40.0, epsabs=0.0, epsrel=1e-12, limit=400)
+    truth *= sd
+    assert _mean_running_max(b, s2, t) == pytest.approx(truth, rel=1e-8)

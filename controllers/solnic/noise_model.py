@@ -39,14 +39,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr
 
 from plant.params import PlantParams
 
 __all__ = ["PulseNoise", "pulse_noise", "velocity_std_after"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
-_M_GRID = np.linspace(0.0, 1.0, 33)[1:]          # push levels as fractions of a scale
 
 
 @dataclass(frozen=True)
@@ -65,22 +63,27 @@ class PulseNoise:
     variance: float
 
 
-def _phi_cdf(z: np.ndarray) -> np.ndarray:
-    return ndtr(z)
-
-
 def _mean_running_max(b: float, s2: float, t: float) -> float:
-    """E[sup_{u≤t}(s·B_u − b·u)⁺] for drift b > 0 [rad/s]."""
+    """E[sup_{u≤t}(s·B_u − b·u)⁺] for drift b ≥ 0 [rad/s], s² = ``s2``, in closed form.
+
+    With P(M_t > m) = Φ((−m − bt)/(s√t)) + e^{−2bm/s²}·Φ((−m + bt)/(s√t)) (the reflection
+    principle with drift), ∫₀^∞ P(M_t > m) dm integrates term by term (the second by parts, its
+    exponent completing a square) to
+
+        E[M_t] = s√t·(z·Φ(z) + φ(z)) + s²·erf(b√t / (s√2)) / (2b),   z = −b√t/s,
+
+    which tends to s·√(2t/π) as b → 0 and to s²/(2b) as t → ∞.
+    """
     if t <= 0 or s2 <= 0:
         return 0.0
     s = math.sqrt(s2)
     sd = s * math.sqrt(t)
-    # P(M_t > m), integrated over m in [0, m_hi] with the trapezoid rule on a fixed grid
-    m_hi = min(8.0 * sd, 8.0 * s2 / (2.0 * b)) if b > 0 else 8.0 * sd
-    m = np.concatenate(([0.0], _M_GRID * m_hi))
-    tail = (_phi_cdf((-m - b * t) / sd)
-            + np.exp(-2.0 * b * m / s2) * _phi_cdf((-m + b * t) / sd))
-    return float(np.trapezoid(tail, m))
+    if b <= 0:
+        return sd * math.sqrt(2.0 / math.pi)
+    z = -b * math.sqrt(t) / s
+    phi = math.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
+    cdf = 0.5 * math.erfc(-z / math.sqrt(2.0))
+    return sd * (z * cdf + phi) + s2 * math.erf(-z / math.sqrt(2.0)) / (2.0 * b)
 
 
 def velocity_std_after(params: PlantParams, moving_time: float) -> float:

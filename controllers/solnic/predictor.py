@@ -133,7 +133,7 @@ class Predictor:
             return hit
         if not self.valid(ks, kc):
             raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
-        est = self.params.replace(stiction=float(ks), coulomb=float(kc))
+        est = self.params.with_friction(ks, kc)
         r = self._response(est, float(dt_u), sign=1, seed=None)
         self.n_model_runs += 1
         out = (float(r.delta_c), None if r.t_breakaway is None else float(r.t_breakaway),
