@@ -87,8 +87,12 @@ class MemoryRecorder:
             self.e.append(ev)
 
     def internals(self, values: dict[str, float]) -> None:
+        series = self.i
         for k, v in values.items():
-            self.i.setdefault(k, [math.nan] * self.n_steps).append(float(v))
+            lst = series.get(k)
+            if lst is None:          # a key first reported now: NaN for the steps before
+                lst = series[k] = [math.nan] * self.n_steps
+            lst.append(float(v))
         self.n_steps += 1
         for lst in self.i.values():
             if len(lst) < self.n_steps:
