@@ -198,25 +198,36 @@ def test_set_boundary_trigger_uses_the_new_size(set_boundary_runs):
 
 
 # ---------------------------------------------------------------- consistency (NEES)
+NEES_SEEDS = (0, 1, 2, 3, 4)
+
+
 @pytest.fixture(scope="module")
 def thesis_runs_20s():
+    """Both variants on thesis, 20 s, seeds 0-4: (NEES per seed, summary of seed 0)."""
     from controllers.solnic.diagnostics import mode2_nees
     out = {}
     for name in ("solnic", "solnic-modern"):
-        r = run_closed_loop(PlantParams(), get_controller(name)(), duration_s=20.0, warmup_s=5.0,
-                            seed=0, record=True)
-        assert r.status == "ok", r.message
-        out[name] = (mode2_nees(r.samples, r.internals, 5.0), r.summary)
+        nees, summary = [], None
+        for seed in NEES_SEEDS:
+            r = run_closed_loop(PlantParams(), get_controller(name)(), duration_s=20.0, warmup_s=5.0,
+                                seed=seed, record=True)
+            assert r.status == "ok", r.message
+            nees.append(mode2_nees(r.samples, r.internals, 5.0))
+            summary = summary or r.summary
+        out[name] = (nees, summary)
     return out
 
 
 def test_modern_mode2_filter_is_consistent_on_thesis(thesis_runs_20s):
     """NEES of (x̂1, x̂4) against the true state, stuck samples from 5 s: ≈ 1 when honest.
 
-    The faithful filter (noise-free internal model, no w2 term in (5-9)) is far from it; the
-    test states that too, so that a change making it honest shows up.
+    The statistic is the median over seeds 0-4: one seed's NEES over 20 s moves by several
+    units with the closed loop's chaotic path (seed 0: 0.8 before, 4.4 after a 0.5 % change in
+    the noise model's push term). The faithful filter (noise-free internal model, no w2 term in
+    (5-9)) is far from it; the test states that too, so that a change making it honest shows up.
     """
     nees, summary = thesis_runs_20s["solnic-modern"]
-    assert nees["n"] > 500
-    assert 0.5 <= nees["nees"] <= 2.0 and 0.5 <= nees["nees_x1"] <= 2.0
-    assert thesis_runs_20s["solnic"][0]["nees"] > 10.0
+    assert all(n["n"] > 500 for n in nees)
+    assert 0.5 <= np.median([n["nees"] for n in nees]) <= 2.0
+    assert 0.5 <= np.median([n["nees_x1"] for n in nees]) <= 2.0
+    assert np.median([n["nees"] for n in thesis_runs_20s["solnic"][0]]) > 10.0
