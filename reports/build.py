@@ -343,7 +343,7 @@ def render_html(inputs: ReportInputs) -> str:
     add("speed", _fig.work_precision(inputs.speed), 480)
 
     counts = {v: sum(r.verdict == v for r in rows)
-              for v in (_claims.REPRODUCED, _claims.NOT_REPRODUCED, _claims.NOT_MEASURED)}
+              for v in (_claims.REPRODUCED, _claims.NOT_REPRODUCED, _claims.INCONCLUSIVE, _claims.NOT_MEASURED)}
     figure_panels = [
         {"id": fid, "title": title, "div": figs[fid], "quotes": _FIGURE_QUOTES[fid],
          "claims": [by_key[k] for k in _FIGURE_CLAIMS[fid]], "needs": needs}

@@ -28,7 +28,7 @@ from reports.inputs import SIZE_PEAK_COLUMNS, SeriesRun
 from reports.limits import PlantLimits
 
 __all__ = [
-    "REPRODUCED", "NOT_REPRODUCED", "NOT_MEASURED", "Criterion", "within_rel", "within_abs",
+    "REPRODUCED", "NOT_REPRODUCED", "NOT_MEASURED", "INCONCLUSIVE", "Criterion", "within_rel", "within_abs",
     "at_most", "at_least", "below", "above", "verdict", "Measurement", "ClaimSpec", "ClaimRow",
     "Selection", "CLAIMS", "evaluate_claims", "value_at", "settling_time",
 ]
@@ -36,6 +36,7 @@ __all__ = [
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
 NOT_MEASURED = "not measured"
+INCONCLUSIVE = "inconclusive"
 
 _Kind = Literal["rel", "abs", "at_most", "at_least", "below", "above"]
 
@@ -114,16 +115,24 @@ def above(limit: float) -> Criterion:
     return Criterion("above", limit)
 
 
-def verdict(value: float | None, criterion: Criterion) -> str:
+def verdict(value: float | None, criterion: Criterion, ci: tuple[float, float] | None = None) -> str:
     """``"not measured"`` for None/NaN, else reproduced / not reproduced by ``criterion``.
 
-    ``inf`` is a measurement (e.g. "never settled") and is judged like any number.
+    ``inf`` is a measurement (e.g. "never settled") and is judged like any number. With a 95 %
+    confidence interval ``ci`` (claims that compare controllers over seeds), the verdict is
+    reproduced only if the criterion holds at both ends, not reproduced if it fails at both,
+    and ``"inconclusive"`` when the interval straddles the claimed threshold.
     """
     if value is None:
         return NOT_MEASURED
     x = float(value)
     if math.isnan(x):
         return NOT_MEASURED
+    if ci is not None and all(math.isfinite(c) for c in ci):
+        held = [criterion.holds(float(c)) for c in ci]
+        if all(held):
+            return REPRODUCED
+        return NOT_REPRODUCED if not any(held) else INCONCLUSIVE
     return REPRODUCED if criterion.holds(x) else NOT_REPRODUCED
 
 
@@ -134,6 +143,7 @@ class Measurement:
     value: float | None
     text: str
     basis: str = ""
+    ci: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -453,6 +463,21 @@ def _m_order_of_magnitude(ctx: _Context) -> Measurement:
                        _describe_cells(df) + "; worst cell")
 
 
+def _paired(a: pd.DataFrame, b: pd.DataFrame, column: str):
+    """Paired ratio a/b over the seeds both frames hold (bench.stats.paired_ratio: geometric
+    mean of the per-seed ratios, 95 % BCa bootstrap CI, P(a < b))."""
+    from bench.stats import paired_ratio
+
+    ga = a.groupby("seed")[column].mean()
+    gb = b.groupby("seed")[column].mean()
+    seeds = ga.index.intersection(gb.index)
+    return paired_ratio(ga.loc[seeds].to_numpy(), gb.loc[seeds].to_numpy())
+
+
+def _ci_text(pr) -> str:
+    return f"[95 % CI {_g(pr.low)}–{_g(pr.high)}, {pr.n} paired seeds]"
+
+
 def _m_ten_times_linear(ctx: _Context) -> Measurement:
     lin = ctx.cells(ctx.selection.linear, ctx.selection.thesis_scenario, "peak_error_rad")
     r, s = ctx.results, ctx.selection
@@ -466,10 +491,16 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
     best = sol.groupby(["controller", "scenario"])["peak_error_rad"].mean()
     (bc, bs), bv = best.idxmin(), float(best.min())
     ml = float(lin["peak_error_rad"].mean())
-    ratio = ml / bv
-    return Measurement(ratio, f"mean linear peak {_g(ml * 1e6)} µrad / best solnic ({bc}/{bs}) "
-                              f"{_g(bv * 1e6)} µrad = {_g(ratio)}×",
-                       "means over seeds; best solnic variant on the thesis plant")
+    pr = _paired(lin, sol[(sol["controller"] == bc) & (sol["scenario"] == bs)], "peak_error_rad")
+    if pr.n < 2:
+        ratio = ml / bv
+        return Measurement(ratio, f"mean linear peak {_g(ml * 1e6)} µrad / best solnic ({bc}/{bs}) "
+                                  f"{_g(bv * 1e6)} µrad = {_g(ratio)}× (no paired seeds: no CI)",
+                           "means over seeds; best solnic variant on the thesis plant")
+    return Measurement(pr.ratio, f"linear / best solnic ({bc}/{bs}) peak, paired by seed: {_g(pr.ratio)}× "
+                                 f"{_ci_text(pr)}; means {_g(ml * 1e6)} vs {_g(bv * 1e6)} µrad",
+                       "geometric mean of per-seed ratios with a BCa bootstrap CI; best solnic variant "
+                       "(lowest mean) on the thesis plant; verdict from the CI", (pr.low, pr.high))
 
 
 def _m_vs_peers(ctx: _Context) -> Measurement:
@@ -486,10 +517,19 @@ def _m_vs_peers(ctx: _Context) -> Measurement:
         return _not_measured(f"needs ok {s.solnic} and other controllers on {s.thesis_scenario}")
     ref = float(means[s.solnic])
     others = means.drop(s.solnic).sort_values()
-    ratio = float(others.iloc[0]) / ref
+    best = others.index[0]
+    fam_plain = fam[plain.index]
+    pr = _paired(plain[fam_plain == best], plain[fam_plain == s.solnic], "peak_error_rad")
     parts = ", ".join(f"{k} {_g(v * 1e6)} µrad ({_g(v / ref)}×)" for k, v in others.items())
-    return Measurement(ratio, f"{s.solnic} {_g(ref * 1e6)} µrad; {parts}",
-                       f"means over seeds on {s.thesis_scenario}; ratio = best other / {s.solnic}")
+    if pr.n < 2:
+        ratio = float(others.iloc[0]) / ref
+        return Measurement(ratio, f"{s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+                           f"means over seeds on {s.thesis_scenario}; ratio = best other / {s.solnic}")
+    return Measurement(pr.ratio, f"best other ({best}) / {s.solnic}, paired by seed: {_g(pr.ratio)}× "
+                                 f"{_ci_text(pr)}, P({best} lower) = {_g(pr.p_improvement)}; "
+                                 f"means: {s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+                       f"best other family by mean peak on {s.thesis_scenario}; geometric mean of per-seed "
+                       f"ratios with a BCa bootstrap CI; verdict from the CI", (pr.low, pr.high))
 
 
 def _m_less_current(ctx: _Context) -> Measurement:
@@ -498,11 +538,17 @@ def _m_less_current(ctx: _Context) -> Measurement:
     if s.empty or lin.empty:
         return _not_measured("needs ok solnic and linear thesis cells with mean_abs_current")
     ms, ml = float(s["mean_abs_current"].mean()), float(lin["mean_abs_current"].mean())
+    pr = _paired(s, lin, "mean_abs_current")
     text = f"mean |i|: solnic {_g(ms)} vs linear {_g(ml)} ozf·in (ratio {_g(ms / ml)})"
+    if pr.n >= 2:
+        text += f"; paired by seed {_g(pr.ratio)} {_ci_text(pr)}"
     if "supply_charge_rate" in s.columns and "supply_charge_rate" in lin.columns:
         text += (f"; supply charge rate {_g(s['supply_charge_rate'].mean())} vs "
                  f"{_g(lin['supply_charge_rate'].mean())}")
-    return Measurement(ms / ml, text, "means over seeds of mean_abs_current (1/T)∫|x3|dt")
+    if pr.n < 2:
+        return Measurement(ms / ml, text, "means over seeds of mean_abs_current (1/T)∫|x3|dt")
+    return Measurement(pr.ratio, text, "geometric mean of per-seed ratios of mean_abs_current (1/T)∫|x3|dt "
+                                       "with a BCa bootstrap CI; verdict from the CI", (pr.low, pr.high))
 
 
 def _m_largest_error(which: Literal["value", "time"]) -> Callable[[_Context], Measurement]:
@@ -777,5 +823,5 @@ def evaluate_claims(*, results: pd.DataFrame, limits: PlantLimits,
         rows.append(ClaimRow(
             key=spec.key, claim=spec.claim, source=spec.source, claimed=spec.claimed,
             measured=m.text, criterion=spec.criterion.describe(spec.unit),
-            verdict=verdict(m.value, spec.criterion), value=m.value, basis=m.basis))
+            verdict=verdict(m.value, spec.criterion, m.ci), value=m.value, basis=m.basis))
     return rows

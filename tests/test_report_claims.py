@@ -311,3 +311,34 @@ def test_vs_peers_compares_solnic_with_every_other_family_and_names_a_winner():
     assert row.verdict == C.NOT_REPRODUCED and row.value == pytest.approx(0.75)
     assert row.measured.index("pulse-width") < row.measured.index("linear")   # best first
     assert "solnic-high" not in row.measured
+
+
+def test_a_ci_decides_comparison_verdicts():
+    from reports.claims import INCONCLUSIVE, NOT_REPRODUCED, REPRODUCED, at_least, verdict
+
+    crit = at_least(10.0)
+    assert verdict(20.0, crit, (12.0, 30.0)) == REPRODUCED
+    assert verdict(20.0, crit, (8.0, 30.0)) == INCONCLUSIVE      # the point holds, the CI straddles 10
+    assert verdict(5.0, crit, (3.0, 9.0)) == NOT_REPRODUCED
+    assert verdict(20.0, crit) == REPRODUCED                      # no CI: the point decides
+
+
+def test_paired_comparison_claims_carry_a_ci_from_the_seeds():
+    # linear 100x solnic's peak on every seed, with scatter: ten_times_linear holds with a CI;
+    # currents solnic/linear = 0.05 on every seed.
+    import pandas as pd
+
+    from reports.claims import Selection, _Context, _m_less_current, _m_ten_times_linear
+    rng = np.random.default_rng(0)
+    rows = []
+    for seed in range(8):
+        base = 20e-6 * (1 + 0.3 * rng.random())
+        for ctl, peak, cur in (("linear", 100 * base, 1.0), ("solnic", base, 0.05)):
+            rows.append(dict(cell=f"{ctl}__thesis__s{seed}", controller=ctl, controller_base=ctl, controller_family=ctl,
+                             scenario="thesis", seed=seed, status="ok", peak_error_rad=peak, mean_abs_current=cur))
+    df = pd.DataFrame(rows)
+    ctx = _Context(df, [], None, None, None, None, Selection(), 20.0)
+    m = _m_ten_times_linear(ctx)
+    assert m.value == pytest.approx(100.0) and m.ci[0] == pytest.approx(100.0) and m.ci[1] == pytest.approx(100.0)
+    c = _m_less_current(ctx)
+    assert c.value == pytest.approx(0.05) and c.ci == (pytest.approx(0.05), pytest.approx(0.05))
