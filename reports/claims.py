@@ -484,8 +484,8 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
     if lin.empty or "peak_error_rad" not in r.columns:
         return _not_measured("needs ok linear and solnic cells with peak_error_rad")
     sol = r[(_family(r) == s.solnic) & (r["status"] == "ok") & r["peak_error_rad"].notna()]
-    sol = pd.concat([sol[sol["scenario"] == s.thesis_scenario],
-                     ctx.high_cost_cells("peak_error_rad")]).drop_duplicates("cell")
+    # every solnic variant, on the same (thesis) plant as the linear cells it is paired with
+    sol = sol[sol["scenario"] == s.thesis_scenario]
     if sol.empty:
         return _not_measured("needs ok solnic cells with peak_error_rad")
     best = sol.groupby(["controller", "scenario"])["peak_error_rad"].mean()
