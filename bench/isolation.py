@@ -32,7 +32,7 @@ __all__ = ["CellFailure", "call_isolated", "kill_all", "reopen", "start", "ready
 
 # What the forkserver imports once, so that each child starts with the simulator loaded.
 # bench.warm compiles the plant's kernels there once (not in every cell's time limit).
-PRELOAD = ["bench.cells", "bench.runner", "bench.series", "bench.traces", "controllers", "bench.warm"]
+PRELOAD = ["bench.cells", "bench.runner", "bench.series", "bench.traces", "controllers", "control", "bench.warm"]
 _PR_SET_PDEATHSIG = 1
 
 _live: set[multiprocessing.process.BaseProcess] = set()

@@ -31,6 +31,8 @@ def test_thesis_cell(benchmark, controller):
 
 
 def test_quick_matrix(benchmark, tmp_path):
+    if benchmark.disabled:   # `make test`: tests/test_cli_run.py runs and checks the quick matrix already
+        pytest.skip("a timing only (make benchmark); the quick run is tested in tests/test_cli_run.py")
     from typer.testing import CliRunner
 
     from bench.cli import app

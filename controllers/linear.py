@@ -35,13 +35,25 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
-import control as ct
 import numpy as np
 import scipy.integrate
 
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
+
+
+class _Control:
+    """python-control, imported on first use: it costs ~1 s (scipy.signal, matplotlib) that a
+    process which never designs a linear controller (a CLI error, a plugin-only matrix) saves."""
+
+    def __getattr__(self, name: str) -> Any:
+        import control
+
+        return getattr(control, name)
+
+
+ct = _Control()
 
 __all__ = ["LAG_RATIO_CAP", "LinearDesign", "design_linear", "highest_crossover", "LinearOptions",
            "LinearController"]
