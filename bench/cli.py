@@ -151,9 +151,6 @@ def run(
         raise UserError(f"--traces must be one of all, first-seed, none; got {traces!r}")
     out = _out_dir(out_value)
     pool = make_executor(executor, workers, scheduler)
-    if pool.kind == "local":        # the cell processes' server loads while the matrix is checked
-        from bench.isolation import start
-        start()
     from bench.matrix import builtin_matrix_path, load_matrix
     spec = load_matrix(matrix if matrix is not None else builtin_matrix_path(quick))
     from bench.store import check_layout

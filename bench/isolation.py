@@ -28,7 +28,7 @@ import time
 from multiprocessing.connection import wait
 from typing import Any, Callable
 
-__all__ = ["CellFailure", "call_isolated", "kill_all", "reopen", "start", "ready", "PRELOAD"]
+__all__ = ["CellFailure", "call_isolated", "kill_all", "reopen", "ready", "PRELOAD"]
 
 # What the forkserver imports once, so that each child starts with the simulator loaded.
 # bench.warm compiles the plant's kernels there once (not in every cell's time limit).
@@ -178,16 +178,6 @@ def reopen() -> None:
 
 
 _ready = False
-
-
-def start() -> None:
-    """Start the forkserver without waiting for it: it imports :data:`PRELOAD` (and compiles the
-    kernels) in the background while the caller reads and checks its matrix. :func:`ready`
-    waits for it later."""
-    from multiprocessing import forkserver
-
-    _context()
-    forkserver.ensure_running()
 
 
 def ready() -> None:
