@@ -49,7 +49,7 @@ class WeakErrorConfig:
     steps: tuple[float, ...] = (1e-5, 3e-6, 1e-6, 3e-7, 1e-7)
 
 
-QUICK_WEAK = WeakErrorConfig(n_paths=1500, steps=(1e-5, 1e-6, 1e-7))
+QUICK_WEAK = WeakErrorConfig(n_paths=1500, steps=(1e-5, 1e-6))
 FULL_WEAK = WeakErrorConfig()
 
 
