@@ -110,7 +110,7 @@ def to_toml(data: dict[str, Any], header: str = "") -> str:
 
 def frontier_command(
     quick: bool = typer.Option(False, "--quick", help="The quick frontier (at most 3 min on 2 cores)."),
-    out: Path = typer.Option(Path("frontier"), "--out", help="Run directory; a re-run resumes it."),
+    out_value: str = typer.Option("frontier", "--out", help="Run directory; a re-run resumes it."),
     executor: str = typer.Option("local", "--executor", help="local (process pool) or dask."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="dask scheduler address (default: a LocalCluster)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: CPU count)."),
@@ -118,9 +118,10 @@ def frontier_command(
 ) -> None:
     """Every registered controller over its knob, with the oracle floor and the noise sweeps:
     DIR/results.{parquet,csv}, DIR/frontier-matrix.toml, DIR/report.html with a frontier section."""
-    from bench.cli import _writable_dir, run
+    from bench.cli import _out_dir, _writable_dir, run
     from bench.matrix import parse_matrix
 
+    out = _out_dir(out_value)
     data = frontier_matrix_data(quick)
     source = frontier_matrix_path(quick)
     parse_matrix(data, str(source))          # a bad registry knob is a user error before anything runs
@@ -133,5 +134,5 @@ def frontier_command(
             path.write_text(text, encoding="utf-8")
     except OSError as exc:
         raise UserError(f"--out {out}: cannot write {path.name}: {exc.strerror or exc}") from None
-    run(matrix=path, quick=False, out=out, executor=executor, scheduler=scheduler, workers=workers,
-        no_traces=not traces)
+    run(matrix=path, quick=False, out_value=str(out), executor=executor, scheduler=scheduler, workers=workers,
+        traces_policy="all" if traces else "none", no_traces=False)

@@ -224,3 +224,25 @@ def test_crossing_of_the_best_over_points_takes_the_minimum_per_level():
     values = np.repeat(base[None], 10, axis=0)
     point, lo, hi = crossing_ci(levels, values, 4.0)
     assert point == pytest.approx(1.6) and lo == hi == pytest.approx(1.6)
+
+
+def test_frontier_command_runs_its_matrix_through_run(tmp_path, monkeypatch):
+    """The `frontier` command end to end on a tiny stand-in of its matrix (the real one is
+    minutes): the completed matrix is written, every point is an ordinary cell, a report is made."""
+    from typer.testing import CliRunner
+
+    import bench.frontier as F
+    from bench.cli import app
+
+    tiny = {"matrix": {"controllers": ["linear", "oracle-pulse"], "scenarios": ["thesis"], "seeds": [0, 1],
+                       "duration_s": 1.0, "warmup_s": 0.5},
+            "sweep": {"oracle-pulse": {"band": [2e-6, 8e-6]}}}
+    monkeypatch.setattr(F, "frontier_matrix_data", lambda quick=False: tiny)
+    out = tmp_path / "fr"
+    result = CliRunner().invoke(app, ["frontier", "--quick", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (out / "frontier-matrix.toml").is_file() and (out / "report.html").is_file()
+    df = pd.read_parquet(out / "results.parquet")
+    assert sorted(df["controller"].unique()) == ["linear", "oracle-pulse[band=2e-06]", "oracle-pulse[band=8e-06]"]
+    assert (df["status"] == "ok").all() and len(df) == 6
+    assert not (out / "traces").exists() or not any((out / "traces").iterdir())
