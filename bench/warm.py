@@ -13,6 +13,7 @@ import numpy as np
 from plant.drive import DriveCommand, DriveType
 from plant.interval import advance
 from plant.params import PlantParams
+from plant.pulse import pulse_response
 from plant.randomness import NoiseStream
 from plant.state import SimOptions, initial_state
 
@@ -28,6 +29,8 @@ def warm() -> None:
             stream = NoiseStream(np.random.default_rng(0)) if noise else None
             for command in commands:
                 state = advance(state, command, params, stream, SimOptions(noise=noise), record=record).state
+    pulse_response(params, 1.2e-3)              # the closed-form pulse (pulse controllers' predictors)
+    pulse_response(params, 1.2e-3, seed=0)
 
 
 try:
