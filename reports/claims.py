@@ -323,10 +323,19 @@ def _family(r: pd.DataFrame) -> pd.Series:
     return out
 
 
+def _is_bound(name: str) -> bool:
+    """Whether ``name`` is a registered privileged bound (e.g. the oracle), not a controller."""
+    from controllers.base import available_controllers
+
+    cls = available_controllers().get(str(name))
+    return bool(cls is not None and cls.privileged)
+
+
 def _plain(r: pd.DataFrame, family: str) -> pd.Series:
-    """Rows of ``family`` whose controller is the registered one, not a variant."""
+    """Rows of the registered controller that *is* ``family`` (its name is the family's): not a
+    matrix variant of it, nor a registered subclass that inherits the family (solnic-modern)."""
     base = r["controller_base"].astype(str) if "controller_base" in r.columns else r["controller"]
-    return (_family(r) == family) & (r["controller"] == base)
+    return (_family(r) == family) & (r["controller"] == base) & (r["controller"] == family)
 
 
 def _not_measured(why: str) -> Measurement:
@@ -511,7 +520,8 @@ def _m_vs_peers(ctx: _Context) -> Measurement:
     ok = r[(r["status"] == "ok") & (r["scenario"] == s.thesis_scenario) & r["peak_error_rad"].notna()]
     fam = _family(ok)
     base = ok["controller_base"].astype(str) if "controller_base" in ok.columns else ok["controller"]
-    plain = ok[ok["controller"] == base]
+    plain = ok[(ok["controller"] == base) & (ok["controller"] == fam)]
+    plain = plain[~plain["controller"].map(_is_bound).astype(bool)]   # a bound is not a peer
     means = plain.groupby(fam[plain.index])["peak_error_rad"].mean()
     if s.solnic not in means.index or len(means) < 2:
         return _not_measured(f"needs ok {s.solnic} and other controllers on {s.thesis_scenario}")

@@ -291,7 +291,8 @@ def _per_seed(results: pd.DataFrame, controller: str, scenarios: list[str], col:
     r = results[(results["controller"] == controller) & results["scenario"].isin(scenarios)]
     ok = r.assign(v=np.where(r["status"] == "ok", r[col], np.nan))
     table = ok.pivot_table(index="seed", columns="scenario", values="v", aggfunc="first", dropna=False)
-    return table.reindex(columns=scenarios).to_numpy(dtype=float)
+    seeds = sorted(results["seed"].dropna().unique())     # one shared seed axis: pairs stay paired
+    return table.reindex(index=seeds, columns=scenarios).to_numpy(dtype=float)
 
 
 def crossing_rows(results: pd.DataFrame, points: pd.DataFrame, config: Mapping[str, Any],
@@ -339,7 +340,7 @@ def _fmt_level(v: float) -> str:
 def crossing_claims(rows: list[dict[str, Any]], table_sigma2: float, limit_rad: float) -> list[Any]:
     """Scorecard rows (:class:`reports.claims.ClaimRow`) of :func:`crossing_rows`: the claim
     "beats the classical limit" holds at the thesis plant iff the crossing σ2² ≥ Table 2-1's."""
-    from reports.claims import ClaimRow, at_least, verdict
+    from reports.claims import INCONCLUSIVE, ClaimRow, at_least, verdict
 
     out = []
     crit = at_least(table_sigma2)
@@ -362,7 +363,8 @@ def crossing_claims(rows: list[dict[str, Any]], table_sigma2: float, limit_rad: 
                   f"(frontier: the σ2² where its median peak error reaches {limit_rad * 1e6:.3g} µrad)",
             source="§7.3 (2/7 of the limit); issue 14 noise sweep", claimed="beats 7.09 µrad at Table 2-1's σ2",
             measured=text, criterion=crit.describe("ozf²·in²·s"),
-            verdict=verdict(c if math.isfinite(c) else (1e300 if c > 0 else -1e300), crit), value=c,
+            verdict=(INCONCLUSIVE if straddle else
+                     verdict(c if math.isfinite(c) else (1e300 if c > 0 else -1e300), crit)), value=c,
             basis=f"median peak over {r['n']} shared seeds at σ2² = {', '.join(f'{v:.3g}' for v in r['levels'])}; "
                   f"crossing by linear interpolation; CI: percentile bootstrap over seeds"))
     return out

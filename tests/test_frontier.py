@@ -246,3 +246,13 @@ def test_frontier_command_runs_its_matrix_through_run(tmp_path, monkeypatch):
     assert sorted(df["controller"].unique()) == ["linear", "oracle-pulse[band=2e-06]", "oracle-pulse[band=8e-06]"]
     assert (df["status"] == "ok").all() and len(df) == 6
     assert not (out / "traces").exists() or not any((out / "traces").iterdir())
+
+
+def test_per_seed_values_stay_paired_when_a_controller_misses_a_seed():
+    from reports.frontier import _per_seed
+    df = pd.DataFrame([dict(controller=c, scenario="thesis", seed=s, status="ok", peak_error_rad=float(s + 1))
+                       for c, seeds in (("a", (0, 1, 2)), ("b", (0, 2))) for s in seeds])
+    a = _per_seed(df, "a", ["thesis"], "peak_error_rad")[:, 0]
+    b = _per_seed(df, "b", ["thesis"], "peak_error_rad")[:, 0]
+    assert a.tolist() == [1.0, 2.0, 3.0]
+    assert b[0] == 1.0 and math.isnan(b[1]) and b[2] == 3.0

@@ -342,3 +342,15 @@ def test_paired_comparison_claims_carry_a_ci_from_the_seeds():
     assert m.value == pytest.approx(100.0) and m.ci[0] == pytest.approx(100.0) and m.ci[1] == pytest.approx(100.0)
     c = _m_less_current(ctx)
     assert c.value == pytest.approx(0.05) and c.ci == (pytest.approx(0.05), pytest.approx(0.05))
+
+
+def test_claims_read_the_registered_controller_not_a_subclass_of_its_family():
+    # solnic-modern inherits the family "solnic"; the claims about solnic must not pool it in
+    from reports.claims import Selection, _Context, _m_less_current
+    rows = []
+    for seed in range(4):
+        for ctl, fam, cur in (("linear", "linear", 1.0), ("solnic", "solnic", 0.05), ("solnic-modern", "solnic", 0.5)):
+            rows.append(dict(cell=f"{ctl}__thesis__s{seed}", controller=ctl, controller_base=ctl, controller_family=fam,
+                             scenario="thesis", seed=seed, status="ok", peak_error_rad=1e-5, mean_abs_current=cur))
+    ctx = _Context(pd.DataFrame(rows), [], None, None, None, None, Selection(), 20.0)
+    assert _m_less_current(ctx).value == pytest.approx(0.05)
