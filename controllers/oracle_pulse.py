@@ -30,7 +30,7 @@ import numpy as np
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.pulse import pulse_response
+from plant.pulse import max_on_time, pulse_response
 from plant.state import X1, X3, X4, X5
 
 __all__ = ["OraclePulse", "OraclePulseOptions"]
@@ -62,18 +62,6 @@ class OraclePulseOptions:
                              f"got {self.landing_fraction!r}")
 
 
-def _max_on_time(params: PlantParams) -> float:
-    """Largest Δt_u [s] whose current is back to zero within one sample period."""
-    tau, ts = params.motor_time_constant, params.sample_period
-    lo, hi = 0.0, ts
-    for _ in range(80):          # t_cz(Δt) = Δt + τ3·ln(2 − e^(−Δt/τ3)), increasing
-        mid = 0.5 * (lo + hi)
-        if mid + tau * math.log(2.0 - math.exp(-mid / tau)) < ts:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
 
 @register("oracle-pulse")
 class OraclePulse(Controller):
@@ -89,7 +77,7 @@ class OraclePulse(Controller):
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         self.params = params
-        self.dtu_max = _max_on_time(params)
+        self.dtu_max = max_on_time(params)
         self._truth = None
         self._law: tuple[float, PlantParams] | None = None
         self._t_stop_guess = 0.0

@@ -23,7 +23,7 @@ from plant.params import PlantParams
 from plant.randomness import NoiseStream
 from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
 
-__all__ = ["PulseResponse", "pulse_response"]
+__all__ = ["PulseResponse", "pulse_response", "max_on_time"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,23 @@ class PulseResponse:
 
 _HORIZON_S = 1.0
 _BREAKAWAY, _STICK, _FLYBACK_END = int(EventKind.BREAKAWAY), int(EventKind.STICK), int(EventKind.FLYBACK_END)
+
+
+def max_on_time(params: PlantParams) -> float:
+    """Largest bridge on-time Δt_u [s] whose current is back to zero within one sample period.
+
+    From rest, x3 rises for Δt and then flies back towards −u_max until it crosses zero at
+    t_cz(Δt) = Δt + τ3·ln(2 − e^(−Δt/τ3)), which increases with Δt; bisection for t_cz = τs.
+    """
+    tau, ts = params.motor_time_constant, params.sample_period
+    lo, hi = 0.0, ts
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if mid + tau * math.log(2.0 - math.exp(-mid / tau)) < ts:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int | None = None,

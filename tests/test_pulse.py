@@ -8,6 +8,7 @@ import pytest
 from plant import PlantParams, pulse_response
 from plant.drive import DriveType
 from plant.reference import Schedule, event_driven
+from plant.state import SimOptions
 
 P0 = PlantParams()
 
@@ -97,3 +98,13 @@ def test_hermite_peak_matches_dense_evaluation():
         turns = np.flatnonzero(np.sign(dy[1:]) != np.sign(dy[:-1])) + 1
         dense = np.abs(y[turns]).max() if turns.size else 0.0
         assert hermite_peak(h, ya, da, yb, db) == pytest.approx(dense, rel=1e-6, abs=1e-18)
+
+
+@pytest.mark.parametrize("params", [PlantParams(), PlantParams(motor_time_constant=5e-3)])
+def test_max_on_time_brings_the_current_back_to_zero_at_the_next_sample(params):
+    # independent truth: the event-driven simulator's flyback-end time for that on-time
+    from plant.pulse import max_on_time
+    dt = max_on_time(params)
+    assert 0 < dt < params.sample_period
+    r = pulse_response(params, dt, options=SimOptions(noise=False))
+    assert r.t_current_zero == pytest.approx(params.sample_period, abs=1e-12)

@@ -62,6 +62,7 @@ import numpy as np
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
+from plant.pulse import max_on_time
 
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
@@ -89,18 +90,6 @@ def adjusted_increment(params: PlantParams, a_c: float, a_ratio: float = 2.0) ->
     opt = optimal_dtu(params, a_c)
     return opt, optimal_increment(params, opt, a_ratio)
 
-
-def _max_on_time(params: PlantParams) -> float:
-    """Largest Δt_u whose current is back to zero within one sample period [s]."""
-    tau, ts = params.motor_time_constant, params.sample_period
-    lo, hi = 0.0, ts
-    for _ in range(80):                         # t_cz(Δt) = Δt + τ3·ln(2 − e^(−Δt/τ3)), increasing
-        mid = 0.5 * (lo + hi)
-        if mid + tau * math.log(2.0 - math.exp(-mid / tau)) < ts:
-            lo = mid
-        else:
-            hi = mid
-    return lo
 
 
 @dataclass
@@ -190,7 +179,7 @@ class SolnicController(Controller):
             self.adjusted = adjusted_increment(params, o.a_c, o.a_ratio)
             inc0 = o.initial_increment_factor * self.adjusted[1]
         self.schedule = SizeSchedule(dtu_opt=o.dtu_opt_initial, dtu_inc=inc0)
-        self.dtu_max = _max_on_time(params)
+        self.dtu_max = max_on_time(params)
         self.z_motion = NormalDist().inv_cdf(o.motion_confidence)
         self._n = 0
         self._t_max = -math.inf

@@ -35,7 +35,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr
+
+from controllers.solnic.truncation import condition_half_plane
 
 __all__ = ["FrictionFilter", "FrictionUpdate"]
 
@@ -133,22 +134,9 @@ class FrictionFilter:
         (``always=False``) avoids that, but measured worse: on thesis seed 100 the joint
         filter's k̂ then wandered and the run diverged (peak 2.1 mrad).
         """
-        c = np.asarray(c, dtype=float)
-        Pc = self.P @ c
-        v = float(c @ Pc)
-        m = float(c @ self.k)
-        if not v > 0:
-            return
-        sd = math.sqrt(v)
-        alpha = (bound - m) / sd
-        if alpha > 8.0 or (alpha >= 0.0 and not always):     # no information, or mean inside
-            return
-        lam = math.exp(-0.5 * alpha * alpha - 0.5 * math.log(2 * math.pi) - float(log_ndtr(alpha)))
-        mean_z = m - sd * lam
-        var_z = v * max(1.0 - alpha * lam - lam * lam, 1e-6)
-        self.k = self.k + Pc * (mean_z - m) / v
-        self.P = self.P - np.outer(Pc, Pc) * (v - var_z) / (v * v)
-        self.P = 0.5 * (self.P + self.P.T)
+        out = condition_half_plane(self.k, self.P, c, bound, always)
+        if out is not None:
+            self.k, self.P = out
 
     def _apply_distribution_constraints(self, peak_torque: float) -> None:
         """k_s ≤ peak torque (motion occurred), k_s ≥ k_c, k_c ≥ 0 as conditions on N(k̂, P_b)."""

@@ -27,9 +27,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import log_ndtr
 
 from controllers.solnic.mode2_filter import mode2_transition
+from controllers.solnic.truncation import condition_half_plane
 
 __all__ = ["JointFilter", "FrictionView"]
 
@@ -280,18 +280,6 @@ class JointFilter:
         (``always=False``) avoids that, but measured worse: on thesis seed 100 the joint
         filter's k̂ then wandered and the run diverged (peak 2.1 mrad).
         """
-        Pc = self.P @ c
-        v = float(c @ Pc)
-        if not v > 0:
-            return
-        m = float(c @ self.z)
-        sd = math.sqrt(v)
-        alpha = (bound - m) / sd
-        if alpha > 8.0 or (alpha >= 0.0 and not always):
-            return
-        lam = math.exp(-0.5 * alpha * alpha - 0.5 * math.log(2 * math.pi) - float(log_ndtr(alpha)))
-        mean_s = m - sd * lam
-        var_s = v * max(1.0 - alpha * lam - lam * lam, 1e-6)
-        self.z = self.z + Pc * (mean_s - m) / v
-        self.P = self.P - np.outer(Pc, Pc) * (v - var_s) / (v * v)
-        self.P = 0.5 * (self.P + self.P.T)
+        out = condition_half_plane(self.z, self.P, c, bound, always)
+        if out is not None:
+            self.z, self.P = out
