@@ -100,9 +100,11 @@ class DriveCommand:
         if not math.isfinite(level):
             raise ValueError(f"DriveCommand level must be finite, got {level!r}")
         cmd = object.__new__(cls)
-        cmd._set(((0.0, level),), drive if type(drive) is DriveType else DriveType(drive))
-        object.__setattr__(cmd, "_offsets", _HOLD_OFFSETS)
-        object.__setattr__(cmd, "_levels", np.full(1, level))
+        _set = object.__setattr__
+        _set(cmd, "segments", ((0.0, level),))
+        _set(cmd, "drive", drive if type(drive) is DriveType else DriveType(drive))
+        _set(cmd, "_offsets", _HOLD_OFFSETS)
+        _set(cmd, "_levels", np.array((level,)))   # np.full costs 3x more at this size
         return cmd
 
     @classmethod
