@@ -52,18 +52,23 @@ class DriveCommand:
     __slots__ = ("segments", "drive", "_offsets", "_levels")
 
     def __init__(self, segments, drive: DriveType = DriveType.LINEAR) -> None:
-        segs = tuple((float(o), float(v)) for o, v in segments)
-        if not segs:
-            raise ValueError("DriveCommand.segments must not be empty")
-        if segs[0][0] != 0.0:
-            raise ValueError(f"DriveCommand.segments must start at offset 0, got {segs[0][0]!r}")
+        offsets, levels = [], []
         prev = -1.0
-        for o, v in segs:
-            if not (o > prev and math.isfinite(o) and math.isfinite(v)):
+        for o, v in segments:
+            o, v = float(o), float(v)
+            if not offsets and o != 0.0:
+                raise ValueError(f"DriveCommand.segments must start at offset 0, got {o!r}")
+            if not (o > prev and o - o == 0.0 and v - v == 0.0):   # x - x == 0 only for finite x
                 raise ValueError(f"DriveCommand.segments offsets must increase and levels be finite, "
                                  f"got ({o!r}, {v!r}) after offset {prev!r}")
+            offsets.append(o)
+            levels.append(v)
             prev = o
-        self._set(segs, drive if type(drive) is DriveType else DriveType(drive))
+        if not offsets:
+            raise ValueError("DriveCommand.segments must not be empty")
+        self._set(tuple(zip(offsets, levels)), drive if type(drive) is DriveType else DriveType(drive))
+        object.__setattr__(self, "_offsets", np.array(offsets))
+        object.__setattr__(self, "_levels", np.array(levels))
 
     def _set(self, segs: tuple, drive: DriveType) -> None:
         object.__setattr__(self, "segments", segs)
