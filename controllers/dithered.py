@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import register
+from controllers.law import LinearLaw
 from controllers.linear import LinearController, LinearOptions
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -174,6 +175,15 @@ class DitheredController(LinearController):
                                          self._phase, self._u_max)
         self._n += 1
         return DriveCommand(segments, DriveType.LINEAR)
+
+    def linear_law(self) -> LinearLaw | None:
+        """The law of :meth:`step`: the linear law plus the dither (None for a subclass that
+        overrides ``step``)."""
+        if self.design is None or type(self).step is not DitheredController.step:
+            return None
+        amplitude, frequency = self._dither
+        return LinearLaw(*self.design.state_space, u_max=self._u_max, dither_amplitude=amplitude,
+                         dither_frequency=frequency, dither_phase=self._phase)
 
     def summary(self) -> dict[str, Any]:
         out = super().summary()

@@ -39,6 +39,7 @@ import numpy as np
 import scipy.integrate
 
 from controllers.base import Controller, register
+from controllers.law import LinearLaw
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
@@ -538,6 +539,12 @@ class LinearController(Controller):
     def step(self, y: float) -> DriveCommand:
         """Hold −C(z)·y(n), clipped to ±u_max, over the next interval."""
         return DriveCommand.hold(self.control_level(y), DriveType.LINEAR)
+
+    def linear_law(self) -> LinearLaw | None:
+        """The law of :meth:`step` (None for a subclass that overrides ``step``)."""
+        if self.design is None or type(self).step is not LinearController.step:
+            return None
+        return LinearLaw(*self.design.state_space, u_max=self._u_max)
 
     def internals(self) -> dict[str, float]:
         return {"u_linear": self._level}
