@@ -119,6 +119,14 @@ class SolnicOptions:
     joint_correction_limit : bool
         With "joint-ekf": limit large k̂ corrections by a fictitious variance of the motion d
         (``max_correction_fraction`` × k̂s for a residual of the whole Δc), section 5.3.
+    friction_grid : bool
+        With "joint-ekf": the friction posterior is a grid over (k_c, k_s) updated with each
+        pulse's exact pulse-response likelihood (:mod:`controllers.solnic.grid_posterior`);
+        "no motion" is its censored evidence, the constraints its support; the pulse's
+        predicted Δc, its spread and t_max come from the posterior predictive, and the joint
+        filter keeps (x1, x4, d) with the grid's moments as its k block.
+    grid_points : int
+        Lattice points per axis of ``friction_grid``; ≥ 1 (64).
     censored_no_motion : bool
         A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
         half-plane condition on N(k̂, P_b).
@@ -155,6 +163,8 @@ class SolnicOptions:
     censored_no_motion: bool = False
     joint_correction_limit: bool = False
     friction_estimator: Literal["modified-kalman", "joint-ekf"] = "modified-kalman"
+    friction_grid: bool = False
+    grid_points: int = 64
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -190,7 +200,9 @@ class SolnicOptions:
             raise _bad("friction_constraints", "'clip' or 'distribution'", self.friction_constraints)
         if self.friction_estimator not in ("modified-kalman", "joint-ekf"):
             raise _bad("friction_estimator", "'modified-kalman' or 'joint-ekf'", self.friction_estimator)
-        for name in ("evaluation_samples", "max_undecided_cycles"):
+        if self.friction_grid and self.friction_estimator != "joint-ekf":
+            raise _bad("friction_grid", "false unless friction_estimator is 'joint-ekf'", self.friction_grid)
+        for name in ("evaluation_samples", "max_undecided_cycles", "grid_points"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise _bad(name, "an integer >= 1", v)
