@@ -109,7 +109,6 @@ class _Cycle:
     moving_time: float
     overshoot: bool
     noise_var: float = 0.0    # VAR[Δc] from w2 (noise-aware model) [rad²]
-    bias: float = 0.0         # E[Δc] − Δc_p from w2 [rad]
     spread_var: float = 0.0   # VAR[Δc_p] from the friction uncertainty [rad²]
 
 
@@ -259,10 +258,10 @@ class SolnicController(Controller):
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
             x1, x4 = self.mode2.x1, self.mode2.x4
             dc_plan = abs(pred.delta_c)
-            gp = self._grid_predictive(dtu)
+            gp = self._grid_predictive(dtu, pred)
             if gp is not None:
-                dc_plan = gp.dc_mean
-            if self.options.noise_aware_model:
+                dc_plan = gp.dc_mean                        # w2 bias included
+            elif self.options.noise_aware_model:
                 dc_plan += self._pulse_noise(pred, dtu)[0]
             trig = plan_trigger(x1, x4, self.mode2.drift_std(), dc_plan, horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
@@ -283,20 +282,19 @@ class SolnicController(Controller):
         if self.joint is None:
             self.mode2.set_anchor()
         dc = abs(pred.delta_c)
-        noise_var = bias = 0.0
-        gp = self._grid_predictive(dtu)
-        if gp is not None:
-            dc = gp.dc_mean
-        if self.options.noise_aware_model:
-            bias, noise_var = self._pulse_noise(pred, dtu)
-            dc += bias                                      # E[Δc] with the w2 push and tail
+        noise_var = 0.0
+        gp = self._grid_predictive(dtu, pred)
         if gp is not None:
             # the posterior predictive of the grid: d ~ (mean, spread + w2 + no-motion mass),
             # uncorrelated with the joint filter's k block (the grid, not the samples, updates k)
+            dc = gp.dc_mean
             p_zero, spread = 1.0 - gp.p_motion, gp.dc_var
             t_nominal, sd_t = gp.t_stop_mean, math.sqrt(gp.t_stop_var)
             moving = 0.0                                    # the grid has no x5 drift
         else:
+            if self.options.noise_aware_model:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] with the w2 push and tail
             spread = self.friction.motion_variance(pred.H_b)
             t_nominal = pred.t_nominal
             sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
@@ -317,7 +315,7 @@ class SolnicController(Controller):
         self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
                                np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
-                               noise_var, bias, spread)
+                               noise_var, spread)
         if self.schedule.size in (STARTUP_RAISE, STARTUP_SETTLE):
             self.counts["startup_cycles"] += 1
         self.schedule.launched(dtu)
@@ -339,7 +337,25 @@ class SolnicController(Controller):
             self._noise_memo[key] = hit
         return hit
 
-    def _grid_predictive(self, dtu: float) -> Predictive | None:
+    def _noise_ratios(self, dtu: float, pred: PulsePrediction | None = None) -> tuple[float, float]:
+        """(VAR/f, bias/√f) of the w2 moments at the point estimate, f = α²σ2²T_m³/3; the grid
+        scales them to every lattice point. Defaults 2.5 and 0.8 (the middle of the ranges
+        measured in issue 13) when the point estimate predicts no motion."""
+        if not self.options.noise_aware_model:
+            return 0.0, 0.0
+        if pred is None:
+            pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
+        p = self.params
+        T = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+        f = p.alpha**2 * p.sigma2_sq * T**3 / 3.0
+        if not f > 0:
+            return 2.5, 0.8
+        bias, var = self._pulse_noise(pred, dtu)
+        # clipped to the ranges the derivation gives away from degenerate pulses (issue 13:
+        # 1.3–3.7 and 0.6–1.0); a pulse that barely breaks away has T_m → 0 and 0/0 ratios
+        return min(max(var / f, 0.0), 4.0), min(max(bias / math.sqrt(f), 0.0), 1.2)
+
+    def _grid_predictive(self, dtu: float, pred: PulsePrediction | None = None) -> Predictive | None:
         """The grid posterior's predictive of a pulse of ``dtu`` (None without the grid or
         without motion mass), memoised until the next grid update."""
         if self.grid is None:
@@ -350,7 +366,7 @@ class SolnicController(Controller):
             self._grid_key = key
         gp = self._grid_memo.get(dtu)
         if gp is None:
-            gp = self._grid_memo[dtu] = self.grid.predictive(dtu)
+            gp = self._grid_memo[dtu] = self.grid.predictive(dtu, *self._noise_ratios(dtu, pred))
         return gp if gp.p_motion > 0 else None
 
     def _evaluate(self, t_b: float) -> None:
@@ -412,7 +428,7 @@ class SolnicController(Controller):
                 entry["nis"] = nis
             if self.grid is not None:
                 # every cycle, whatever the decision: the exact likelihood of its evidence
-                self.grid.update(c.dt_u, c.sign, m, R, c.bias, c.noise_var)
+                self.grid.update(c.dt_u, c.sign, m, R, *self._noise_ratios(c.dt_u))
                 self.counts["friction_updates"] += int(math.isfinite(R))
                 if decision == "none":
                     self.joint.no_motion(c.peak_torque, censor=False)
@@ -458,7 +474,7 @@ class SolnicController(Controller):
             dtu = min(dtu, self.dtu_max)
             pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
             dc, noise_var = abs(pred.delta_c), 0.0
-            gp = self._grid_predictive(dtu)
+            gp = self._grid_predictive(dtu, pred)
             if gp is not None:
                 # the size does not move the shaft unless the posterior says it probably does
                 dc = gp.dc_mean if gp.p_motion >= 0.5 else 0.0
@@ -466,12 +482,13 @@ class SolnicController(Controller):
                     costs.append(math.inf)
                     motions.append(0.0)
                     continue
-            if o.noise_aware_model and dc > 0:
+                noise_var = gp.dc_var                       # w2 and the posterior spread
+            elif o.noise_aware_model and dc > 0:
                 bias, noise_var = self._pulse_noise(pred, dtu)
                 dc += bias                                  # E[Δc] in (6-1), (6-3)
             var_dc = var_x1 = 0.0
             if o.cost_variances:
-                var_dc = self.friction.motion_variance(pred.H_b) + noise_var
+                var_dc = noise_var + (self.friction.motion_variance(pred.H_b) if gp is None else 0.0)
                 var_x1 = float(self.mode2.P[0, 0])
             costs.append(cycle_cost(dtu, dc, x4, o.a_c, p, var_dc, var_x1).total)
             motions.append(dc)
