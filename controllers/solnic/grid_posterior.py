@@ -262,7 +262,7 @@ class FrictionGrid:
         Robust statistics: the posterior puts small mass on far points (k_c → 0 coasts for a
         long way) whose Δc would dominate a mean, so ``dc_mean`` is the weighted median of
         E[Δc | k] (friction-noise bias included, :meth:`noise_moments`), ``dc_var`` the square
-        of half the 16–84 % range plus the median friction-noise variance; likewise the stop
+        of half the 16–84 % range plus the friction-noise variance at the median; likewise the stop
         time's median and spread² (t_max = median + 3·spread, (5-11)). A far quantile of the
         stop time (0.9987) would wait for those far points: on quiet-friction seed 3 it kept
         the mode-2 filter blind for 1.8 s after every start-up pulse (peak 864 µrad).
@@ -272,16 +272,18 @@ class FrictionGrid:
         p = float(np.sum(w))
         if not p > 0:
             return Predictive(0.0, math.nan, math.nan, math.nan, math.nan)
-        w = w / p
-        q16, q50, q84 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
-        v50 = _weighted_quantiles(var, w, (0.5,))[0]
-        t16, t50, t84 = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
-        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + v50, t50, (0.5 * (t84 - t16)) ** 2)
+        keep = w > 1e-9 * p                         # negligible points cannot move a quantile much
+        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
+        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
+        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
+        # the friction-noise variance at the median point
+        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2)
 
 
-def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs) -> list[float]:
-    """Quantiles of the discrete distribution Σ w_i δ(x_i) (w sums to 1), lower convention."""
-    order = np.argsort(x)
+def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs) -> tuple[list[float], int]:
+    """Quantiles of Σ w_i δ(x_i) (w sums to ≤ 1; lower convention), and the index of the
+    point at the middle requested quantile."""
+    order = np.argsort(x, kind="stable")
     cw = np.cumsum(w[order])
     idx = np.minimum(np.searchsorted(cw, np.asarray(qs) * cw[-1]), len(x) - 1)
-    return [float(v) for v in x[order][idx]]
+    return [float(v) for v in x[order][idx]], int(order[idx[len(idx) // 2]])
