@@ -45,6 +45,7 @@ MODERN_FLAGS = types.MappingProxyType(dict(
     friction_estimator="joint-ekf",
     noise_aware_model=True,
     motion_decision="three-way",
+    friction_grid=True,
 ))
 
 
