@@ -171,14 +171,15 @@ class SolnicController(Controller):
                                      prior, [kc0, ks0], self.friction.P, params.u_max)
             self.mode2 = self.joint
             self.friction = self.joint.friction
-        self.grid: FrictionGrid | None = None
-        if o.friction_grid:
-            self.grid = FrictionGrid(params, [kc0, ks0], self.friction.P, n=o.grid_points)
-            self._grid_memo: dict[float, Predictive] = {}
-            self._grid_key = -1
         else:
             self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
                                      [0.0, 0.0], prior)
+        self.grid: FrictionGrid | None = None
+        if o.friction_grid:
+            self.grid = FrictionGrid(params, [kc0, ks0], self.friction.P, n=o.grid_points,
+                                     memory=o.grid_memory)
+            self._grid_memo: dict[float, Predictive] = {}
+            self._grid_key = -1
         if o.dtu_inc_initial is not None:
             inc0 = o.dtu_inc_initial
             self.adjusted = (_NAN, _NAN)
@@ -288,7 +289,8 @@ class SolnicController(Controller):
             # the posterior predictive of the grid: d ~ (mean, spread + w2 + no-motion mass),
             # uncorrelated with the joint filter's k block (the grid, not the samples, updates k)
             dc = gp.dc_mean
-            p_zero, spread = 1.0 - gp.p_motion, gp.dc_var
+            p_zero = 1.0 - gp.p_motion
+            spread = gp.dc_var + (self.options.grid_model_error * dc) ** 2
             t_nominal, sd_t = gp.t_stop_mean, math.sqrt(gp.t_stop_var)
             moving = 0.0                                    # the grid has no x5 drift
         else:

@@ -114,9 +114,13 @@ class FrictionGrid:
         Points per lattice axis.
     width_sigmas : float
         Half-width of a re-fitted lattice in posterior standard deviations.
+    memory : float
+        Evidence of the pulse j steps back is weighted e^(−j/memory) (exponential forgetting
+        of the log-likelihood; inf, the default, keeps all of it). See the module docstring.
     """
 
-    def __init__(self, params: PlantParams, k0, P0, n: int = 64, width_sigmas: float = 6.0) -> None:
+    def __init__(self, params: PlantParams, k0, P0, n: int = 64, width_sigmas: float = 6.0,
+                 memory: float = math.inf) -> None:
         self.params = params
         self.u_max = float(params.u_max)
         self.k0 = np.asarray(k0, dtype=float).reshape(2)
@@ -124,6 +128,9 @@ class FrictionGrid:
         self.P0inv = np.linalg.inv(self.P0)
         self.n = int(n)
         self.width_sigmas = float(width_sigmas)
+        if not memory > 0:
+            raise ValueError(f"memory must be > 0 pulses, got {memory!r}")
+        self.forget = math.exp(-1.0 / memory)       # weight of the evidence one pulse older
         self.obs: list[tuple[float, int, float, float, float, float]] = []
         sd = np.sqrt(np.diag(self.P0))
         hi = min(self.u_max, float(np.max(self.k0 + 6.0 * sd)))
@@ -144,13 +151,14 @@ class FrictionGrid:
         self._log_prior = -0.5 * np.einsum("in,ij,jn->n", e, self.P0inv, e)
         self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self.version = getattr(self, "version", 0) + 1
-        logw = self._log_prior.copy()
+        logL = np.zeros_like(self._log_prior)
         for ob in self.obs:
-            logw += self._loglik(*ob)
-        self._set_weights(logw)
+            logL = self.forget * logL + self._loglik(*ob)
+        self._set_weights(logL)
 
-    def _set_weights(self, logw: np.ndarray) -> None:
-        self._logw = logw
+    def _set_weights(self, logL: np.ndarray) -> None:
+        self._logL = logL
+        logw = self._log_prior + logL
         w = np.exp(logw - np.max(logw))
         self.w = w / np.sum(w)
         kc, ks = self.kc[self._idx], self.ks[self._idx]
@@ -231,7 +239,7 @@ class FrictionGrid:
             return
         ob = (float(dt_u), int(sign), float(m), float(R), float(var_ratio), float(bias_ratio))
         self.obs.append(ob)
-        self._set_weights(self._logw + self._loglik(*ob))
+        self._set_weights(self.forget * self._logL + self._loglik(*ob))
         self._maybe_regrid()
 
     def _edge_mass(self) -> float:

@@ -127,6 +127,12 @@ class SolnicOptions:
         filter keeps (x1, x4, d) with the grid's moments as its k block.
     grid_points : int
         Lattice points per axis of ``friction_grid``; ≥ 1 (64).
+    grid_memory : float
+        With ``friction_grid``: the evidence of the pulse j cycles back counts e^(−j/memory)
+        [pulses]; > 0, inf keeps all of it.
+    grid_model_error : float
+        With ``friction_grid``: a relative error of the predicted Δc added to the prior
+        variance of the pulse's motion in the mode-2/joint filter, (this × Δc)²; ≥ 0.
     censored_no_motion : bool
         A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
         half-plane condition on N(k̂, P_b).
@@ -165,19 +171,22 @@ class SolnicOptions:
     friction_estimator: Literal["modified-kalman", "joint-ekf"] = "modified-kalman"
     friction_grid: bool = False
     grid_points: int = 64
+    grid_memory: float = math.inf
+    grid_model_error: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if f.type in ("float", "float | None") and v is not None:
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise _bad(f.name, "a finite number", v)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or (
+                        math.isinf(v) and not (f.name == "grid_memory" and v > 0)):
+                    raise _bad(f.name, "a finite number" + (" or inf" if f.name == "grid_memory" else ""), v)
             if f.type == "bool" and not isinstance(v, bool):
                 raise _bad(f.name, "true or false", v)
         for name in ("a_c", "a_ratio", "initial_friction_factor", "friction_prior_std_fraction",
                      "initial_increment_factor", "x1_prior_std", "x4_prior_std",
                      "stuck_confidence_sigmas", "max_correction_fraction", "fd_step",
-                     "overshoot_factor"):
+                     "overshoot_factor", "grid_memory"):
             if not getattr(self, name) > 0:
                 raise _bad(name, "> 0", getattr(self, name))
         for name in ("a_cov", "a_gain", "min_inc_factor"):
@@ -186,6 +195,8 @@ class SolnicOptions:
         for name in ("motion_confidence", "no_motion_power"):
             if not 0.5 < getattr(self, name) < 1:
                 raise _bad(name, "in (0.5, 1)", getattr(self, name))
+        if not self.grid_model_error >= 0:
+            raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:
             raise _bad("dtu_opt_initial", ">= 0 [s]", self.dtu_opt_initial)
         if self.dtu_inc_initial is not None and not self.dtu_inc_initial > 0:
