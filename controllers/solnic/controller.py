@@ -203,7 +203,7 @@ class SolnicController(Controller):
         self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
                            cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
-                           undecided_cycles=0)
+                           undecided_cycles=0, grid_handover_cycle=0)
         self._ready = True
 
     # ------------------------------------------------------------------ per sample
@@ -435,6 +435,12 @@ class SolnicController(Controller):
                 if decision == "none":
                     self.joint.no_motion(c.peak_torque, censor=False)
                 self.joint.set_friction(self.grid.mean, self.grid.cov)
+                n_sets = self.options.grid_handover_sets
+                if n_sets and self.counts["cost_evaluations"] >= n_sets:
+                    # hand over: the joint EKF goes on from the grid's moments, k correlated
+                    # again with (x1, x4, d) through the quasipartials of each pulse
+                    self.grid = None
+                    self.counts["grid_handover_cycle"] = self.counts["cycles_evaluated"]
             elif decision == "moved":
                 self.joint.moved(c.peak_torque)
                 self.counts["friction_updates"] += 1

@@ -130,6 +130,10 @@ class SolnicOptions:
     grid_memory : float
         With ``friction_grid``: the evidence of the pulse j cycles back counts e^(−j/memory)
         [pulses]; > 0, inf keeps all of it.
+    grid_handover_sets : int
+        With ``friction_grid``: after this many sets of twelve cycles (cost evaluations) the
+        grid hands over to the joint EKF, which goes on from the grid's mean and covariance;
+        0 keeps the grid for the whole run; ≥ 0.
     grid_model_error : float
         With ``friction_grid``: a relative error of the predicted Δc added to the prior
         variance of the pulse's motion in the mode-2/joint filter, (this × Δc)²; ≥ 0.
@@ -173,6 +177,7 @@ class SolnicOptions:
     grid_points: int = 64
     grid_memory: float = math.inf
     grid_model_error: float = 0.0
+    grid_handover_sets: int = 0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -195,6 +200,9 @@ class SolnicOptions:
         for name in ("motion_confidence", "no_motion_power"):
             if not 0.5 < getattr(self, name) < 1:
                 raise _bad(name, "in (0.5, 1)", getattr(self, name))
+        if isinstance(self.grid_handover_sets, bool) or not isinstance(self.grid_handover_sets, int) \
+                or self.grid_handover_sets < 0:
+            raise _bad("grid_handover_sets", "an integer >= 0", self.grid_handover_sets)
         if not self.grid_model_error >= 0:
             raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:
