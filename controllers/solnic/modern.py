@@ -46,6 +46,7 @@ MODERN_FLAGS = types.MappingProxyType(dict(
     noise_aware_model=True,
     motion_decision="three-way",
     friction_grid=True,
+    grid_handover_sets=3,
 ))
 
 
