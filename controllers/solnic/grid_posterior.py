@@ -37,8 +37,17 @@ current box's area or the mass on the edge cells exceeds 1e-4; all stored pulses
 re-evaluated on the new lattice, so (1) stays exact up to the lattice. x5's drift while moving
 (σ5² over ~3 ms per pulse, 5e-4 ozf²·in² in a 100 s run) is neglected.
 
-The friction-noise bias and variance are computed once per pulse at the point estimate and
-used at every lattice point (an approximation, exact when σ2 = 0).
+The friction-noise moments at each lattice point scale with f = α²σ2²T_m³/3 (T_m that
+point's moving time): variance r_v·f and bias r_b·√f, the ratios r_v, r_b taken from
+:func:`controllers.solnic.noise_model.pulse_noise` at the point estimate (an approximation;
+exact when σ2 = 0).
+
+Limitation: each pulse's evidence (m_j, R_j) leans on the same drift estimate x̂4, so the
+evidence of successive pulses is correlated while (1) multiplies it as independent. Over a
+whole run the posterior grows confident in a Δc that is slightly off and x̂4 absorbs the
+difference (quiet-friction NEES of (x̂1, x̂4) in the hundreds). solnic-modern therefore uses
+the grid for the start-up only and hands its moments to the joint EKF, which carries the
+k–x4 correlation (``grid_handover_sets``, :mod:`controllers.solnic.modern`).
 """
 
 from __future__ import annotations

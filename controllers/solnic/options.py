@@ -124,7 +124,8 @@ class SolnicOptions:
         pulse's exact pulse-response likelihood (:mod:`controllers.solnic.grid_posterior`);
         "no motion" is its censored evidence, the constraints its support; the pulse's
         predicted Δc, its spread and t_max come from the posterior predictive, and the joint
-        filter keeps (x1, x4, d) with the grid's moments as its k block.
+        filter keeps (x1, x4, d) with the grid's moments as its k block. Tuning (seeds 0–4)
+        in :mod:`controllers.solnic.modern`.
     grid_points : int
         Lattice points per axis of ``friction_grid``; ≥ 1 (64).
     grid_memory : float
