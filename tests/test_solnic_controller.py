@@ -41,6 +41,8 @@ def test_registered_on_the_bridge():
     (dict(grid_memory=0.0), "grid_memory"),
     (dict(grid_memory=math.nan), "grid_memory"),
     (dict(grid_model_error=-0.1), "grid_model_error"),
+    (dict(grid_handover_sets=-1), "grid_handover_sets"),
+    (dict(grid_handover_inflation=0.5), "grid_handover_inflation"),
 ])
 def test_options_are_validated(kw, match):
     with pytest.raises(ValueError, match=match):

@@ -439,6 +439,7 @@ class SolnicController(Controller):
                 if n_sets and self.counts["cost_evaluations"] >= n_sets:
                     # hand over: the joint EKF goes on from the grid's moments, k correlated
                     # again with (x1, x4, d) through the quasipartials of each pulse
+                    self.joint.set_friction(self.grid.mean, self.grid.cov * self.options.grid_handover_inflation)
                     self.grid = None
                     self.counts["grid_handover_cycle"] = self.counts["cycles_evaluated"]
             elif decision == "moved":

@@ -44,7 +44,10 @@ measurement (thesis and quiet-friction, 100 s scored from 20 s; the first three 
   joint EKF carries the k–x4 correlation and stays honest once it starts near the truth.
   Also measured on seeds 0–4 with the grid all run and not turned on: ``grid_memory`` 30, 100,
   300 pulses (exponential forgetting; quiet NEES still 72–385, thesis NEES up to 5.4) and
-  ``grid_model_error`` 0.05, 0.15 (quiet NEES 101–279; thesis up to 14.3).
+  ``grid_model_error`` 0.05, 0.15 (quiet NEES 101–279; thesis up to 14.3). With the hand-over
+  after 3 sets, ``grid_handover_inflation`` 4 and 16 (the handed-over covariance × that):
+  quiet 2.87/3.36 and 2.91/3.03 µrad, thesis 22.2/30.5 and 20.4/60.2 µrad with NEES
+  0.64 [0.62, 2.12] and 1.74 [1.02, 6.72] — not better than 1.
 
 The first three flags were chosen on seeds 100–109 (issue 13, first round); the grid and its
 hand-over on seeds 0–4. Reported on seeds 0–9 in the README ("solnic and solnic-modern").

@@ -135,6 +135,8 @@ class SolnicOptions:
         With ``friction_grid``: after this many sets of twelve cycles (cost evaluations) the
         grid hands over to the joint EKF, which goes on from the grid's mean and covariance;
         0 keeps the grid for the whole run; ≥ 0.
+    grid_handover_inflation : float
+        The covariance handed over is the grid's × this; ≥ 1.
     grid_model_error : float
         With ``friction_grid``: a relative error of the predicted Δc added to the prior
         variance of the pulse's motion in the mode-2/joint filter, (this × Δc)²; ≥ 0.
@@ -179,6 +181,7 @@ class SolnicOptions:
     grid_memory: float = math.inf
     grid_model_error: float = 0.0
     grid_handover_sets: int = 0
+    grid_handover_inflation: float = 1.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -204,6 +207,8 @@ class SolnicOptions:
         if isinstance(self.grid_handover_sets, bool) or not isinstance(self.grid_handover_sets, int) \
                 or self.grid_handover_sets < 0:
             raise _bad("grid_handover_sets", "an integer >= 0", self.grid_handover_sets)
+        if not self.grid_handover_inflation >= 1:
+            raise _bad("grid_handover_inflation", ">= 1", self.grid_handover_inflation)
         if not self.grid_model_error >= 0:
             raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:
