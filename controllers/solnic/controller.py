@@ -69,7 +69,7 @@ from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
-from controllers.solnic.noise_model import pulse_noise
+from controllers.solnic.noise_model import braked_pulse_noise, pulse_noise
 from controllers.solnic.predictor import Predictor, PulsePrediction
 from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.series import cycle_event_times, log_series
@@ -153,7 +153,11 @@ class SolnicController(Controller):
         o = self.options
         self.params = params
         self.rng = rng
-        self.predictor = Predictor(params, fd_step=o.fd_step)
+        # braking pulses (option): not while the grid posterior, whose likelihood is the single
+        # pulse's, is in charge; switched on at its hand-over
+        self._brake_margin = o.brake_margin_sigmas if o.braking_pulse else None
+        self.predictor = Predictor(params, fd_step=o.fd_step,
+                                   brake_margin=None if o.friction_grid else self._brake_margin)
         f = o.initial_friction_factor
         kc0, ks0 = f * params.coulomb, f * params.stiction
         ks0 = min(ks0, 0.999 * params.u_max)
@@ -203,7 +207,7 @@ class SolnicController(Controller):
         self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
                            cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
-                           undecided_cycles=0, grid_handover_cycle=0)
+                           undecided_cycles=0, grid_handover_cycle=0, braked_pulses=0)
         self._ready = True
 
     # ------------------------------------------------------------------ per sample
@@ -323,16 +327,24 @@ class SolnicController(Controller):
         self.schedule.launched(dtu)
         self.counts["pulses"] += 1
         self.counts["overshoot_corrections"] += int(overshoot)
+        if pred.t_off is not None:                     # braking pair: +u for Δt_u, −u to t_off, off
+            self.counts["braked_pulses"] += 1
+            level = sign * self.params.u_max
+            segs = [(offset, level), (offset + dtu, -level), (offset + pred.t_off, 0.0)]
+            if offset > 0:
+                segs.insert(0, (0.0, 0.0))
+            return DriveCommand(segs, DriveType.BRIDGE)
         return DriveCommand.pulse(offset, dtu, sign * self.params.u_max)
 
     def _pulse_noise(self, pred: PulsePrediction, dtu: float) -> tuple[float, float]:
         """(bias, variance) of |Δc| from w2 for the pulse ``pred`` [rad, rad²], memoised."""
-        key = (self.friction.ks, self.friction.kc, dtu)
+        key = (self.friction.ks, self.friction.kc, dtu, pred.t_off)
         hit = self._noise_memo.get(key)
         if hit is None:
             ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
-            n = pulse_noise(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
-                            pred.t_current_zero, pred.t_nominal)
+            noise = pulse_noise if pred.t_off is None else braked_pulse_noise
+            n = noise(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
+                      pred.t_current_zero, pred.t_nominal)
             hit = (n.bias, n.variance)
             if len(self._noise_memo) > 512:
                 self._noise_memo.clear()
@@ -441,6 +453,7 @@ class SolnicController(Controller):
                     # again with (x1, x4, d) through the quasipartials of each pulse
                     self.joint.set_friction(self.grid.mean, self.grid.cov * self.options.grid_handover_inflation)
                     self.grid = None
+                    self.predictor.brake_margin = self._brake_margin
                     self.counts["grid_handover_cycle"] = self.counts["cycles_evaluated"]
             elif decision == "moved":
                 self.joint.moved(c.peak_torque)

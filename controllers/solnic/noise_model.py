@@ -83,7 +83,7 @@ from numba import njit
 from plant.params import PlantParams
 from plant.pulse import _closed_form_kernel
 
-__all__ = ["PulseNoise", "pulse_noise", "velocity_std_after"]
+__all__ = ["PulseNoise", "pulse_noise", "braked_pulse_noise", "velocity_std_after"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 # the backward-equation solver: grid points in x, time steps after/before t_ks, domain width in
@@ -135,6 +135,26 @@ def _mean_running_max(b: float, s2: float, t: float) -> float:
 def velocity_std_after(params: PlantParams, moving_time: float) -> float:
     """√(α²σ2²·T) [rad/s]: the spread the noise adds to the velocity over ``moving_time``."""
     return math.sqrt(params.alpha**2 * params.sigma2_sq * max(moving_time, 0.0))
+
+
+def braked_pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breakaway: float,
+                       t_current_zero: float, t_stop: float) -> PulseNoise:
+    """Bias and variance of Δc for a braking pulse pair (:mod:`controllers.solnic.braking`).
+
+    Its timing leaves v(t_cz2) = r_b·√V (r_b ≥ 0.75) at the end of the reverse current, so the
+    coasting formulas (1)–(3) apply with t_cz2 for t_cz and v(t_cz2) = α·k̂c·(t_stop − t_cz2)
+    (the drift of the reverse drive does not enter the linear perturbation). The stop is a
+    coast on k̂c, so t_stop > t_cz2; a pair without that falls back to :func:`pulse_noise`.
+    """
+    s2 = params.alpha**2 * params.sigma2_sq
+    if t_breakaway is None or s2 <= 0 or not t_stop > t_breakaway:
+        return PulseNoise(0.0, 0.0)
+    if not (t_stop > t_current_zero and kc > 0):
+        return pulse_noise(params, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop)
+    al, U, tau = params.alpha, params.u_max, params.motor_time_constant
+    b, v = _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop,
+                             U * -math.expm1(-dt_u / tau), _GL_X, _GL_W, al * kc * (t_stop - t_current_zero))
+    return PulseNoise(b, v)
 
 
 def pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breakaway: float | None,
@@ -199,13 +219,17 @@ def _pulse_noise(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_st
 
 
 @njit(cache=True)
-def _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, x3_off, gl_x, gl_w):
-    """(bias, variance) by (1)–(3): linear perturbation to t_cz, then coasting from v0(t_cz) + δ."""
+def _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, x3_off, gl_x, gl_w,
+                      v_cz=math.nan):
+    """(bias, variance) by (1)–(3): linear perturbation to t_cz, then coasting from v0(t_cz) + δ.
+
+    ``v_cz`` overrides v0(t_cz) (a braking pulse pair: its t_cz2 and v(t_cz2),
+    :mod:`controllers.solnic.braking`)."""
     t_f = min(t_current_zero, t_stop)
     T1 = t_f - t_breakaway
     V = s2 * T1
     a = al * kc
-    x = _v0(t_f, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off)
+    x = _v0(t_f, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off) if math.isnan(v_cz) else v_cz
     # Gaussian moments of x = v0(t_f) + δ, δ ~ N(0, V)
     E1, E2 = x, x * x + V
     E3, E4 = x**3 + 3 * x * V, x**4 + 6 * x * x * V + 3 * V * V

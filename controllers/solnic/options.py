@@ -128,6 +128,15 @@ class SolnicOptions:
         in :mod:`controllers.solnic.modern`.
     grid_points : int
         Lattice points per axis of ``friction_grid``; ≥ 1 (64).
+    braking_pulse : bool
+        Follow each forward pulse with a reverse drive (bridge, −sign·u_max) timed from the
+        model to end the motion early (:mod:`controllers.solnic.braking`); the predictor's Δc,
+        t_stop, quasipartials and current zero (hence t_max and the trigger) are the pair's.
+        Not while ``friction_grid`` is still in charge (its likelihood is the single pulse's).
+    brake_margin_sigmas : float
+        With ``braking_pulse``: the noise-free velocity left at the end of the reverse current,
+        in standard deviations of the w2 velocity spread; ≥ 0.75 (where the noise model's
+        coasting formulas hold).
     grid_memory : float
         With ``friction_grid``: the evidence of the pulse j cycles back counts e^(−j/memory)
         [pulses]; > 0, inf keeps all of it.
@@ -182,6 +191,8 @@ class SolnicOptions:
     grid_model_error: float = 0.0
     grid_handover_sets: int = 0
     grid_handover_inflation: float = 1.0
+    braking_pulse: bool = False
+    brake_margin_sigmas: float = 0.75
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -209,6 +220,8 @@ class SolnicOptions:
             raise _bad("grid_handover_sets", "an integer >= 0", self.grid_handover_sets)
         if not self.grid_handover_inflation >= 1:
             raise _bad("grid_handover_inflation", ">= 1", self.grid_handover_inflation)
+        if not self.brake_margin_sigmas >= 0.75:
+            raise _bad("brake_margin_sigmas", ">= 0.75", self.brake_margin_sigmas)
         if not self.grid_model_error >= 0:
             raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:

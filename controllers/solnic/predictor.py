@@ -72,6 +72,9 @@ class PulsePrediction:
         (∂t_nominal/∂k̂c, ∂t_nominal/∂k̂s) [s per ozf·in] (5-12).
     peak_torque : float
         x3 at switch-off [ozf·in], the largest torque the pulse applies.
+    t_off : float or None
+        With a braking pulse (:mod:`controllers.solnic.braking`): the end of the reverse drive
+        [s from the pulse start]; ``t_current_zero`` is then the pair's t_cz2. None: single.
     """
 
     dt_u: float
@@ -83,6 +86,7 @@ class PulsePrediction:
     H_b: np.ndarray
     H_tb: np.ndarray
     peak_torque: float
+    t_off: float | None = None
 
     @property
     def moves(self) -> bool:
@@ -104,10 +108,16 @@ class Predictor:
         :func:`plant.pulse_response` (the default). Injected for unit tests.
     cache_size : int
         Number of noise-free pulse responses kept.
+    brake_margin : float or None
+        Braking pulses (:mod:`controllers.solnic.braking`) with this margin r_b; None (the
+        default) predicts single pulses. The reverse drive is timed from the estimates and
+        held fixed in the quasipartials (the plant's friction differs, the command does not).
     """
 
     def __init__(self, params: PlantParams, *, fd_step: float = 1e-4,
-                 response_fn: ResponseFn | None = None, cache_size: int = 8192) -> None:
+                 response_fn: ResponseFn | None = None, cache_size: int = 8192,
+                 brake_margin: float | None = None) -> None:
+        self.brake_margin = brake_margin
         if not (fd_step > 0 and math.isfinite(fd_step)):
             raise ValueError(f"fd_step must be a finite positive number, got {fd_step!r}")
         if response_fn is None:
@@ -124,8 +134,30 @@ class Predictor:
         """Whether (k̂s, k̂c) make a valid plant: 0 ≤ k̂c ≤ k̂s < u_max."""
         return 0.0 <= kc <= ks < self.params.u_max
 
-    def response(self, ks: float, kc: float, dt_u: float) -> tuple[float, float | None, float, float]:
-        """(Δc, t_breakaway, t_current_zero, t_stop) of a +u_max pulse, noise-free, cached."""
+    def brake_off(self, ks: float, kc: float, dt_u: float) -> float | None:
+        """t_off of the braking pulse for (k̂s, k̂c, Δt_u), or None (no brake, or braking off)."""
+        if self.brake_margin is None or not self.valid(ks, kc):
+            return None
+        from controllers.solnic.braking import brake_timing
+        return brake_timing(self.params.with_friction(ks, kc), dt_u, self.brake_margin)
+
+    def response(self, ks: float, kc: float, dt_u: float,
+                 t_off: float | None = None) -> tuple[float, float | None, float, float]:
+        """(Δc, t_breakaway, t_current_zero, t_stop) of a +u_max pulse, noise-free, cached;
+        with ``t_off`` the braking pair (:func:`controllers.solnic.braking.braked_response`)."""
+        if t_off is not None:
+            key = (float(ks), float(kc), float(dt_u), float(t_off))
+            hit = self._cache.get(key)
+            if hit is None:
+                if not self.valid(ks, kc):
+                    raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
+                from controllers.solnic.braking import braked_response
+                hit = braked_response(self.params.with_friction(ks, kc), dt_u, t_off)
+                self.n_model_runs += 1
+                self._cache[key] = hit
+                if len(self._cache) > self._cache_size:
+                    self._cache.popitem(last=False)
+            return hit
         key = (float(ks), float(kc), float(dt_u))
         hit = self._cache.get(key)
         if hit is not None:
@@ -145,7 +177,8 @@ class Predictor:
 
     # -- prediction with quasipartials ---------------------------------------------------
     def _partial(self, ks: float, kc: float, dt_u: float, which: int,
-                 base: tuple[float, float | None, float, float]) -> tuple[float, float]:
+                 base: tuple[float, float | None, float, float],
+                 t_off: float | None = None) -> tuple[float, float]:
         """Partial differences of (Δc, t_stop) w.r.t. k̂c (which=0) or k̂s (which=1)."""
         moved = base[1] is not None
         h = self.fd_step
@@ -154,7 +187,7 @@ class Predictor:
             k[which] += step
             if not self.valid(k[1], k[0]):
                 continue
-            pert = self.response(k[1], k[0], dt_u)
+            pert = self.response(k[1], k[0], dt_u, t_off)
             if (pert[1] is not None) != moved:   # crossed the Δc_min → 0 discontinuity
                 continue
             return (pert[0] - base[0]) / step, (pert[3] - base[3]) / step
@@ -166,14 +199,15 @@ class Predictor:
             raise ValueError(f"sign must be +1 or -1, got {sign!r}")
         if not (dt_u >= 0 and math.isfinite(dt_u)):
             raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
-        base = self.response(ks, kc, dt_u)
-        dc_kc, t_kc = self._partial(ks, kc, dt_u, 0, base)
-        dc_ks, t_ks = self._partial(ks, kc, dt_u, 1, base)
+        t_off = self.brake_off(ks, kc, dt_u)
+        base = self.response(ks, kc, dt_u, t_off)
+        dc_kc, t_kc = self._partial(ks, kc, dt_u, 0, base, t_off)
+        dc_ks, t_ks = self._partial(ks, kc, dt_u, 1, base, t_off)
         return PulsePrediction(
             dt_u=float(dt_u), sign=sign, delta_c=sign * base[0], t_nominal=base[3],
             t_breakaway=base[1], t_current_zero=base[2],
             H_b=sign * np.array([dc_kc, dc_ks]), H_tb=np.array([t_kc, t_ks]),
-            peak_torque=peak_torque(self.params, dt_u))
+            peak_torque=peak_torque(self.params, dt_u), t_off=t_off)
 
     def conditional(self, ks: float, kc: float, dt_u: float, sign: int = 1,
                     shrink: float = 1e-6) -> PulsePrediction:
@@ -183,7 +217,7 @@ class Predictor:
         motion, if any, happens with a stiction just below the peak torque, so we predict
         with k̂s' = peak·(1 − shrink) (and k̂c' = min(k̂c, k̂s')): Δc_min of that Δt_u.
         """
-        key = (float(ks), float(kc), float(dt_u), sign, shrink)
+        key = (float(ks), float(kc), float(dt_u), sign, shrink, self.brake_margin)
         memo = self.__dict__.setdefault("_conditional_memo", {})
         hit = memo.get(key)
         if hit is not None:
@@ -202,4 +236,4 @@ class Predictor:
         """|Δc_p| only (no partials), for cost curves."""
         if dt_u <= 0:
             return 0.0
-        return abs(self.response(ks, kc, dt_u)[0])
+        return abs(self.response(ks, kc, dt_u, self.brake_off(ks, kc, dt_u))[0])

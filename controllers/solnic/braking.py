@@ -1,0 +1,138 @@
+"""A braking pulse: a forward pulse followed by a timed reverse drive that ends the motion early.
+
+Option ``braking_pulse`` of :class:`~controllers.solnic.options.SolnicOptions` (issue 13). The
+friction noise w2 scatters a pulse's motion with variance ≈ α²σ2²·T_m³/3 and more (T_m the
+moving time, :mod:`controllers.solnic.noise_model`), and after the flyback the shaft coasts on
+Coulomb friction alone, decelerating at only α·k_c (2.8 rad/s² for Table 2-1). A pulse pair
+shortens that tail: the bridge drives +u_max for Δt_u, then −u_max until t_off, then is
+switched off (the diodes drive +u_max until the now negative current is back to zero at
+t_cz2), then 0. On the bridge −u_max after Δt_u is what the flyback applies anyway, so the pair
+is the single pulse whose flyback voltage is held past the current zero: x3 goes negative and
+the shaft decelerates at α(k_c − x3) > α·k_c.
+
+Noise-free response (sign +1; the plant's closed forms (3-20)/(3-21) through
+:func:`plant.pulse._move`): stuck until x3 = k_s at t_b = −τ3·ln(1 − k_s/u_max); driven to
+Δt_u; u = −u_max to t_off; u = +u_max to t_cz2 = t_off + τ3·ln((u_max − x3(t_off))/u_max);
+coasting at −α·k_c to the stop t_stop = t_cz2 + v(t_cz2)/(α·k_c), Δc = x1(t_cz2) +
+v(t_cz2)²/(2α·k_c). If the velocity reaches zero earlier, the stop is that zero (a safeguarded
+root of the closed-form velocity); the shaft sticks there if |x3| ≤ k_s.
+
+Timing (from the model, not from the text): t_off is chosen so that the noise-free velocity at
+the end of the reverse current is a margin of r_b standard deviations of the w2 velocity
+spread, v(t_cz2) = r_b·s·√(t_cz2 − t_b) (s² = α²σ2²). Then (i) the noisy shaft stops, with
+high probability, after x3 is back above −k_s — a stop while x3 < −k_s would reverse the shaft
+(mode 1) — and (ii) the noise model's coasting formulas (1)–(3) hold with t_cz2 in place of
+t_cz (v0(t_cz2)/√V = r_b ≥ 0.75, where they agree with the exact backward equations). v(t_cz2)
+decreases strictly with t_off (a longer reverse drive removes more velocity), so t_off is a
+bisection root. No brake when the single pulse already ends with v(t_cz) ≤ r_b·√V, and
+t_cz2 is capped at ``max_duration`` (the pair must end inside one sample interval; a capped
+pair brakes less than the target, never more).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from plant.pulse import _closed_form_kernel, _move, _velocity_root
+
+__all__ = ["brake_timing", "braked_response"]
+
+
+@njit(cache=True)
+def _pair(dt_u, t_off, U, t3, a, ks, kc):
+    """(Δc, t_b or −1, t_cz2, t_stop, v(t_cz2), x3 at the stop) of the pair, noise-free, sign +1.
+
+    ``t_off`` ≤ the single pulse's current zero gives the single pulse. A stop before t_cz2
+    returns v(t_cz2) = −1 (the velocity's first zero ends the motion there).
+    """
+    x3_on = -U * math.expm1(-dt_u / t3)
+    t_cz = dt_u + t3 * math.log1p(x3_on / U)
+    if not t_off > t_cz:
+        dc, tb, tcz, ts = _closed_form_kernel(dt_u, U, t3, a, ks, kc)
+        return dc, tb, tcz, ts, math.nan, 0.0
+    t_b = -t3 * math.log1p(-ks / U)
+    if not dt_u > t_b:
+        return 0.0, -1.0, t_cz, 0.0, 0.0, 0.0
+    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)           # driven
+    h = t_off - dt_u
+    e1_, v_end, x3e = _move(x1, x2, x3, -U, kc, h, t3, a)                 # flyback, then reverse drive
+    if v_end <= 0.0:
+        tau = _velocity_root(x1, x2, x3, -U, kc, h, t3, a)
+        x1s, _, x3s = _move(x1, x2, x3, -U, kc, tau, t3, a)
+        return x1s, t_b, t_off + t3 * math.log((U - x3e) / U), dt_u + tau, -1.0, x3s
+    x1, x2, x3 = e1_, v_end, x3e
+    t_f = t3 * math.log((U - x3) / U)                                     # diodes +U to x3 = 0
+    t_cz2 = t_off + t_f
+    v_cz2 = _move(x1, x2, x3, U, kc, t_f, t3, a)[1]
+    if v_cz2 <= 0.0:
+        tau = _velocity_root(x1, x2, x3, U, kc, t_f, t3, a)
+        x1s, _, x3s = _move(x1, x2, x3, U, kc, tau, t3, a)
+        return x1s, t_b, t_cz2, t_off + tau, -1.0, x3s
+    x1 = _move(x1, x2, x3, U, kc, t_f, t3, a)[0]
+    return x1 + v_cz2 * v_cz2 / (2.0 * a * kc), t_b, t_cz2, t_cz2 + v_cz2 / (a * kc), v_cz2, 0.0
+
+
+@njit(cache=True)
+def _timing(dt_u, U, t3, a, ks, kc, s2, margin, max_duration):
+    """t_off of the pair (module docstring), or −1 when no brake applies."""
+    x3_on = -U * math.expm1(-dt_u / t3)
+    t_cz = dt_u + t3 * math.log1p(x3_on / U)
+    t_b = -t3 * math.log1p(-ks / U)
+    if not (dt_u > t_b and kc > 0.0) or t_cz >= max_duration:
+        return -1.0
+    r = _pair(dt_u, t_cz, U, t3, a, ks, kc)
+    if r[3] <= t_cz:                                                      # stops during the flyback
+        return -1.0
+    v_cz = a * kc * (r[3] - t_cz)
+    if v_cz <= margin * math.sqrt(s2 * (t_cz - t_b)):
+        return -1.0
+    # the longest reverse drive whose current is back to zero by max_duration
+    lo, hi = t_cz, max_duration
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        x3m = -U + (x3_on + U) * math.exp(-(mid - dt_u) / t3)
+        if mid + t3 * math.log((U - x3m) / U) <= max_duration:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-14:
+            break
+    t_cap = lo
+    g = _pair(dt_u, t_cap, U, t3, a, ks, kc)
+    if g[4] >= margin * math.sqrt(s2 * (g[2] - t_b)):
+        return t_cap                                                      # capped: brake as much as fits
+    lo, hi = t_cz, t_cap                                                  # g(lo) > 0 ≥ g(hi)
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        g = _pair(dt_u, mid, U, t3, a, ks, kc)
+        if g[4] - margin * math.sqrt(s2 * (g[2] - t_b)) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-14:
+            break
+    return lo
+
+
+def brake_timing(params, dt_u: float, margin: float, max_duration: float | None = None) -> float | None:
+    """t_off [s] from the pulse start for a pulse of ``dt_u`` with ``params``' friction, or None.
+
+    ``margin`` is r_b (standard deviations of the w2 velocity spread left at t_cz2);
+    ``max_duration`` caps t_cz2 (default 0.8 × the sample period).
+    """
+    p = params
+    cap = 0.8 * p.sample_period if max_duration is None else float(max_duration)
+    t = _timing(float(dt_u), p.u_max, p.motor_time_constant, p.alpha, p.stiction, p.coulomb,
+                p.alpha**2 * p.sigma2_sq, float(margin), cap)
+    return None if t < 0.0 else float(t)
+
+
+def braked_response(params, dt_u: float, t_off: float | None):
+    """(Δc [rad], t_breakaway [s] or None, t_current_zero [s], t_stop [s]) of the pair, sign +1,
+    noise-free; ``t_off=None`` is the single pulse (:func:`plant.pulse_response`)."""
+    p = params
+    dc, tb, tcz, ts, _, _ = _pair(float(dt_u), -1.0 if t_off is None else float(t_off), p.u_max,
+                                  p.motor_time_constant, p.alpha, p.stiction, p.coulomb)
+    return dc, (None if tb < 0.0 else tb), tcz, (ts if tb >= 0.0 else 0.0)
