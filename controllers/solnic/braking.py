@@ -75,18 +75,18 @@ def _pair(dt_u, t_off, U, t3, a, ks, kc):
 
 
 @njit(cache=True)
-def _timing(dt_u, U, t3, a, ks, kc, s2, margin, max_duration):
+def _timing(dt_u, U, t3, a, ks, kc, s2, margin, max_duration, min_ratio):
     """t_off of the pair (module docstring), or −1 when no brake applies."""
     x3_on = -U * math.expm1(-dt_u / t3)
     t_cz = dt_u + t3 * math.log1p(x3_on / U)
     t_b = -t3 * math.log1p(-ks / U)
-    if not (dt_u > t_b and kc > 0.0) or t_cz >= max_duration:
+    if not (dt_u > t_b and kc > 0.0 and s2 > 0.0) or t_cz >= max_duration:
         return -1.0
     r = _pair(dt_u, t_cz, U, t3, a, ks, kc)
     if r[3] <= t_cz:                                                      # stops during the flyback
         return -1.0
     v_cz = a * kc * (r[3] - t_cz)
-    if v_cz <= margin * math.sqrt(s2 * (t_cz - t_b)):
+    if v_cz <= max(margin, min_ratio) * math.sqrt(s2 * (t_cz - t_b)):
         return -1.0
     # the longest reverse drive whose current is back to zero by max_duration
     lo, hi = t_cz, max_duration
@@ -116,16 +116,20 @@ def _timing(dt_u, U, t3, a, ks, kc, s2, margin, max_duration):
     return lo
 
 
-def brake_timing(params, dt_u: float, margin: float, max_duration: float | None = None) -> float | None:
+def brake_timing(params, dt_u: float, margin: float, max_duration: float | None = None,
+                 min_ratio: float = 0.0) -> float | None:
     """t_off [s] from the pulse start for a pulse of ``dt_u`` with ``params``' friction, or None.
 
     ``margin`` is r_b (standard deviations of the w2 velocity spread left at t_cz2);
-    ``max_duration`` caps t_cz2 (default 0.8 × the sample period).
+    ``max_duration`` caps t_cz2 (default 0.8 × the sample period); ``min_ratio``: brake only
+    pulses whose single version ends the flyback with v0(t_cz) ≥ that many standard deviations
+    (a long coast: the pulses whose scatter the brake reduces most). Without friction noise
+    (σ2 = 0) there is no scatter to reduce and no brake.
     """
     p = params
     cap = 0.8 * p.sample_period if max_duration is None else float(max_duration)
     t = _timing(float(dt_u), p.u_max, p.motor_time_constant, p.alpha, p.stiction, p.coulomb,
-                p.alpha**2 * p.sigma2_sq, float(margin), cap)
+                p.alpha**2 * p.sigma2_sq, float(margin), cap, float(min_ratio))
     return None if t < 0.0 else float(t)
 
 

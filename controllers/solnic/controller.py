@@ -157,7 +157,8 @@ class SolnicController(Controller):
         # pulse's, is in charge; switched on at its hand-over
         self._brake_margin = o.brake_margin_sigmas if o.braking_pulse else None
         self.predictor = Predictor(params, fd_step=o.fd_step,
-                                   brake_margin=None if o.friction_grid else self._brake_margin)
+                                   brake_margin=None if o.friction_grid else self._brake_margin,
+                                   brake_min_ratio=o.brake_min_ratio)
         f = o.initial_friction_factor
         kc0, ks0 = f * params.coulomb, f * params.stiction
         ks0 = min(ks0, 0.999 * params.u_max)

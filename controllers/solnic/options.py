@@ -137,6 +137,9 @@ class SolnicOptions:
         With ``braking_pulse``: the noise-free velocity left at the end of the reverse current,
         in standard deviations of the w2 velocity spread; ≥ 0.75 (where the noise model's
         coasting formulas hold).
+    brake_min_ratio : float
+        With ``braking_pulse``: brake only pulses whose single version ends the flyback with a
+        noise-free velocity of at least this many w2 velocity SDs (long coasts); ≥ 0.
     grid_memory : float
         With ``friction_grid``: the evidence of the pulse j cycles back counts e^(−j/memory)
         [pulses]; > 0, inf keeps all of it.
@@ -193,6 +196,7 @@ class SolnicOptions:
     grid_handover_inflation: float = 1.0
     braking_pulse: bool = False
     brake_margin_sigmas: float = 0.75
+    brake_min_ratio: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -222,6 +226,8 @@ class SolnicOptions:
             raise _bad("grid_handover_inflation", ">= 1", self.grid_handover_inflation)
         if not self.brake_margin_sigmas >= 0.75:
             raise _bad("brake_margin_sigmas", ">= 0.75", self.brake_margin_sigmas)
+        if not self.brake_min_ratio >= 0:
+            raise _bad("brake_min_ratio", ">= 0", self.brake_min_ratio)
         if not self.grid_model_error >= 0:
             raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:

@@ -110,14 +110,16 @@ class Predictor:
         Number of noise-free pulse responses kept.
     brake_margin : float or None
         Braking pulses (:mod:`controllers.solnic.braking`) with this margin r_b; None (the
-        default) predicts single pulses. The reverse drive is timed from the estimates and
+        default) predicts single pulses; ``brake_min_ratio`` as in
+        :func:`controllers.solnic.braking.brake_timing`. The reverse drive is timed from the estimates and
         held fixed in the quasipartials (the plant's friction differs, the command does not).
     """
 
     def __init__(self, params: PlantParams, *, fd_step: float = 1e-4,
                  response_fn: ResponseFn | None = None, cache_size: int = 8192,
-                 brake_margin: float | None = None) -> None:
+                 brake_margin: float | None = None, brake_min_ratio: float = 0.0) -> None:
         self.brake_margin = brake_margin
+        self.brake_min_ratio = float(brake_min_ratio)
         if not (fd_step > 0 and math.isfinite(fd_step)):
             raise ValueError(f"fd_step must be a finite positive number, got {fd_step!r}")
         if response_fn is None:
@@ -139,7 +141,8 @@ class Predictor:
         if self.brake_margin is None or not self.valid(ks, kc):
             return None
         from controllers.solnic.braking import brake_timing
-        return brake_timing(self.params.with_friction(ks, kc), dt_u, self.brake_margin)
+        return brake_timing(self.params.with_friction(ks, kc), dt_u, self.brake_margin,
+                            min_ratio=self.brake_min_ratio)
 
     def response(self, ks: float, kc: float, dt_u: float,
                  t_off: float | None = None) -> tuple[float, float | None, float, float]:
