@@ -8,6 +8,7 @@
 * :mod:`~controllers.solnic.options` — :class:`SolnicOptions`, presets and the a_c knob;
 * :mod:`~controllers.solnic.controller` — :class:`SolnicController`, registered as ``"solnic"``;
 * :mod:`~controllers.solnic.noise_model` — Δc bias and variance from the friction noise w2;
+* :mod:`~controllers.solnic.braking` — the braking pulse pair, its timing and closed-form response;
 * :mod:`~controllers.solnic.modern` — ``"solnic-modern"``, the same structure with the flags that measured best.
 """
 

@@ -4,7 +4,8 @@ Same family ("solnic"), same presets (``thesis``, ``high-error-cost``), same kno
 options differ from the faithful defaults only in the flags of
 :class:`~controllers.solnic.options.SolnicOptions` listed in :data:`MODERN_FLAGS`, chosen by
 measurement (thesis and quiet-friction, 100 s scored from 20 s; the first three flags on seeds
-100–109, the grid on seeds 0–4) and reported on seeds 0–9 (README, "solnic and solnic-modern"):
+100–109, the grid and the brake on seeds 0–4) and reported on seeds 0–9 (README, "solnic and
+solnic-modern"):
 
 * ``friction_estimator="joint-ekf"``: one Gaussian on (x1, x4, k_c, k_s, d)
   (:mod:`controllers.solnic.joint_filter`): the prediction is used once, the friction is
