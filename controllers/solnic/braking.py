@@ -24,7 +24,10 @@ high probability, after x3 is back above −k_s — a stop while x3 < −k_s wou
 (mode 1) — and (ii) the noise model's coasting formulas (1)–(3) hold with t_cz2 in place of
 t_cz (v0(t_cz2)/√V = r_b ≥ 0.75, where they agree with the exact backward equations). v(t_cz2)
 decreases strictly with t_off (a longer reverse drive removes more velocity), so t_off is a
-bisection root. No brake when the single pulse already ends with v(t_cz) ≤ r_b·√V, and
+bisection root. For the largest pairs the reverse current goes below −k_s before t_off
+(x3(t_off) = −3.2 ozf·in at Δt_u = 3 ms): a noisy path that sticks early would then break away
+backward; such paths are in the Monte-Carlo of ``tests/test_solnic_braking.py`` (the pair's
+mean and variance stay within its tolerances), not in the noise model. No brake when the single pulse already ends with v(t_cz) ≤ r_b·√V, and
 t_cz2 is capped at ``max_duration`` (the pair must end inside one sample interval; a capped
 pair brakes less than the target, never more).
 """
