@@ -25,11 +25,12 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.moving import (NOISY_BLOCK, chol_psd, gaussian_step, mean_path, noise_factor_moving, phi_moving,
-                          q_moving, substep_peak)
+from plant.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
+                          q_moving, substep_peak, velocity_extremum_time)
 from plant.randomness import normal, uniform
 
-__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables"]
+__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
+           "FAR_SIGMAS"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -260,59 +261,181 @@ def bisection_tables(p, sub, BPh, BPw, BG, BC):
             w = w / 2
 
 
+# --- the step ladder ---------------------------------------------------------------------------
+
+LADDER = 12
+"""Rungs of the step ladder: widths h_j·2^k, k < LADDER (h_0 = substep, h_1 = reflect_substep)."""
+
+FAR_SIGMAS = 8.5
+"""K of the far-from-zero rule: a step is long only if its mean velocity stays K·σ away from 0."""
+
+
+def _push_bound(kappa: float) -> float:
+    """G(κ) = E[(|Z| − κ)⁺]·… = 2·(φ(κ) − κ·Φ(−κ)): E[L_h] / (σ_v√h) from x2 = κ·σ_v√h, driftless."""
+    phi = math.exp(-0.5 * kappa * kappa) / math.sqrt(2.0 * math.pi)
+    return 2.0 * (phi - kappa * 0.5 * math.erfc(kappa / math.sqrt(2.0)))
+
+
+def ladder_thresholds(alpha: float, sigma2_sq: float, sigma5_sq: float, beta5: float, sub: float,
+                      rsub: float) -> np.ndarray:
+    """TH[j, k]: the least |mean velocity| [rad/s] over a step at which rung k of ladder j is used.
+
+    j = 0 (looking for a velocity zero) and j = 1 (reflecting); rung k has width h = h_j·2^k,
+    h_0 = ``sub``, h_1 = ``rsub`` [s]; rung 0 is always allowed (TH = −inf). Rung k > 0 is
+    allowed when the mean velocity s·x̄2(τ) stays ≥ TH[j, k] for all τ in [0, h]:
+
+    * **far from zero** (both ladders): TH = c(h) = K·(σ_v·√h + α·σ5·h^(3/2)·e^(β5·h)),
+      K = :data:`FAR_SIGMAS`, σ_v² = α²σ2². The noise of x2 over the step is α·σ2·W2(τ), plus
+      α·∫N5, N5 the x5 noise (an Ornstein–Uhlenbeck martingale ×e^(−β5τ), quadratic variation
+      ≤ σ5²·h·e^(2β5h)). By the reflection principle P(min_τ α·σ2·W2 ≤ −K·σ_v√h) = 2Φ(−K) and
+      P(sup_τ |N5| ≥ K·σ5·√h·e^(β5h)) ≤ 4Φ(−K), so the path touches 0 within the step with
+      probability ≤ 6·Φ(−K) = 5.7e-17 (K = 8.5): a long step then equals the sub-steps in law
+      up to that probability (the transition Φ(h)X + N is exact for any h).
+    * **reflecting near zero** (j = 1, widths up to ``sub``): the Skorokhod push L_h of a step
+      (the bridge minimum, exact) enters x1 as ½·L_h·h, whose error is at most ½·L_h·h since
+      ∫₀ʰ L dτ ∈ [0, L_h·h]. The torque beyond ks makes the drift of s·x2 ≥ 0, so
+      E[L_h | x2 = v] ≤ σ_v·√h·G(v/(σ_v√h)) with G(κ) = 2(φ(κ) − κΦ(−κ)). Rung k is allowed
+      once this bound per unit time, ½·σ_v·√h·G(κ), is no larger than that of the reflect
+      sub-step at zero velocity, ½·σ_v·√h_1·G(0): the expected x1 error rate never exceeds the
+      worst case of today's fixed reflect sub-step (TH = smaller of this and c(h)).
+
+    Beyond the regular sub-step ``sub`` a reflecting step must be far from zero (c(h)), so near
+    zero no step is longer than the fixed sub-steps' Brownian-bridge approximations assume.
+    """
+    sig_v = alpha * math.sqrt(sigma2_sq)
+    sig5 = math.sqrt(sigma5_sq)
+    TH = np.empty((2, LADDER))
+    for j, base in enumerate((sub, rsub)):
+        TH[j, 0] = -math.inf
+        for k in range(1, LADDER):
+            h = base * 2.0**k
+            far = FAR_SIGMAS * (sig_v * math.sqrt(h) + alpha * sig5 * h**1.5 * math.exp(beta5 * h))
+            TH[j, k] = far
+            if j == 1 and h <= sub * (1 + 1e-12) and sig_v > 0:
+                target = _push_bound(0.0) / math.sqrt(2.0**k)    # G(κ) ≤ G(0)·√(h_1/h)
+                lo, hi = 0.0, 40.0
+                for _ in range(200):                             # G decreases in κ
+                    mid = 0.5 * (lo + hi)
+                    if _push_bound(mid) > target:
+                        lo = mid
+                    else:
+                        hi = mid
+                TH[j, k] = min(far, hi * sig_v * math.sqrt(h))
+    return TH
+
+
 @njit(cache=True)
 def substep_tables(p, o_sub, o_rsub, TP, TL):
-    """Φ and noise factors of the regular (j = 0) and reflection (j = 1) sub-steps, both modes."""
+    """Φ and noise factors of the ladder widths h_j·2^k (j = 0 regular, 1 reflection), both modes.
+
+    TP[m, j, k], TL[m, j, k], m = 0 for mode 1 and 1 for mode 3, k < TP.shape[2].
+    """
     Q = np.empty((4, 4))
     for m in range(2):
         mode = 1 if m == 0 else 3
         for j in range(2):
             h = o_sub if j == 0 else o_rsub
-            phi_moving(mode, h, p, TP[m, j])
-            q_moving(mode, h, p, Q)
-            chol_psd(Q, TL[m, j])
+            for k in range(TP.shape[2]):
+                phi_moving(mode, h, p, TP[m, j, k])
+                q_moving(mode, h, p, Q)
+                chol_psd(Q, TL[m, j, k])
+                h = h * 2.0
 
 
 @njit(cache=True)
-def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, BPh, BPw, BG, BC, z, cursor, peak,
-                   max_steps):
+def _step(X, P, L, z, cursor, out):
+    """out = P·X + N with the sparsity of Φ_1/Φ_3 (3-20)/(3-21); N = L·ζ on the noisy block.
+
+    :func:`plant.moving.gaussian_step` without the structural zeros of Φ and of the lower
+    triangular L.
+    """
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    z0 = normal(z, cursor)
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    out[A1] = (x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc
+               + P[A1, AU] * u + L[0, 0] * z0)
+    out[A2] = (x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+               + L[1, 0] * z0 + L[1, 1] * z1)
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4 + L[2, 0] * z0 + L[2, 1] * z1 + L[2, 2] * z2
+    out[A5] = P[A5, A5] * x5 + L[3, 0] * z0 + L[3, 1] * z1 + L[3, 2] * z2 + L[3, 3] * z3
+    out[AKC] = kc
+    out[AU] = u
+
+
+@njit(cache=True)
+def _mean_min(mode, X, p, h, t_ext):
+    """min over τ in [0, h] of s·x̄2(τ), the mean velocity in the direction of motion.
+
+    x̄2 has at most one extremum, at ``t_ext`` (:func:`plant.moving.velocity_extremum_time`).
+    """
+    s = 1.0 if mode == 3 else -1.0
+    v = min(s * X[A2], s * mean_velocity(mode, h, X, p))
+    if 0.0 < t_ext < h:
+        v = min(v, s * mean_velocity(mode, t_ext, X, p))
+    return v
+
+
+@njit(cache=True)
+def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor, peak,
+                   max_steps, W):
     """Advance a noisy moving segment of length h in place (bridge locator, or reflection).
 
-    ``TP[m, j], TL[m, j]``: Φ and the noise factor of the regular (j = 0) and reflection
-    (j = 1) sub-steps, m = 0 for mode 1 and 1 for mode 3 (:func:`substep_tables`). While
-    reflecting, a sub-step is the short one only when x2 is within 8 standard deviations of a
-    regular sub-step's velocity noise of 0: farther out, the bridge minimum falls below 0 with
-    probability < e^(−128), the push is 0 and the long step is exact.
+    Steps come from a ladder of widths h_j·2^k (``TP[m, j, k], TL[m, j, k]``: Φ and noise
+    factor, :func:`substep_tables`; j = 0 regular with h_0 = ``o_sub``, j = 1 reflecting with
+    h_1 = ``o_rsub``; m = 0 for mode 1, 1 for mode 3). Each step takes the longest rung k whose
+    threshold ``TH[j, k]`` (:func:`ladder_thresholds`) the mean velocity clears over the whole
+    step and with 1.5·h_j·2^k < the time left; near zero that is rung 0, the fixed sub-step. The
+    choice depends on the state at the step's start only, so the chain of exact transitions
+    X⁺ = Φ(h)X + N stays exact; what a long step neglects is bounded in ``ladder_thresholds``
+    (crossing probability ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the
+    reflect sub-step's at zero velocity). The last piece of the segment (≤ 1.5 h_j) is factored
+    afresh. Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
+    (reflecting) below.
+
+    ``W`` is scratch space (≥ 30 floats) owned by the caller.
 
     Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
     velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
     """
     s = 1.0 if mode == 3 else -1.0
     m = 0 if mode == 1 else 1
+    j = 1 if reflect else 0
+    base = o_rsub if reflect else o_sub
     sig_v2 = p.alpha * p.alpha * p.sigma2_sq
-    near = 8.0 * math.sqrt(sig_v2 * o_sub)
+    nrung = TP.shape[2]
     no_tables = BPh[:, :0]
-    P = np.empty((7, 7))
-    L = np.empty((4, 4))
-    Qtmp = np.empty((4, 4))
-    Xb = np.empty(7)
-    Xc = np.empty(7)
+    Xb = W[0:7]
+    Xc = W[7:14]
+    P = W[14:63].reshape((7, 7))
+    L = W[63:79].reshape((4, 4))
+    Qtmp = W[79:95].reshape((4, 4))
     t = 0.0
     n = 0
     while h - t > 0.0:
         rem = h - t
-        j = 1 if reflect and s * X[A2] < near else 0
-        sub = o_rsub if j == 1 else o_sub
+        k = 0
+        if nrung > 1 and s * X[A2] >= TH[j, 1] and 3.0 * base < rem:
+            # the longest rung the start velocity and the time left allow, then check the mean path
+            k = 1
+            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and 1.5 * base * 2.0 ** (k + 1) < rem:
+                k += 1
+            t_ext = velocity_extremum_time(mode, X, p)
+            while k > 0 and _mean_min(mode, X, p, base * 2.0**k, t_ext) < TH[j, k]:
+                k -= 1
+        sub = base * 2.0**k
         regular = rem > 1.5 * sub
         if regular:
             step = sub
-            gaussian_step(X, TP[m, j], TL[m, j], z, cursor, Xb)
+            _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
         else:
             step = rem
             phi_moving(mode, step, p, P)
             q_moving(mode, step, p, Qtmp)
             chol_psd(Qtmp, L)
-            gaussian_step(X, P, L, z, cursor, Xb)
+            _step(X, P, L, z, cursor, Xb)
         n += 1
         if n > max_steps:
             return t, False, peak, n, True
@@ -329,7 +452,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, BPh, BPw,
         else:
             pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
             if pc >= 1.0 or uniform(z, cursor) < pc:
-                if regular:
+                if regular and k == 0:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC)
                 else:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
