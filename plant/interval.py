@@ -55,7 +55,7 @@ _SHEET = 15
 _O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
 _O_LADDER = 7
 # Scratch floats of bridge_segment, allocated once per interval.
-_WORK = 96
+_WORK = 400
 # Kernel status codes.
 _OK, _CHATTER, _DIVERGED, _BAD_LEVEL = 0, 1, 2, 3
 _STATUS_OF = {_OK: Status.OK, _CHATTER: Status.CHATTER, _DIVERGED: Status.DIVERGED}

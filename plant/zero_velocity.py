@@ -44,7 +44,7 @@ def _cross_prob(va, vb, h, sig_v2):
 
 
 @njit(cache=True)
-def _bridge_law(mode, w, p, Ph, Pw, G, C):
+def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
     """The law of the midpoint X(w/2) of a sub-step of width w given both its ends.
 
     On the noisy block (x1, x2, x4, x5), with Q_h = COV[N(w/2)], Q_w = COV[N(w)] and Φ_h the
@@ -56,74 +56,128 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C):
     Pw = Φ(w), G, and C with √Σ_22 in C[0, 0], the regression of (x1, x4, x5) on x2 in
     C[1:, 0] and the Cholesky factor of their conditional covariance in C[1:, 1:], so that the
     bisection draws x2 alone first.
+
+    Q_w⁻¹ is applied through the Cholesky factor of the diagonally scaled Q_w; a direction
+    without noise (a zero row, e.g. x4 when σ4 = 0) gets a zero column of G, which is the
+    least-squares solution there. ``V`` is scratch space of ≥ 116 floats.
     """
     phi_moving(mode, w / 2, p, Ph)
     phi_moving(mode, w, p, Pw)
-    Q1 = np.empty((4, 4))
-    Qw = np.empty((4, 4))
+    Q1 = V[0:16].reshape((4, 4))
+    Qw = V[16:32].reshape((4, 4))
+    Lw = V[32:48].reshape((4, 4))
+    M = V[48:64].reshape((4, 4))
+    S = V[64:80].reshape((4, 4))
+    R = V[80:96].reshape((4, 4))
+    Lc = V[96:112].reshape((4, 4))
     q_moving(mode, w / 2, p, Q1)
     q_moving(mode, w, p, Qw)
-    P2 = np.empty((4, 4))
+    # M = Q1·P2ᵀ with P2 the noisy block of Φ(w/2)
     for i in range(4):
         for j in range(4):
-            P2[i, j] = Ph[NOISY_BLOCK[i], NOISY_BLOCK[j]]
-    d = np.empty(4)
-    for i in range(4):
-        d[i] = math.sqrt(Qw[i, i]) if Qw[i, i] > 0 else 1.0
-    Qs = np.empty((4, 4))
-    M = np.empty((4, 4))      # M = Q1·P2ᵀ scaled by columns
-    for i in range(4):
-        for j in range(4):
-            Qs[i, j] = Qw[i, j] / (d[i] * d[j])
             acc = 0.0
             for k in range(4):
-                acc += Q1[i, k] * P2[j, k]
-            M[i, j] = acc / d[j]
-    # G = M · Qs⁻¹ · D⁻¹  →  Gᵀ = D⁻¹ · solve(Qs, Mᵀ)
-    Gt = np.linalg.lstsq(Qs, M.T.copy(), 1e-13)[0]
+                acc += Q1[i, k] * Ph[NOISY_BLOCK[j], NOISY_BLOCK[k]]
+            M[i, j] = acc
+    # Gᵀ = Qw⁻¹·Mᵀ, column by column, with Qw = Lw·Lwᵀ (zero columns of Lw: no noise there)
+    chol_psd(Qw, Lw)
+    for i in range(4):
+        y = V[112:116]
+        for r in range(4):
+            if Lw[r, r] == 0.0:
+                continue
+            acc = M[i, r]
+            for c in range(r):
+                acc -= Lw[r, c] * y[c]
+            y[r] = acc / Lw[r, r]
+        for r in range(3, -1, -1):
+            if Lw[r, r] == 0.0:
+                G[i, r] = 0.0
+                continue
+            acc = y[r]
+            for c in range(r + 1, 4):
+                acc -= Lw[c, r] * G[i, c]
+            G[i, r] = acc / Lw[r, r]
+    # Σ = Q1 − G·P2·Q1 = Q1 − G·Mᵀ, symmetrised
     for i in range(4):
         for j in range(4):
-            G[i, j] = Gt[j, i] / d[j]
-    # Σ = Q1 − G·P2·Q1, symmetrised
-    GP = G @ P2
-    S = Q1 - GP @ Q1
-    S = 0.5 * (S + S.T)
+            acc = 0.0
+            for k in range(4):
+                acc += G[i, k] * M[j, k]
+            S[i, j] = Q1[i, j] - acc
+    for i in range(4):
+        for j in range(i + 1, 4):
+            S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
     for i in range(4):
         for j in range(4):
             C[i, j] = 0.0
     s22 = max(S[1, 1], 0.0)
     C[0, 0] = math.sqrt(s22)
-    others = (0, 2, 3)
-    R = np.empty((3, 3))
     for a in range(3):
-        ia = others[a]
+        ia = 0 if a == 0 else a + 1
         C[1 + a, 0] = S[ia, 1] / s22 if s22 > 0.0 else 0.0
+    for a in range(4):
+        for b in range(4):
+            R[a, b] = 0.0
     for a in range(3):
+        ia = 0 if a == 0 else a + 1
         for b in range(3):
-            R[a, b] = S[others[a], others[b]] - C[1 + a, 0] * S[1, others[b]]
-    Lc = np.empty((3, 3))
-    _chol3(R, Lc)
+            ib = 0 if b == 0 else b + 1
+            R[a, b] = S[ia, ib] - C[1 + a, 0] * S[1, ib]
+    chol_psd(R, Lc)
     for a in range(3):
         for b in range(3):
             C[1 + a, 1 + b] = Lc[a, b]
 
 
 @njit(cache=True)
-def _chol3(R, L):
-    """Lower factor of a PSD 3 × 3 (zero columns for zero or rank-deficient directions)."""
-    Q = np.zeros((4, 4))
-    for i in range(3):
-        for j in range(3):
-            Q[i, j] = R[i, j]
-    L4 = np.empty((4, 4))
-    chol_psd(Q, L4)
-    for i in range(3):
-        for j in range(3):
-            L[i, j] = L4[i, j]
+def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, half, sig_v2, z, cursor):
+    """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
+    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`."""
+    for r in range(7):
+        acc = 0.0
+        for c in range(7):
+            acc += Ph[r, c] * Xa[c]
+        Xm[r] = acc
+    d0 = d1 = d2 = d3 = 0.0
+    for q in range(4):
+        r = NOISY_BLOCK[q]
+        acc = 0.0
+        for c in range(7):
+            acc += Pw[r, c] * Xa[c]
+        if q == 0:
+            d0 = Xb[r] - acc
+        elif q == 1:
+            d1 = Xb[r] - acc
+        elif q == 2:
+            d2 = Xb[r] - acc
+        else:
+            d3 = Xb[r] - acc
+    for q in range(4):
+        Xm[NOISY_BLOCK[q]] += G[q, 0] * d0 + G[q, 1] * d1 + G[q, 2] * d2 + G[q, 3] * d3
+    mean2 = Xm[A2]
+    a, b = Xa[A2], Xb[A2]
+    if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
+        x2m = mean2 + C[0, 0] * normal(z, cursor)        # a sign change: both halves possible
+    else:
+        sgn = 1.0 if a > 0 else -1.0
+        x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
+    pl = _cross_prob(a, x2m, half, sig_v2)
+    pr = _cross_prob(x2m, b, half, sig_v2)
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
+    Xm[A2] = x2m
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    dv = x2m - mean2
+    Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
+    Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
+    Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
+    return pl >= 1.0 or uniform(z, cursor) * p_any < pl
 
 
 @njit(cache=True)
-def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC):
+def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC, V):
     """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
 
     At each level the midpoint is drawn from its law given both ends (:func:`_bridge_law`)
@@ -132,54 +186,31 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     left half with probability p_left/p_any.
 
     ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
-    plant.interval); levels beyond the table are computed here.
+    plant.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 267 floats.
     """
     m = 0 if mode == 1 else 1
-    Xa = Xa0.copy()
-    Xb = Xb0.copy()
+    Xa = V[0:7]
+    Xb = V[7:14]
+    Xm = V[14:21]
+    Ph = V[21:70].reshape((7, 7))
+    Pw = V[70:119].reshape((7, 7))
+    G = V[119:135].reshape((4, 4))
+    C = V[135:151].reshape((4, 4))
+    Vl = V[151:267]
+    Xa[:] = Xa0
+    Xb[:] = Xb0
     ta = 0.0
     w = h
-    Ph = np.empty((7, 7))
-    Pw = np.empty((7, 7))
-    G = np.empty((4, 4))
-    C = np.empty((4, 4))
-    E = np.empty(7)
     levels = 0
     while w > tol:
         half = w / 2
         if levels < BPh.shape[1]:
-            Ph[:, :] = BPh[m, levels]
-            Pw[:, :] = BPw[m, levels]
-            G[:, :] = BG[m, levels]
-            C[:, :] = BC[m, levels]
+            left = _bisect_level(BPh[m, levels], BPw[m, levels], BG[m, levels], BC[m, levels], Xa, Xb, Xm, half,
+                                 sig_v2, z, cursor)
         else:
-            _bridge_law(mode, w, p, Ph, Pw, G, C)
-        E[:] = Ph @ Xa
-        Fb = Pw @ Xa
-        for r in range(4):
-            acc = 0.0
-            for c in range(4):
-                acc += G[r, c] * (Xb[NOISY_BLOCK[c]] - Fb[NOISY_BLOCK[c]])
-            E[NOISY_BLOCK[r]] += acc
-        a, b = Xa[A2], Xb[A2]
-        if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
-            x2m = E[A2] + C[0, 0] * normal(z, cursor)       # a sign change: both halves possible
-        else:
-            sgn = 1.0 if a > 0 else -1.0
-            x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * E[A2], C[0, 0], sig_v2 * half, z, cursor)
-        pl = _cross_prob(a, x2m, half, sig_v2)
-        pr = _cross_prob(x2m, b, half, sig_v2)
-        p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
-        Xm = E.copy()
-        Xm[A2] = x2m
-        z1 = normal(z, cursor)
-        z2 = normal(z, cursor)
-        z3 = normal(z, cursor)
-        dv = x2m - E[A2]
-        Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
-        Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
-        Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
-        if pl >= 1.0 or uniform(z, cursor) * p_any < pl:
+            _bridge_law(mode, w, p, Ph, Pw, G, C, Vl)
+            left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, half, sig_v2, z, cursor)
+        if left:
             Xb[:] = Xm                  # the first crossing is in the left half
         else:
             ta += half
@@ -253,11 +284,12 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
 @njit(cache=True)
 def bisection_tables(p, sub, BPh, BPw, BG, BC):
     """Tabulate :func:`_bridge_law` for w = sub/2^k, k < BPh.shape[1], both moving modes."""
+    V = np.empty(116)
     for m in range(2):
         mode = 1 if m == 0 else 3
         w = sub
         for k in range(BPh.shape[1]):
-            _bridge_law(mode, w, p, BPh[m, k], BPw[m, k], BG[m, k], BC[m, k])
+            _bridge_law(mode, w, p, BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], V)
             w = w / 2
 
 
@@ -395,7 +427,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
     afresh. Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
     (reflecting) below.
 
-    ``W`` is scratch space (≥ 30 floats) owned by the caller.
+    ``W`` is scratch space (≥ 363 floats) owned by the caller.
 
     Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
     velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
@@ -422,9 +454,18 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
             k = 1
             while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and 1.5 * base * 2.0 ** (k + 1) < rem:
                 k += 1
-            t_ext = velocity_extremum_time(mode, X, p)
-            while k > 0 and _mean_min(mode, X, p, base * 2.0**k, t_ext) < TH[j, k]:
-                k -= 1
+            if reflect:
+                # the torque beyond ks keeps the mean drift of s·x2 ≥ −α·|x5|·β5·τ (x5's mean
+                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·h²/2
+                while k > 0:
+                    hk = base * 2.0**k
+                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * hk * hk >= TH[j, k]:
+                        break
+                    k -= 1
+            else:
+                t_ext = velocity_extremum_time(mode, X, p)
+                while k > 0 and _mean_min(mode, X, p, base * 2.0**k, t_ext) < TH[j, k]:
+                    k -= 1
         sub = base * 2.0**k
         regular = rem > 1.5 * sub
         if regular:
@@ -453,10 +494,10 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
             pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
             if pc >= 1.0 or uniform(z, cursor) < pc:
                 if regular and k == 0:
-                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC)
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
                 else:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
-                                     BG[:, :0], BG[:, :0])
+                                     BG[:, :0], BG[:, :0], W[96:])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
                 X[:] = Xc
