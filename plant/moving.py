@@ -147,17 +147,19 @@ def q_moving(mode, h, p, Q):
 
 
 @njit(cache=True)
+def _sqrt_pos(q):
+    return math.sqrt(q) if q > 0 else 0.0
+
+
+@njit(cache=True)
 def chol_psd(Q, L):
     """Lower factor L·Lᵀ = Q of a PSD 4 × 4 (4-29)–(4-34), in diagonally scaled coordinates;
     zero rows (4-28) and rank-deficient directions give zero columns."""
-    n = Q.shape[0]
-    d = np.empty(n)
-    for i in range(n):
-        d[i] = math.sqrt(Q[i, i]) if Q[i, i] > 0 else 0.0
-    for i in range(n):
-        for j in range(n):
+    d = (_sqrt_pos(Q[0, 0]), _sqrt_pos(Q[1, 1]), _sqrt_pos(Q[2, 2]), _sqrt_pos(Q[3, 3]))
+    for i in range(4):
+        for j in range(4):
             L[i, j] = 0.0
-    for j in range(n):
+    for j in range(4):
         if d[j] == 0.0:
             continue
         acc = 1.0
@@ -167,15 +169,15 @@ def chol_psd(Q, L):
             continue
         piv = math.sqrt(acc)
         L[j, j] = piv
-        for i in range(j + 1, n):
+        for i in range(j + 1, 4):
             if d[i] == 0.0:
                 continue
             acc2 = Q[i, j] / (d[i] * d[j])
             for k in range(j):
                 acc2 -= L[i, k] * L[j, k]
             L[i, j] = acc2 / piv
-    for i in range(n):
-        for j in range(n):
+    for i in range(4):
+        for j in range(4):
             L[i, j] *= d[i]
 
 
