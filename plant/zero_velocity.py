@@ -2,8 +2,10 @@
 
 Two locators, both compiled:
 
-* **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N; a zero crossing of
-  x2 inside a sub-step is a sign change or, with both ends on one side, happens with the
+* **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N, their widths taken
+  from a ladder h·2^k (:func:`ladder_thresholds`: long far from a zero, the fixed sub-step near
+  one); a zero crossing of x2 inside a sub-step is a sign change or, with both ends on one side,
+  happens with the
   Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by bridge bisection,
   each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
   X_m = X_m,free + G·(X_b − X_b,free), G = Q(w/2)·Φ(w/2)ᵀ·Q(w)⁻¹), accepted in proportion to
@@ -303,7 +305,12 @@ FAR_SIGMAS = 8.5
 
 
 def _push_bound(kappa: float) -> float:
-    """G(κ) = E[(|Z| − κ)⁺]·… = 2·(φ(κ) − κ·Φ(−κ)): E[L_h] / (σ_v√h) from x2 = κ·σ_v√h, driftless."""
+    """G(κ) = E[(|Z| − κ)⁺] = 2·(φ(κ) − κ·Φ(−κ)), Z a unit normal.
+
+    For a driftless x2 = κ·σ_v·√h at the start of a reflecting step of width h the push is
+    L_h = σ_v·√h·(S − κ)⁺ with S = sup of a standard Brownian motion on [0, 1] ~ |Z|, so
+    E[L_h] = σ_v·√h·G(κ); a drift away from 0 only lowers it.
+    """
     phi = math.exp(-0.5 * kappa * kappa) / math.sqrt(2.0 * math.pi)
     return 2.0 * (phi - kappa * 0.5 * math.erfc(kappa / math.sqrt(2.0)))
 
