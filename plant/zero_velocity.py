@@ -5,8 +5,8 @@ Two locators, both compiled:
 * **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N, their widths taken
   from a ladder h·2^k (:func:`ladder_thresholds`: long far from a zero, the fixed sub-step near
   one); a zero crossing of x2 inside a sub-step is a sign change or, with both ends on one side,
-  happens with the
-  Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by bridge bisection,
+  happens with the Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by
+  bridge bisection,
   each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
   X_m = X_m,free + G·(X_b − X_b,free), G = Q(w/2)·Φ(w/2)ᵀ·Q(w)⁻¹), accepted in proportion to
   the probability that the halves contain a crossing, so the located time has the exact law of
