@@ -31,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.expfun import e1, e2, e3
+from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.segments import hermite_peak, torque_crossing_time
 
@@ -42,6 +42,7 @@ A1, A2, A3, A4, A5, AKC, AU = range(7)
 NOISY_BLOCK = np.array([A1, A2, A4, A5])
 _GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
 _PANEL_RATE = 1e-3
+_SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
 
 
@@ -98,19 +99,81 @@ def mean_velocity(mode, tau, X, p):
 
 
 @njit(cache=True)
+def _fint(y, kind):
+    """F(y) = ∫₀^y f(x) dx for f = e2(x)·e^(−x) (kind 0), e2(x)·e1(x) (1), e2(x)² (2), |y| < 0.5.
+
+    Taylor series of the integrands: the coefficient of x^m is (−1)^m·c_m/m! with
+    c_m = 2^m − 1 − m (kind 0, m ≥ 2), 2 − 2^m + m (kind 1, m ≥ 2), 2^m − 2 − 2m (kind 2, m ≥ 3);
+    the terms shrink by ≤ 2|y|/m ≤ 1/m, summed until below half an ulp (leading terms y³/6,
+    y⁴/8, y⁵/20).
+    """
+    m0 = 3 if kind == 2 else 2
+    fact = 2.0 if m0 == 2 else 6.0
+    pw2 = 4.0 if m0 == 2 else 8.0
+    ypow = y ** (m0 + 1)
+    total = 0.0
+    for m in range(m0, 80):
+        if m > m0:
+            fact *= m
+            pw2 *= 2.0
+            ypow *= y
+        if kind == 0:
+            c = pw2 - 1.0 - m
+        elif kind == 1:
+            c = 2.0 - pw2 + m
+        else:
+            c = pw2 - 2.0 - 2.0 * m
+        term = c / fact * ypow / (m + 1)
+        if m % 2 == 1:
+            term = -term
+        total += term
+        if term != 0.0 and abs(term) <= 2.0 ** -60 * abs(total):
+            break
+    return total
+
+
+@njit(cache=True)
+def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
+    """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
+
+    w2: q2·[h³/3, h²/2; ·, h] on (x1, x2);
+    w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.stuck);
+    w5: x1x1 q5·α²·F2(y5)/β5⁵, x1x2 q5·α²·F1(y5)/β5⁴, x1x5 q5·s·α·F0(y5)/β5³,
+        x2x2 q5·α²·e4(y5)/β5³, x2x5 q5·s·α·e1(y5)²/(2β5²), x5x5 q5·e1(2y5)/(2β5),
+    with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`).
+    """
+    E4, E5 = e1(y4), e1(y5)
+    Q[0, 0] = q2 * h * h * h / 3.0 + q4 * e4(y4) / b4 ** 3 + q5 * a * a * _fint(y5, 2) / b5 ** 5
+    Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + q5 * a * a * _fint(y5, 1) / b5 ** 4
+    Q[1, 1] = q2 * h + q5 * a * a * e4(y5) / b5 ** 3
+    Q[0, 2] = Q[2, 0] = -q4 * E4 * E4 / (2.0 * b4 * b4)
+    Q[0, 3] = Q[3, 0] = q5 * s * a * _fint(y5, 0) / b5 ** 3
+    Q[1, 2] = Q[2, 1] = 0.0
+    Q[1, 3] = Q[3, 1] = q5 * s * a * E5 * E5 / (2.0 * b5 * b5)
+    Q[2, 2] = q4 * e1(2.0 * y4) / (2.0 * b4)
+    Q[2, 3] = Q[3, 2] = 0.0
+    Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
+
+
+@njit(cache=True)
 def q_moving(mode, h, p, Q):
     """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8).
 
     The w2 column of Φ(v) is (v, 1, 0, 0) on the block, so its share is closed form:
     α²σ2²·[h³/3, h²/2; h²/2, h] on (x1, x2). The w4 and w5 columns, (−e1(β4v)/β4, 0, e^(−β4v), 0)
     and (s·α·e2(β5v)/β5², s·α·e1(β5v)/β5, 0, e^(−β5v)), are polynomials of degree ≤ 2 times a power
-    series in β·v; their products (degree ≤ 4) are integrated by 4-node Gauss–Legendre, exact
-    through degree 7, on panels with β·Δ ≤ 1e-3: the first neglected term is below
-    (2β·Δ)⁴·2e-7 ≈ 3e-18 of the entry, i.e. round-off (Van Loan is the test oracle).
+    series in β·v. For β·h < 0.5 their integrals are closed forms (:func:`_q_closed`); beyond,
+    the products (degree ≤ 4) are integrated by 4-node Gauss–Legendre, exact through degree 7,
+    on panels with β·Δ ≤ 1e-3: the first neglected term is below (2β·Δ)⁴·2e-7 ≈ 3e-18 of the
+    entry, i.e. round-off (Van Loan is the test oracle).
     """
     a, b4, b5 = p.alpha, p.beta4, p.beta5
     q2, q4, q5 = a * a * p.sigma2_sq, p.sigma4_sq, p.sigma5_sq
     s = 1.0 if mode == 1 else -1.0
+    y4, y5 = b4 * h, b5 * h
+    if max(y4, y5) < _SERIES_LIMIT:
+        _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q)
+        return
     i11 = i12 = i14 = i15 = i22 = i25 = i44 = i55 = 0.0
     rate = max(b4, b5)
     panels = max(1, int(math.ceil(rate * h / _PANEL_RATE)))

@@ -6,8 +6,7 @@ Two locators, both compiled:
   from a ladder h·2^k (:func:`ladder_thresholds`: long far from a zero, the fixed sub-step near
   one); a zero crossing of x2 inside a sub-step is a sign change or, with both ends on one side,
   happens with the Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by
-  bridge bisection,
-  each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
+  bridge bisection, each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
   X_m = X_m,free + G·(X_b − X_b,free), G = Q(w/2)·Φ(w/2)ᵀ·Q(w)⁻¹), accepted in proportion to
   the probability that the halves contain a crossing, so the located time has the exact law of
   the first crossing of the bridge. It stops at ``bisection_tol`` (≤ 1 µs).
@@ -133,28 +132,29 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
 
 
 @njit(cache=True)
-def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, half, sig_v2, z, cursor):
+def _phi_times(P, X, out):
+    """out = P·X for a moving-mode Φ (3-20)/(3-21), without its structural zeros."""
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    out[A1] = x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc + P[A1, AU] * u
+    out[A2] = x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4
+    out[A5] = P[A5, A5] * x5
+    out[AKC] = kc
+    out[AU] = u
+
+
+@njit(cache=True)
+def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
-    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`."""
-    for r in range(7):
-        acc = 0.0
-        for c in range(7):
-            acc += Ph[r, c] * Xa[c]
-        Xm[r] = acc
-    d0 = d1 = d2 = d3 = 0.0
-    for q in range(4):
-        r = NOISY_BLOCK[q]
-        acc = 0.0
-        for c in range(7):
-            acc += Pw[r, c] * Xa[c]
-        if q == 0:
-            d0 = Xb[r] - acc
-        elif q == 1:
-            d1 = Xb[r] - acc
-        elif q == 2:
-            d2 = Xb[r] - acc
-        else:
-            d3 = Xb[r] - acc
+    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`;
+    ``Fb`` is scratch for Φ(w)·Xa."""
+    _phi_times(Ph, Xa, Xm)
+    _phi_times(Pw, Xa, Fb)
+    d0 = Xb[A1] - Fb[A1]
+    d1 = Xb[A2] - Fb[A2]
+    d2 = Xb[A4] - Fb[A4]
+    d3 = Xb[A5] - Fb[A5]
     for q in range(4):
         Xm[NOISY_BLOCK[q]] += G[q, 0] * d0 + G[q, 1] * d1 + G[q, 2] * d2 + G[q, 3] * d3
     mean2 = Xm[A2]
@@ -188,7 +188,7 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     left half with probability p_left/p_any.
 
     ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
-    plant.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 267 floats.
+    plant.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 274 floats.
     """
     m = 0 if mode == 1 else 1
     Xa = V[0:7]
@@ -199,6 +199,7 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     G = V[119:135].reshape((4, 4))
     C = V[135:151].reshape((4, 4))
     Vl = V[151:267]
+    Fb = V[267:274]
     Xa[:] = Xa0
     Xb[:] = Xb0
     ta = 0.0
@@ -207,11 +208,11 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     while w > tol:
         half = w / 2
         if levels < BPh.shape[1]:
-            left = _bisect_level(BPh[m, levels], BPw[m, levels], BG[m, levels], BC[m, levels], Xa, Xb, Xm, half,
-                                 sig_v2, z, cursor)
+            left = _bisect_level(BPh[m, levels], BPw[m, levels], BG[m, levels], BC[m, levels], Xa, Xb, Xm, Fb,
+                                 half, sig_v2, z, cursor)
         else:
             _bridge_law(mode, w, p, Ph, Pw, G, C, Vl)
-            left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, half, sig_v2, z, cursor)
+            left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor)
         if left:
             Xb[:] = Xm                  # the first crossing is in the left half
         else:
@@ -434,7 +435,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
     afresh. Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
     (reflecting) below.
 
-    ``W`` is scratch space (≥ 363 floats) owned by the caller.
+    ``W`` is scratch space (≥ 370 floats) owned by the caller.
 
     Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
     velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
