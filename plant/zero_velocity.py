@@ -427,12 +427,14 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
     factor, :func:`substep_tables`; j = 0 regular with h_0 = ``o_sub``, j = 1 reflecting with
     h_1 = ``o_rsub``; m = 0 for mode 1, 1 for mode 3). Each step takes the longest rung k whose
     threshold ``TH[j, k]`` (:func:`ladder_thresholds`) the mean velocity clears over the whole
-    step and with 1.5·h_j·2^k < the time left; near zero that is rung 0, the fixed sub-step. The
-    choice depends on the state at the step's start only, so the chain of exact transitions
-    X⁺ = Φ(h)X + N stays exact; what a long step neglects is bounded in ``ladder_thresholds``
-    (crossing probability ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the
-    reflect sub-step's at zero velocity). The last piece of the segment (≤ 1.5 h_j) is factored
-    afresh. Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
+    step; near zero that is rung 0, the fixed sub-step. When that rung reaches the segment's end
+    the rest of the segment is one step, factored afresh (a shorter width is admissible too,
+    since both bounds grow with h); otherwise the step is the longest admissible rung leaving
+    more than half of it, and the last ≤ 1.5·h_j is again one fresh step. The choice depends on
+    the state at the step's start only, so the chain of exact transitions X⁺ = Φ(h)X + N stays
+    exact; what a long step neglects is bounded in ``ladder_thresholds`` (crossing probability
+    ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the reflect sub-step's at
+    zero velocity). Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
     (reflecting) below.
 
     ``W`` is scratch space (≥ 370 floats) owned by the caller.
@@ -457,26 +459,32 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
     while h - t > 0.0:
         rem = h - t
         k = 0
-        if nrung > 1 and s * X[A2] >= TH[j, 1] and 3.0 * base < rem:
-            # the longest rung the start velocity and the time left allow, then check the mean path
+        if nrung > 1 and s * X[A2] >= TH[j, 1] and base < rem:
+            # the rung the start velocity allows, up to the first one reaching the segment end;
+            # then the mean path over the width w actually used (TH grows with h: conservative)
             k = 1
-            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and 1.5 * base * 2.0 ** (k + 1) < rem:
+            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and base * 2.0**k < rem:
                 k += 1
             if reflect:
                 # the torque beyond ks keeps the mean drift of s·x2 ≥ −α·|x5|·β5·τ (x5's mean
-                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·h²/2
+                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·w²/2
                 while k > 0:
-                    hk = base * 2.0**k
-                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * hk * hk >= TH[j, k]:
+                    w = min(base * 2.0**k, rem)
+                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * w * w >= TH[j, k]:
                         break
                     k -= 1
             else:
                 t_ext = velocity_extremum_time(mode, X, p)
-                while k > 0 and _mean_min(mode, X, p, base * 2.0**k, t_ext) < TH[j, k]:
+                while k > 0 and _mean_min(mode, X, p, min(base * 2.0**k, rem), t_ext) < TH[j, k]:
                     k -= 1
         sub = base * 2.0**k
-        regular = rem > 1.5 * sub
+        # one fresh step to the segment's end when an admissible rung reaches it (any shorter
+        # width is admissible too: c(h) and E[L_h] grow with h), or the last ≤ 1.5 sub-steps
+        regular = not (rem <= sub or (k == 0 and rem <= 1.5 * sub))
         if regular:
+            while k > 0 and 1.5 * sub >= rem:
+                k -= 1
+                sub = sub / 2.0
             step = sub
             _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
         else:
