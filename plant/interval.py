@@ -280,7 +280,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
     X = np.empty(7)
-    W = np.empty(_WORK)
+    W = np.zeros(_WORK)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
         S[i] = 0.0

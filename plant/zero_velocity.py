@@ -86,6 +86,7 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
         y = V[112:116]
         for r in range(4):
             if Lw[r, r] == 0.0:
+                y[r] = 0.0          # no noise in this direction (its column of Lw is zero too)
                 continue
             acc = M[i, r]
             for c in range(r):
@@ -287,7 +288,7 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
 @njit(cache=True)
 def bisection_tables(p, sub, BPh, BPw, BG, BC):
     """Tabulate :func:`_bridge_law` for w = sub/2^k, k < BPh.shape[1], both moving modes."""
-    V = np.empty(116)
+    V = np.zeros(116)
     for m in range(2):
         mode = 1 if m == 0 else 3
         w = sub

@@ -153,3 +153,41 @@ def test_ladder_thresholds_follow_their_rules():
             assert math.sqrt(2**k) * g == pytest.approx(math.sqrt(2 / math.pi), rel=1e-9)
         else:
             assert TH[1, k] > 8 * sig_v * math.sqrt(h)
+
+
+@pytest.mark.parametrize("params", [P0, P0.replace(command_velocity_std=0.0)])
+def test_bridge_law_matches_gaussian_conditioning(params):
+    """The bisection's midpoint law (Matheron gain G, conditional factor C) against numpy:
+    G = Q(w/2)·Φ_hᵀ·pinv(Q(w)) on the noisy block, Σ = Q(w/2) − G·Φ_h·Q(w/2); with σ4 = 0 (the
+    pulse plant) x4 has no noise, and scratch memory full of NaN must not leak into the law."""
+    from plant.moving import NOISY_BLOCK, phi_moving, q_moving
+    from plant.zero_velocity import _bridge_law
+
+    prm = params.kernel_record()[0]
+    for mode in (1, 3):
+        for w in (1e-4, 3.3e-5, 1e-6):
+            Ph, Pw, G, C = np.empty((7, 7)), np.empty((7, 7)), np.empty((4, 4)), np.empty((4, 4))
+            _bridge_law(mode, w, prm, Ph, Pw, G, C, np.full(116, np.nan))
+            Q1, Qw, P = np.empty((4, 4)), np.empty((4, 4)), np.empty((7, 7))
+            q_moving(mode, w / 2, prm, Q1)
+            q_moving(mode, w, prm, Qw)
+            phi_moving(mode, w / 2, prm, P)
+            P2 = P[np.ix_(NOISY_BLOCK, NOISY_BLOCK)]
+            d = np.sqrt(np.diag(Qw))
+            d[d == 0] = 1.0
+            Gref = (Q1 @ P2.T / d) @ np.linalg.pinv(Qw / np.outer(d, d), rcond=1e-13) / d
+            S = Q1 - Gref @ P2 @ Q1
+            s1 = np.sqrt(np.diag(Q1))
+            s1[s1 == 0] = 1.0
+            assert np.all(np.isfinite(G)) and np.all(np.isfinite(C))
+            assert np.allclose(G * d[None, :] / s1[:, None], Gref * d[None, :] / s1[:, None], rtol=0, atol=1e-9)
+            assert C[0, 0] == pytest.approx(math.sqrt(S[1, 1]), rel=1e-9)
+            # the conditional covariance of (x1, x4, x5) given x2, rebuilt from C
+            o = [0, 2, 3]
+            R = S[np.ix_(o, o)] - np.outer(S[o, 1], S[1, o]) / S[1, 1]
+            Lc = C[1:, 1:]
+            so = s1[o]
+            assert np.allclose((Lc @ Lc.T) / np.outer(so, so), R / np.outer(so, so), rtol=0, atol=1e-9)
+            # regression of (x1, x4, x5) on x2, compared as correlations (x1's is round-off here)
+            sc = math.sqrt(S[1, 1]) / np.where(np.diag(S)[o] > 0, np.sqrt(np.abs(np.diag(S)[o])), 1.0)
+            assert np.allclose(C[1:, 0] * sc, S[o, 1] / S[1, 1] * sc, rtol=0, atol=1e-7)
