@@ -50,6 +50,21 @@ def uniform(z, cursor):
     return 0.5 * math.erfc(-normal(z, cursor) / math.sqrt(2.0))
 
 
+@njit(cache=True)
+def uniform_below(z, cursor, p):
+    """U < p for U = Φ(Z) of the next unit normal, the same decision as ``uniform(z, cursor) < p``.
+
+    Φ(Z) ≥ ½ for Z ≥ 0 and < ½ for Z < 0, so the sign of Z decides whenever p and ½ lie on
+    opposite sides of it; only the remaining draws pay for erfc.
+    """
+    x = normal(z, cursor)
+    if x >= 0.0 and p <= 0.5:
+        return False
+    if x < 0.0 and p > 0.5:
+        return True
+    return 0.5 * math.erfc(-x / math.sqrt(2.0)) < p
+
+
 class NoiseStream:
     """Unit normals from ``rng`` with a read position; the plant's only source of randomness.
 

@@ -28,7 +28,7 @@ from numba import njit
 
 from plant.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
                           q_moving, substep_peak, velocity_extremum_time)
-from plant.randomness import normal, uniform
+from plant.randomness import normal, uniform, uniform_below
 
 __all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
            "FAR_SIGMAS"]
@@ -176,7 +176,9 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
     Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
     Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
-    return pl >= 1.0 or uniform(z, cursor) * p_any < pl
+    if pl >= 1.0:
+        return True
+    return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)
 
 
 @njit(cache=True)
@@ -500,8 +502,15 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
             if sig_v2 > 0:
-                u = uniform(z, cursor)
-                low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
+                # the bridge minimum is below 0 iff U < exp(−2·va·vb/(σ_v²·h)) (va, vb > 0): when the
+                # normal behind U already decides "no", skip the inversion
+                p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+                x = normal(z, cursor)
+                if x >= 0.0 and p_push <= 0.5:
+                    low = min(va, vb)
+                else:
+                    u = 0.5 * math.erfc(-x / math.sqrt(2.0))
+                    low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
             else:
                 low = min(va, vb)
             if low < 0.0:
@@ -509,7 +518,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
                 Xb[A1] += s * (-low) * step / 2.0
         else:
             pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
-            if pc >= 1.0 or uniform(z, cursor) < pc:
+            if pc >= 1.0 or uniform_below(z, cursor, pc):
                 if regular and k == 0:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
                 else:
