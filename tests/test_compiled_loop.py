@@ -78,3 +78,20 @@ def test_time_limit_stops_the_compiled_loop():
     assert r.status == "error" and r.message.startswith("time limit of 1e-09 s exceeded at t = ")
     assert 1.0 <= r.simulated_s <= 20.0       # within the first chunks of 1000 samples (10 s)
     assert math.isnan(r.metrics["peak_error_rad"])
+
+
+def test_compiled_dither_segments_equal_the_python_ones():
+    """bench.compiled_loop._segments against controllers.dithered.square_wave_segments on random
+    intervals, levels, amplitudes (some clipping), frequencies and phases."""
+    import numpy as np
+
+    from controllers.dithered import square_wave_segments
+    rng = np.random.default_rng(3)
+    offs, levs = np.empty(64), np.empty(64)
+    for _ in range(3000):
+        t0 = int(rng.integers(0, 100000)) * 0.01
+        base, amp = rng.uniform(-30, 30), float(rng.choice([0.0, 2.0, 18.0, 40.0, rng.uniform(0, 30)]))
+        freq, phase = float(rng.choice([25.0, 125.0, 250.0, 500.0, rng.uniform(1, 1000)])), rng.random()
+        k = compiled_loop._segments(t0, 0.01, base, amp, freq, phase, 26.0, offs, levs)
+        assert tuple(zip(offs[:k].tolist(), levs[:k].tolist())) == \
+            square_wave_segments(t0, 0.01, base, amp, freq, phase, 26.0)
