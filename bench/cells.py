@@ -162,6 +162,12 @@ class Cell:
         return f"{self.controller.name}__{self.scenario.name}__s{self.seed}"
 
     @property
+    def process_key(self) -> tuple:
+        """Cells with equal keys may share a cell process (bench.isolation): the same plugins,
+        from the same directories, with the same source."""
+        return (self.plugins, self.plugin_dirs, self.plugin_source, self.code_version)
+
+    @property
     def duration_s(self) -> float:
         return self.scenario.duration_s
 

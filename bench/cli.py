@@ -278,6 +278,16 @@ def list_(
         out_console.print(f"{'--quick' if quick else 'default'} matrix: {n} cells = "
                           f"{len(m.controllers)} controllers × {len(m.scenarios)} scenarios × "
                           f"{len(m.seeds)} seeds ({escape(m.source)})")
+    from bench.frontier import frontier_matrix_data, frontier_matrix_path
+    from bench.matrix import parse_matrix
+
+    for quick in (False, True):
+        m = parse_matrix(frontier_matrix_data(quick), str(frontier_matrix_path(quick)), check_resets=False)
+        cells = m.cells()
+        points = len({c.controller.name for c in cells})
+        out_console.print(f"frontier{' --quick' if quick else ''}: {len(cells)} cells = {points} controller "
+                          f"points × {len(m.scenarios)} scenarios × {len(m.seeds)} seeds "
+                          f"({escape(str(frontier_matrix_path(quick)))} completed from the registry)")
 
 
 def _drive(base: str) -> str:

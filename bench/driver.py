@@ -169,7 +169,8 @@ def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, trace
             store.write_json("meta.json", meta)
             if todo:
                 calls = [(c, str(store.root), trace_of[c.cell_id]) for c in todo]
-                for i, row, exc in executor.map_unordered(run_cell, calls, [kill_deadline(c) for c in todo]):
+                keys = [c.process_key for c in todo]
+                for i, row, exc in executor.map_unordered(run_cell, calls, [kill_deadline(c) for c in todo], keys):
                     if exc is not None:
                         kind = exc.kind if isinstance(exc, CellFailure) else "crash"
                         row = failure_row(todo[i], "crash" if kind == "raised" else kind,

@@ -11,6 +11,7 @@ yields a :class:`~bench.isolation.CellFailure` for that cell only; the other cel
 
 * ``local``: a :class:`concurrent.futures.ThreadPoolExecutor` with ``workers`` threads, each of
   which waits on one cell process at a time (default ``os.cpu_count()`` processes at once).
+  The idle cell processes are stopped when the executor closes.
 * ``dask``: ``Client(address)`` for a running scheduler (``--scheduler``), else a
   ``LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)`` (nanny-managed,
   non-daemonic workers so that they may start the cell process). Tasks are submitted with
@@ -28,11 +29,11 @@ import logging
 import multiprocessing
 import os
 import re
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Hashable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Any
 
-from bench.isolation import CellFailure, call_isolated, kill_all, ready, reopen
+from bench.isolation import CellFailure, call_isolated, kill_all, ready, reopen, retire_idle
 
 from bench.errors import UserError
 
@@ -66,12 +67,14 @@ class Executor(abc.ABC):
     @abc.abstractmethod
     def map_unordered(self, fn: Callable[..., Any], calls: Sequence[tuple[Any, ...]],
                       deadlines: Sequence[float | None] | None = None,
+                      keys: Sequence[Hashable] | None = None,
                       ) -> Iterator[tuple[int, Any, BaseException | None]]:
         """Yield ``(index, result, None)`` or ``(index, None, exception)`` per call, as they finish.
 
-        Each call runs in its own process; ``deadlines[i]`` (wall seconds, None = none) is enforced
-        from outside it. A failed call's exception is a :class:`CellFailure` (or, on dask, what the
-        cluster raised for a lost worker).
+        Each call runs in a cell process; ``deadlines[i]`` (wall seconds, None = none) is enforced
+        from outside it; only calls with equal ``keys[i]`` share a process. A failed call's
+        exception is a :class:`CellFailure` (or, on dask, what the cluster raised for a lost
+        worker).
         """
         raise NotImplementedError
 
@@ -101,10 +104,11 @@ class LocalExecutor(Executor):
         ready()
         self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="cell")
 
-    def map_unordered(self, fn, calls, deadlines=None):
+    def map_unordered(self, fn, calls, deadlines=None, keys=None):
         deadlines = list(deadlines) if deadlines is not None else [None] * len(calls)
-        futures = {self._pool.submit(call_isolated, fn, tuple(args), limit): i
-                   for i, (args, limit) in enumerate(zip(calls, deadlines))}
+        keys = list(keys) if keys is not None else [None] * len(calls)
+        futures = {self._pool.submit(call_isolated, fn, tuple(args), limit, key): i
+                   for i, (args, limit, key) in enumerate(zip(calls, deadlines, keys))}
         for fut in as_completed(futures):
             exc = fut.exception()
             yield futures[fut], (None if exc else fut.result()), exc
@@ -116,15 +120,17 @@ class LocalExecutor(Executor):
                 kill_all()    # the waiting threads see their process die and return
             pool.shutdown(wait=True, cancel_futures=cancel)
             self._pool = None
+        retire_idle()
 
 
-def _dask_task(fn, args, deadline):
-    """Runs on a dask worker: the cell in its own process when the worker may have children."""
+def _dask_task(fn, args, deadline, key=None):
+    """Runs on a dask worker: the cell in a cell process when the worker may have children
+    (the worker keeps its idle cell process for the next task with the same key)."""
     if multiprocessing.current_process().daemon:
         return ("ok", fn(*args))
     try:
         ready()
-        return ("ok", call_isolated(fn, tuple(args), deadline))
+        return ("ok", call_isolated(fn, tuple(args), deadline, key))
     except CellFailure as exc:
         return ("failed", exc.kind, exc.message)
 
@@ -162,12 +168,13 @@ class DaskExecutor(Executor):
                                              dashboard_address=None, silence_logs=logging.ERROR)
             self._client = Client(self._cluster, set_as_default=False)
 
-    def map_unordered(self, fn, calls, deadlines=None):
+    def map_unordered(self, fn, calls, deadlines=None, keys=None):
         from distributed import as_completed as dask_as_completed
 
         deadlines = list(deadlines) if deadlines is not None else [None] * len(calls)
-        futures = {self._client.submit(_dask_task, fn, args, limit, pure=False, retries=0): i
-                   for i, (args, limit) in enumerate(zip(calls, deadlines))}
+        keys = list(keys) if keys is not None else [None] * len(calls)
+        futures = {self._client.submit(_dask_task, fn, args, limit, key, pure=False, retries=0): i
+                   for i, (args, limit, key) in enumerate(zip(calls, deadlines, keys))}
         for fut in dask_as_completed(list(futures), loop=self._client.loop):
             try:
                 answer = fut.result()

@@ -5,9 +5,10 @@ scenarios, the shared seeds, the noise sweeps and explicit sweeps for controller
 declare ``knobs`` yet. :func:`frontier_matrix_data` completes them from the registry:
 
 * every registered controller is in the matrix (the ``privileged`` bounds too, drawn as floors);
-* a controller whose class declares ``knobs`` is swept over them (the full frontier: their
-  cross product; ``--quick``: the first, middle and last value of the first knob), replacing
-  the file's explicit sweep; one without knobs keeps the file's sweep, or runs at its defaults;
+* a controller whose class declares ``knobs`` is swept over them (the full frontier: every
+  value of the first knob crossed with the first, middle and last value of the second;
+  ``--quick``: the first, middle and last value of the first knob), replacing the file's
+  explicit sweep; one without knobs keeps the file's sweep, or runs at its defaults;
 * real controllers also keep their default point (``include_default``).
 
 The completed matrix is written to ``DIR/frontier-matrix.toml`` (what ran, for provenance and
@@ -63,7 +64,7 @@ def frontier_matrix_data(quick: bool = False) -> dict[str, Any]:
         knobs = dict(getattr(cls, "knobs", {}) or {})
         if knobs:
             fields = list(knobs)[:1] if quick else list(knobs)[:2]
-            table = {f: (thin(knobs[f]) if quick else list(knobs[f])) for f in fields}
+            table = {f: (thin(knobs[f]) if quick or i > 0 else list(knobs[f])) for i, f in enumerate(fields)}
             table = {f: [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in vs]
                      for f, vs in table.items()}
             sweep[name] = table

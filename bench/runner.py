@@ -5,6 +5,10 @@ returns the drive command for [n·τs, (n+1)·τs); the plant's pure step
 (:func:`plant.advance`) returns the state at the next instant with the interval's exact
 integrals, which the scoring window sums (:class:`bench.metrics.WindowTotals`).
 
+A controller that describes its step as a fixed linear law (the ``linear_law`` hook: the
+linear and dithered controllers) runs, when nothing is recorded, in one compiled loop
+(:mod:`bench.compiled_loop`) with bit-identical results; every other run calls ``step`` here.
+
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
 plant noise, sensor noise, controller, and the initial draw of x5 from N(0, VAR(x5)).
 
@@ -27,6 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from bench.compiled_loop import run_law
 from bench.metrics import WindowTotals, run_metrics
 from controllers.base import Controller
 from plant.interval import advance
@@ -120,7 +125,8 @@ def spawn_streams(seed: int) -> dict[str, np.random.Generator]:
 def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: float,
                     warmup_s: float = 0.0, seed: int = 0, noise: bool = True, record: bool = False,
                     options: SimOptions | None = None, x5_initial: float | None = None,
-                    time_limit_s: float | None = None, recorder: Recorder | None = None) -> RunResult:
+                    time_limit_s: float | None = None, recorder: Recorder | None = None,
+                    compiled: bool = True) -> RunResult:
     """Run ``controller`` on the plant for ``duration_s`` seconds and score from ``warmup_s``.
 
     Parameters
@@ -136,8 +142,13 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     x5_initial : float, optional
         Override the initial correlated friction x5(0) [ozf·in].
     time_limit_s : float, optional
-        Wall-clock budget [s]; checked at every sample, a run over budget stops with status
-        ``error``. None (default) means no limit.
+        Wall-clock budget [s]; checked at every sample (every :data:`bench.compiled_loop.CHUNK`
+        samples on the compiled path), a run over budget stops with status ``error``. None
+        (default) means no limit.
+    compiled : bool
+        Run a controller that describes its step as a linear law (``linear_law`` hook) in one
+        compiled loop (:mod:`bench.compiled_loop`, bit-identical) when nothing is recorded.
+        False always calls ``step`` from Python.
 
     Returns
     -------
@@ -178,7 +189,15 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     privileged = controller.privileged
     try:
         controller.reset(params, streams["controller"])
-        for n in range(n_samples):
+        law = controller.linear_law() if (rec is None and not privileged and compiled) else None
+        if law is not None:
+            state, totals, window, status, message = run_law(law, params, opts, state, sensor, n_warm,
+                                                              plant_noise, deadline)
+            n_window = window.shape[0]
+            x1_window[:n_window] = window
+            if status is Status.ERROR:
+                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+        for n in range(n_samples if law is None else 0):
             x = state.x
             x1 = x[X1]
             y = float(x1 + sensor[n])
@@ -206,8 +225,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
                 break
         else:
-            x1_window[n_window] = state.x[X1]
-            n_window += 1
+            if law is None:
+                x1_window[n_window] = state.x[X1]
+                n_window += 1
     except Exception as exc:  # a failing controller is a result, not a crash (STYLE §8)
         status = Status.ERROR
         message = f"{type(exc).__name__}: {exc}"

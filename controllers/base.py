@@ -25,6 +25,9 @@ Optional hooks (class attributes and methods with neutral defaults) replace ever
 ``privileged`` / ``observe_truth``
     Only for bounds (e.g. an oracle) that are not real controllers: the runner hands them the
     true plant state before every ``step``. Real controllers never see it.
+``linear_law``
+    A controller whose step is a fixed linear law (plus square-wave dither) may describe it
+    (:class:`controllers.law.LinearLaw`); the runner then compiles the whole loop.
 """
 
 from __future__ import annotations
@@ -90,6 +93,11 @@ class Controller(abc.ABC):
     def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
         """Extra series sampled at the sample instants ``t`` [s] for the report's figures."""
         return {}
+
+    def linear_law(self) -> Any:
+        """After :meth:`reset`: a :class:`~controllers.law.LinearLaw` if ``step`` computes exactly
+        that law (then the runner may run it compiled, without calling ``step``), else None."""
+        return None
 
     def observe_truth(self, state: Any) -> None:
         """Privileged hook: the true :class:`~plant.state.PlantState` before each ``step``.

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import register
+from controllers.law import LinearLaw
 from controllers.linear import LinearController, LinearOptions
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -55,25 +56,29 @@ def square_wave_segments(t0: float, duration: float, base: float, amplitude: flo
     """
     if amplitude == 0.0:
         return ((0.0, min(max(base, -limit), limit)),)
+    high = min(max(base + amplitude, -limit), limit)
+    low = min(max(base - amplitude, -limit), limit)
+    floor = math.floor
     cycles0 = frequency_hz * t0 + phase
-    first = math.floor(2.0 * cycles0) + 1  # next half-cycle index after t0
-    offsets = [0.0]
-    k = first
-    while True:
-        off = (0.5 * k - cycles0) / frequency_hz
-        if off >= duration - _EDGE_TOL_S:
-            break
+    k = floor(2.0 * cycles0) + 1  # next half-cycle index after t0
+    bounds = [0.0]
+    off = (0.5 * k - cycles0) / frequency_hz
+    while off < duration - _EDGE_TOL_S:
         if off > _EDGE_TOL_S:
-            offsets.append(off)
+            bounds.append(off)
         k += 1
-    bounds = offsets + [duration]
-    segments: list[tuple[float, float]] = []
-    for a, b in zip(bounds, bounds[1:]):
+        off = (0.5 * k - cycles0) / frequency_hz
+    bounds.append(duration)
+    segments = []
+    last = None
+    a = 0.0
+    for b in bounds[1:]:
         theta = cycles0 + frequency_hz * 0.5 * (a + b)  # midpoint: immune to edge round-off
-        sign = 1.0 if (theta - math.floor(theta)) < 0.5 else -1.0
-        level = min(max(base + amplitude * sign, -limit), limit)
-        if not segments or segments[-1][1] != level:
+        level = high if theta - floor(theta) < 0.5 else low
+        if level != last:
             segments.append((a, level))
+            last = level
+        a = b
     return tuple(segments)
 
 
@@ -160,15 +165,25 @@ class DitheredController(LinearController):
         self._tau_s = params.sample_period
         self._n = 0
         self._phase = float(rng.random()) if self.options.random_phase else 0.0
+        self._dither = (self.dither_amplitude, self.dither_frequency)
 
     def step(self, y: float) -> DriveCommand:
         """Linear level −C(z)·y(n) plus the dither over [n·τs, (n+1)·τs)."""
         base = self.control_level(y)
-        segments = square_wave_segments(self._n * self._tau_s, self._tau_s, base,
-                                         self.dither_amplitude, self.dither_frequency,
+        amplitude, frequency = self._dither
+        segments = square_wave_segments(self._n * self._tau_s, self._tau_s, base, amplitude, frequency,
                                          self._phase, self._u_max)
         self._n += 1
         return DriveCommand(segments, DriveType.LINEAR)
+
+    def linear_law(self) -> LinearLaw | None:
+        """The law of :meth:`step`: the linear law plus the dither (None for a subclass that
+        overrides ``step``)."""
+        if self.design is None or type(self).step is not DitheredController.step:
+            return None
+        amplitude, frequency = self._dither
+        return LinearLaw(*self.design.state_space, u_max=self._u_max, dither_amplitude=amplitude,
+                         dither_frequency=frequency, dither_phase=self._phase)
 
     def summary(self) -> dict[str, Any]:
         out = super().summary()

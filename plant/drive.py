@@ -52,18 +52,23 @@ class DriveCommand:
     __slots__ = ("segments", "drive", "_offsets", "_levels")
 
     def __init__(self, segments, drive: DriveType = DriveType.LINEAR) -> None:
-        segs = tuple((float(o), float(v)) for o, v in segments)
-        if not segs:
-            raise ValueError("DriveCommand.segments must not be empty")
-        if segs[0][0] != 0.0:
-            raise ValueError(f"DriveCommand.segments must start at offset 0, got {segs[0][0]!r}")
+        offsets, levels = [], []
         prev = -1.0
-        for o, v in segs:
-            if not (o > prev and math.isfinite(o) and math.isfinite(v)):
+        for o, v in segments:
+            o, v = float(o), float(v)
+            if not offsets and o != 0.0:
+                raise ValueError(f"DriveCommand.segments must start at offset 0, got {o!r}")
+            if not (o > prev and o - o == 0.0 and v - v == 0.0):   # x - x == 0 only for finite x
                 raise ValueError(f"DriveCommand.segments offsets must increase and levels be finite, "
                                  f"got ({o!r}, {v!r}) after offset {prev!r}")
+            offsets.append(o)
+            levels.append(v)
             prev = o
-        self._set(segs, drive if type(drive) is DriveType else DriveType(drive))
+        if not offsets:
+            raise ValueError("DriveCommand.segments must not be empty")
+        self._set(tuple(zip(offsets, levels)), drive if type(drive) is DriveType else DriveType(drive))
+        object.__setattr__(self, "_offsets", np.array(offsets))
+        object.__setattr__(self, "_levels", np.array(levels))
 
     def _set(self, segs: tuple, drive: DriveType) -> None:
         object.__setattr__(self, "segments", segs)
@@ -100,9 +105,11 @@ class DriveCommand:
         if not math.isfinite(level):
             raise ValueError(f"DriveCommand level must be finite, got {level!r}")
         cmd = object.__new__(cls)
-        cmd._set(((0.0, level),), drive if type(drive) is DriveType else DriveType(drive))
-        object.__setattr__(cmd, "_offsets", _HOLD_OFFSETS)
-        object.__setattr__(cmd, "_levels", np.full(1, level))
+        _set = object.__setattr__
+        _set(cmd, "segments", ((0.0, level),))
+        _set(cmd, "drive", drive if type(drive) is DriveType else DriveType(drive))
+        _set(cmd, "_offsets", _HOLD_OFFSETS)
+        _set(cmd, "_levels", np.array((level,)))   # np.full costs 3x more at this size
         return cmd
 
     @classmethod

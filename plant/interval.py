@@ -475,3 +475,27 @@ def _message(code: int, state: PlantState, options: SimOptions) -> str:
     if code == _CHATTER:
         return f"more than {options.max_events} events in one interval at t={state.t:.6f} s"
     return f"|x1| = {abs(state.x[X1]):.3g} rad at t={state.t:.6f} s"
+
+
+# --- for compiled callers ---------------------------------------------------------------------
+# A caller that runs many intervals in one compiled loop (bench.compiled_loop) calls
+# interval_kernel itself with the inputs advance() would pass: kernel_inputs() gives the options
+# vector and tables, the work-sheet positions below read the kernel's results, and
+# interval_status() turns a status code into what advance() returns.
+SHEET_T, SHEET_MODE, SHEET_FLYBACK, SHEET_PEAK = _T, _MODE, _FB, _PEAK
+SHEET_ABS, SHEET_SQ, SHEET_CHARGE, SHEET_DURATION = _IABS, _ISQ, _CHG, _DUR
+SHEET_EVENTS, SHEET_BREAKAWAYS, SHEET_STICKS, SHEET_SUBSTEPS, SHEET_STATUS = _NEV, _NBRK, _NSTK, _NSUB, _STATUS
+SHEET_SIZE, STATUS_OK = _SHEET, _OK
+NO_EVENTS = _NO_EVENTS
+
+
+def kernel_inputs(params: PlantParams, options: SimOptions, noisy: bool) -> tuple[np.ndarray, ...]:
+    """(options vector, TP, TL, BPh, BPw, BG, BC): interval_kernel's arguments after ``prm``."""
+    return _plan(params, options, noisy)
+
+
+def interval_status(code: int, state: PlantState, options: SimOptions) -> tuple[Status, str]:
+    """The :class:`Status` and message of a kernel status code (as in :func:`advance`)."""
+    if code == _OK:
+        return Status.OK, ""
+    return _STATUS_OF[code], _message(code, state, options)

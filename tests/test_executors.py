@@ -45,3 +45,51 @@ def test_process_pool_reproduces_in_process_rows(tmp_path):
         other, exc = there[i]
         assert exc is None and row["status"] == "ok"
         assert _strip(other) == _strip(row)
+
+
+def test_reused_and_fresh_cell_processes_give_identical_rows(tmp_path, monkeypatch):
+    """Cells run one after another in a shared process (in another order than above) or each in
+    its own process: the rows are the same bit for bit."""
+    base = builtin_scenarios()["thesis"].with_durations(duration_s=1.0, warmup_s=0.2)
+    cells = [Cell(ControllerSpec(c, c), base, seed) for seed in (3, 4) for c in ("linear", "solnic-modern", "reset-pid")]
+    rows = {}
+    for per_process in ("1", "64"):
+        monkeypatch.setenv("SOLNIC_BENCH_CELLS_PER_PROCESS", per_process)
+        with make_executor("local", 1) as pool:
+            calls = [(c, str(tmp_path / per_process), False) for c in reversed(cells)]
+            out = {i: (row, exc) for i, row, exc in pool.map_unordered(run_cell, calls,
+                                                                        keys=[c.process_key for c in cells])}
+        assert all(exc is None and row["status"] == "ok" for row, exc in out.values())
+        rows[per_process] = {row["cell"]: _strip(row) for row, _ in out.values()}
+    assert rows["1"] == rows["64"]
+
+
+def _pid_and_mark(mark: bool) -> int:
+    import os
+    import sys
+    if mark:
+        sys.modules[__name__].MARKED = True
+    return os.getpid() if not getattr(sys.modules[__name__], "MARKED", False) or mark else -1
+
+
+def _raise_system_exit() -> None:
+    raise SystemExit(7)
+
+
+def test_a_cell_process_is_reused_only_while_healthy(monkeypatch):
+    from bench import isolation
+    from bench.isolation import CellFailure, call_isolated, retire_idle
+
+    monkeypatch.setenv("SOLNIC_BENCH_CELLS_PER_PROCESS", "3")
+    isolation.reopen()
+    retire_idle()
+    first = call_isolated(_pid_and_mark, (False,), 30, key="k")
+    assert call_isolated(_pid_and_mark, (False,), 30, key="k") == first           # reused
+    assert call_isolated(_pid_and_mark, (False,), 30, key="other") != first       # another key: another process
+    assert call_isolated(_pid_and_mark, (True,), 30, key="k") == first            # third call: then replaced
+    assert call_isolated(_pid_and_mark, (False,), 30, key="k") not in (first, -1)  # fresh: no mark inherited
+    with pytest.raises(CellFailure) as failure:
+        call_isolated(_raise_system_exit, (), 30, key="k")
+    assert failure.value.kind == "raised" and "SystemExit: 7" in failure.value.message
+    assert call_isolated(_pid_and_mark, (False,), 30, key="k") != first
+    assert retire_idle() >= 1

@@ -253,3 +253,19 @@ def test_table_2_1_ramp_peak_error_exceeds_bound(noise: bool) -> None:
     print(f"noise={noise}: peak {res.metrics['peak_error_rad']:.4g} rad, "
           f"bound {bound:.4g} rad, ratio {ratio:.3f}")
     assert ratio >= 1.0
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 4])
+def test_unrolled_compensator_step_is_the_state_space_recursion(n):
+    """compensator_step(A, B, C, D) against the matrix recursion u = C·x + D·y, x⁺ = A·x + B·y."""
+    from controllers.linear import compensator_step
+    rng = np.random.default_rng(n)
+    A, B, C, D = rng.normal(size=(n, n)) * 0.4, rng.normal(size=(n, 1)), rng.normal(size=(1, n)), rng.normal(size=(1, 1))
+    law = compensator_step(A, B, C, D)
+    x, xs = np.zeros(n), (0.0,) * n
+    for y in rng.normal(size=50):
+        u, xs = law(xs, float(y))
+        u_ref = (C @ x + D[0] * y).item()
+        x = A @ x + B[:, 0] * y
+        assert u == pytest.approx(u_ref, rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(xs, x, rtol=1e-12, atol=1e-12)

@@ -66,6 +66,7 @@ from plant.pulse import max_on_time
 
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
+from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import pulse_noise
@@ -108,6 +109,7 @@ class _Cycle:
     moving_time: float
     overshoot: bool
     noise_var: float = 0.0    # VAR[Δc] from w2 (noise-aware model) [rad²]
+    spread_var: float = 0.0   # VAR[Δc_p] from the friction uncertainty [rad²]
 
 
 @register("solnic")
@@ -172,6 +174,12 @@ class SolnicController(Controller):
         else:
             self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
                                      [0.0, 0.0], prior)
+        self.grid: FrictionGrid | None = None
+        if o.friction_grid:
+            self.grid = FrictionGrid(params, [kc0, ks0], self.friction.P, n=o.grid_points,
+                                     memory=o.grid_memory)
+            self._grid_memo: dict[float, Predictive] = {}
+            self._grid_key = -1
         if o.dtu_inc_initial is not None:
             inc0 = o.dtu_inc_initial
             self.adjusted = (_NAN, _NAN)
@@ -195,7 +203,7 @@ class SolnicController(Controller):
         self.counts = dict(pulses=0, overshoot_corrections=0, samples_used=0, samples_rejected=0,
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
                            cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
-                           undecided_cycles=0)
+                           undecided_cycles=0, grid_handover_cycle=0)
         self._ready = True
 
     # ------------------------------------------------------------------ per sample
@@ -251,7 +259,10 @@ class SolnicController(Controller):
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
             x1, x4 = self.mode2.x1, self.mode2.x4
             dc_plan = abs(pred.delta_c)
-            if self.options.noise_aware_model:
+            gp = self._grid_predictive(dtu, pred)
+            if gp is not None:
+                dc_plan = gp.dc_mean                        # w2 bias included
+            elif self.options.noise_aware_model:
                 dc_plan += self._pulse_noise(pred, dtu)[0]
             trig = plan_trigger(x1, x4, self.mode2.drift_std(), dc_plan, horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
@@ -273,27 +284,40 @@ class SolnicController(Controller):
             self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         noise_var = 0.0
-        if self.options.noise_aware_model:
-            bias, noise_var = self._pulse_noise(pred, dtu)
-            dc += bias                                      # E[Δc] with the w2 push and tail
-        p_zero = self.friction.prob_no_motion(pred.peak_torque)
-        var_dc = self.friction.motion_variance(pred.H_b) + dc**2 * p_zero          # (5-9)
-        var_dc += noise_var                                 # noise-aware: w2 over T_m
-        if self.joint is not None:      # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
+        gp = self._grid_predictive(dtu, pred)
+        if gp is not None:
+            # the posterior predictive of the grid: d ~ (mean, spread + w2 + no-motion mass),
+            # uncorrelated with the joint filter's k block (the grid, not the samples, updates k)
+            dc = gp.dc_mean
+            p_zero = 1.0 - gp.p_motion
+            spread = gp.dc_var + (self.options.grid_model_error * dc) ** 2
+            t_nominal, sd_t = gp.t_stop_mean, math.sqrt(gp.t_stop_var)
+            moving = 0.0                                    # the grid has no x5 drift
+        else:
+            if self.options.noise_aware_model:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] with the w2 push and tail
+            spread = self.friction.motion_variance(pred.H_b)
+            t_nominal = pred.t_nominal
+            sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
+            moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+            p_zero = self.friction.prob_no_motion(pred.peak_torque)
+        var_dc = spread + dc**2 * p_zero + noise_var        # (5-9), noise-aware: w2 over T_m
+        if gp is not None:
+            self.joint.add_motion(sign, dc, np.zeros(2), var_dc)
+        elif self.joint is not None:    # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
             limit = (self.options.max_correction_fraction * self.friction.ks
                      if self.options.joint_correction_limit else math.inf)
             self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
         else:
             self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
-        sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
         k = self.options.stuck_confidence_sigmas
-        self._t_max = t_a + pred.t_nominal + k * sd_t                               # (5-11)
+        self._t_max = t_a + t_nominal + k * sd_t                                    # (5-11)
         self._samples_since_launch = 0
-        moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
         self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
                                np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
-                               noise_var)
+                               noise_var, spread)
         if self.schedule.size in (STARTUP_RAISE, STARTUP_SETTLE):
             self.counts["startup_cycles"] += 1
         self.schedule.launched(dtu)
@@ -314,6 +338,38 @@ class SolnicController(Controller):
                 self._noise_memo.clear()
             self._noise_memo[key] = hit
         return hit
+
+    def _noise_ratios(self, dtu: float, pred: PulsePrediction | None = None) -> tuple[float, float]:
+        """(VAR/f, bias/√f) of the w2 moments at the point estimate, f = α²σ2²T_m³/3; the grid
+        scales them to every lattice point. Defaults 2.5 and 0.8 (the middle of the ranges
+        measured in issue 13) when the point estimate predicts no motion."""
+        if not self.options.noise_aware_model:
+            return 0.0, 0.0
+        if pred is None:
+            pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
+        p = self.params
+        T = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+        f = p.alpha**2 * p.sigma2_sq * T**3 / 3.0
+        if not f > 0:
+            return 2.5, 0.8
+        bias, var = self._pulse_noise(pred, dtu)
+        # clipped to the ranges the derivation gives away from degenerate pulses (issue 13:
+        # 1.3–3.7 and 0.6–1.0); a pulse that barely breaks away has T_m → 0 and 0/0 ratios
+        return min(max(var / f, 0.0), 4.0), min(max(bias / math.sqrt(f), 0.0), 1.2)
+
+    def _grid_predictive(self, dtu: float, pred: PulsePrediction | None = None) -> Predictive | None:
+        """The grid posterior's predictive of a pulse of ``dtu`` (None without the grid or
+        without motion mass), memoised until the next grid update."""
+        if self.grid is None:
+            return None
+        key = (self.grid.version, len(self.grid.obs))
+        if key != self._grid_key:
+            self._grid_memo.clear()
+            self._grid_key = key
+        gp = self._grid_memo.get(dtu)
+        if gp is None:
+            gp = self._grid_memo[dtu] = self.grid.predictive(dtu, *self._noise_ratios(dtu, pred))
+        return gp if gp.p_motion > 0 else None
 
     def _evaluate(self, t_b: float) -> None:
         c, self._pending = self._pending, None
@@ -347,7 +403,8 @@ class SolnicController(Controller):
             # "no motion" only if the test could have seen the predicted motion: power of the
             # one-sided test against Δc_p; otherwise undecided (keep the schedule, no k̂ update)
             # Δc itself is uncertain (k̂ spread H P_b H', w2 scatter): marginal power
-            spread = math.sqrt(sd * sd + self.friction.motion_variance(c.H_b) + c.noise_var)
+            var_k = c.spread_var if self.grid is not None else self.friction.motion_variance(c.H_b)
+            spread = math.sqrt(sd * sd + var_k + c.noise_var)
             power = NormalDist().cdf((c.delta_c - self.z_motion * sd) / spread)
             if power < self.options.no_motion_power:
                 self._undecided += 1
@@ -371,7 +428,21 @@ class SolnicController(Controller):
                 nis = (m - prior_mean) ** 2 / (R + prior_var)
                 self._nis.append(nis)
                 entry["nis"] = nis
-            if decision == "moved":
+            if self.grid is not None:
+                # every cycle, whatever the decision: the exact likelihood of its evidence
+                self.grid.update(c.dt_u, c.sign, m, R, *self._noise_ratios(c.dt_u))
+                self.counts["friction_updates"] += int(math.isfinite(R))
+                if decision == "none":
+                    self.joint.no_motion(c.peak_torque, censor=False)
+                self.joint.set_friction(self.grid.mean, self.grid.cov)
+                n_sets = self.options.grid_handover_sets
+                if n_sets and self.counts["cost_evaluations"] >= n_sets:
+                    # hand over: the joint EKF goes on from the grid's moments, k correlated
+                    # again with (x1, x4, d) through the quasipartials of each pulse
+                    self.joint.set_friction(self.grid.mean, self.grid.cov * self.options.grid_handover_inflation)
+                    self.grid = None
+                    self.counts["grid_handover_cycle"] = self.counts["cycles_evaluated"]
+            elif decision == "moved":
                 self.joint.moved(c.peak_torque)
                 self.counts["friction_updates"] += 1
             elif decision == "none":
@@ -412,12 +483,21 @@ class SolnicController(Controller):
             dtu = min(dtu, self.dtu_max)
             pred = self.predictor.predict(self.friction.ks, self.friction.kc, dtu)
             dc, noise_var = abs(pred.delta_c), 0.0
-            if o.noise_aware_model and dc > 0:
+            gp = self._grid_predictive(dtu, pred)
+            if gp is not None:
+                # the size does not move the shaft unless the posterior says it probably does
+                dc = gp.dc_mean if gp.p_motion >= 0.5 else 0.0
+                if dc == 0.0:
+                    costs.append(math.inf)
+                    motions.append(0.0)
+                    continue
+                noise_var = gp.dc_var                       # w2 and the posterior spread
+            elif o.noise_aware_model and dc > 0:
                 bias, noise_var = self._pulse_noise(pred, dtu)
                 dc += bias                                  # E[Δc] in (6-1), (6-3)
             var_dc = var_x1 = 0.0
             if o.cost_variances:
-                var_dc = self.friction.motion_variance(pred.H_b) + noise_var
+                var_dc = noise_var + (self.friction.motion_variance(pred.H_b) if gp is None else 0.0)
                 var_x1 = float(self.mode2.P[0, 0])
             costs.append(cycle_cost(dtu, dc, x4, o.a_c, p, var_dc, var_x1).total)
             motions.append(dc)

@@ -252,6 +252,14 @@ class JointFilter:
         self.condition(c, min(peak_torque, self.u_max) * (1.0 - 1e-6))
         self._valid()
 
+    def set_friction(self, mean, cov) -> None:
+        """Replace the (k_c, k_s) block by an outside posterior (the grid's moments), with no
+        correlation to (x1, x4, d): the samples then no longer update k here."""
+        self.z[KC:KS + 1] = np.asarray(mean, dtype=float).reshape(2)
+        self.P[KC:KS + 1, :] = 0.0
+        self.P[:, KC:KS + 1] = 0.0
+        self.P[KC:KS + 1, KC:KS + 1] = np.asarray(cov, dtype=float).reshape(2, 2)
+
     def _valid(self) -> None:
         """k_c ≤ k_s, k_c ≥ 0 and k_s < u_max as conditions on the distribution."""
         c = np.zeros(5)

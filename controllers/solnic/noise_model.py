@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from plant.params import PlantParams
 
@@ -63,6 +64,7 @@ class PulseNoise:
     variance: float
 
 
+@njit(cache=True)
 def _mean_running_max(b: float, s2: float, t: float) -> float:
     """E[sup_{u≤t}(s·B_u − b·u)⁺] for drift b ≥ 0 [rad/s], s² = ``s2``, in closed form.
 
@@ -96,42 +98,53 @@ def pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breaka
     """Bias and variance of Δc for a +u_max pulse of ``dt_u`` with friction (k̂s, k̂c).
 
     The noise-free times (from :func:`plant.pulse_response` with the same friction) locate
-    the phases; see the module docstring for the derivation.
+    the phases; see the module docstring for the derivation. (Compiled: it is called at every
+    sample by the noise-aware planner.)
     """
     s2 = params.alpha**2 * params.sigma2_sq
     if t_breakaway is None or s2 <= 0 or not t_stop > t_breakaway:
         return PulseNoise(0.0, 0.0)
-    al, U, tau = params.alpha, params.u_max, params.motor_time_constant
+    bias, variance = _pulse_noise(params.alpha, params.u_max, params.motor_time_constant, s2, ks, kc, dt_u,
+                                  t_breakaway, t_current_zero, t_stop, _GL_X, _GL_W)
+    return PulseNoise(bias, variance)
+
+
+@njit(cache=True)
+def _x3(t, dt_u, U, tau, x3_off):
+    if t <= dt_u:
+        return U * -math.expm1(-t / tau)
+    return -U + (x3_off + U) * math.exp(-(t - dt_u) / tau)
+
+
+@njit(cache=True)
+def _v0(t, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off):
+    """Noise-free velocity at time t ≥ t_b (driven, then flyback) [rad/s]."""
+    w_on = min(t, dt_u) - t_breakaway
+    v = al * ((U - kc) * w_on - (U - ks) * tau * -math.expm1(-w_on / tau)) if w_on > 0 else 0.0
+    if t > dt_u:
+        w = t - max(dt_u, t_breakaway)
+        x_start = _x3(max(dt_u, t_breakaway), dt_u, U, tau, x3_off)
+        v += al * ((-U - kc) * w + (x_start + U) * tau * -math.expm1(-w / tau))
+    return v
+
+
+@njit(cache=True)
+def _pulse_noise(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, gl_x, gl_w):
+    """(bias, variance) of :func:`pulse_noise` for a moving pulse (t_stop > t_breakaway)."""
     x3_off = U * -math.expm1(-dt_u / tau)
-
-    def x3(t: float) -> float:
-        if t <= dt_u:
-            return U * -math.expm1(-t / tau)
-        return -U + (x3_off + U) * math.exp(-(t - dt_u) / tau)
-
-    def v0(t: float) -> float:
-        """Noise-free velocity at time t ≥ t_b (driven, then flyback) [rad/s]."""
-        w_on = min(t, dt_u) - t_breakaway
-        v = al * ((U - kc) * w_on - (U - ks) * tau * -math.expm1(-w_on / tau)) if w_on > 0 else 0.0
-        if t > dt_u:
-            w = t - max(dt_u, t_breakaway)
-            x_start = x3(max(dt_u, t_breakaway))
-            v += al * ((-U - kc) * w + (x_start + U) * tau * -math.expm1(-w / tau))
-        return v
-
     t_f = min(t_current_zero, t_stop)
     T1 = t_f - t_breakaway
     V = s2 * T1
     if t_stop > t_current_zero:
         a = al * kc
-        x = v0(t_f)
+        x = _v0(t_f, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off)
     else:
-        a = al * (kc - x3(t_stop))
+        a = al * (kc - _x3(t_stop, dt_u, U, tau, x3_off))
         if not a > 0:
             a = al * kc
         x = 0.0
     if not a > 0:
-        return PulseNoise(math.inf, math.inf)
+        return math.inf, math.inf
     # Gaussian moments of x = v0(t_f) + δ, δ ~ N(0, V)
     E1, E2 = x, x * x + V
     E3, E4 = x**3 + 3 * x * V, x**4 + 6 * x * x * V + 3 * V * V
@@ -147,12 +160,14 @@ def pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breaka
     push = 0.0
     if t_ks > t_breakaway:
         half = 0.5 * (t_ks - t_breakaway)
-        nodes = t_breakaway + half * (_GL_X + 1.0)
-        vals = []
-        for tn in nodes:
+        acc = 0.0
+        for i in range(gl_x.shape[0]):                              # ∫ E[L] over [t_b, t_ks], Gauss-Legendre
+            tn = t_breakaway + half * (gl_x[i] + 1.0)
             w = tn - t_breakaway
-            vals.append(_mean_running_max(max(v0(tn) / w, 1e-12), s2, w))
-        push = half * float(np.dot(_GL_W, vals))                    # ∫ E[L] over [t_b, t_ks]
-        L_end = _mean_running_max(max(v0(t_ks) / (t_ks - t_breakaway), 1e-12), s2, t_ks - t_breakaway)
+            acc += gl_w[i] * _mean_running_max(max(_v0(tn, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off) / w, 1e-12),
+                                               s2, w)
+        push = half * acc
+        L_end = _mean_running_max(max(_v0(t_ks, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off) / (t_ks - t_breakaway),
+                                      1e-12), s2, t_ks - t_breakaway)
         push += L_end * (t_stop - t_ks)                             # L frozen from t_ks to the stop
-    return PulseNoise(bias=max(EA - A0, 0.0) + push, variance=max(variance, 0.0))
+    return max(EA - A0, 0.0) + push, max(variance, 0.0)

@@ -119,6 +119,27 @@ class SolnicOptions:
     joint_correction_limit : bool
         With "joint-ekf": limit large k̂ corrections by a fictitious variance of the motion d
         (``max_correction_fraction`` × k̂s for a residual of the whole Δc), section 5.3.
+    friction_grid : bool
+        With "joint-ekf": the friction posterior is a grid over (k_c, k_s) updated with each
+        pulse's exact pulse-response likelihood (:mod:`controllers.solnic.grid_posterior`);
+        "no motion" is its censored evidence, the constraints its support; the pulse's
+        predicted Δc, its spread and t_max come from the posterior predictive, and the joint
+        filter keeps (x1, x4, d) with the grid's moments as its k block. Tuning (seeds 0–4)
+        in :mod:`controllers.solnic.modern`.
+    grid_points : int
+        Lattice points per axis of ``friction_grid``; ≥ 1 (64).
+    grid_memory : float
+        With ``friction_grid``: the evidence of the pulse j cycles back counts e^(−j/memory)
+        [pulses]; > 0, inf keeps all of it.
+    grid_handover_sets : int
+        With ``friction_grid``: after this many sets of twelve cycles (cost evaluations) the
+        grid hands over to the joint EKF, which goes on from the grid's mean and covariance;
+        0 keeps the grid for the whole run; ≥ 0.
+    grid_handover_inflation : float
+        The covariance handed over is the grid's × this; ≥ 1.
+    grid_model_error : float
+        With ``friction_grid``: a relative error of the predicted Δc added to the prior
+        variance of the pulse's motion in the mode-2/joint filter, (this × Δc)²; ≥ 0.
     censored_no_motion : bool
         A "no motion" decision is censored evidence k_s ≥ the applied peak torque, applied as a
         half-plane condition on N(k̂, P_b).
@@ -155,19 +176,26 @@ class SolnicOptions:
     censored_no_motion: bool = False
     joint_correction_limit: bool = False
     friction_estimator: Literal["modified-kalman", "joint-ekf"] = "modified-kalman"
+    friction_grid: bool = False
+    grid_points: int = 64
+    grid_memory: float = math.inf
+    grid_model_error: float = 0.0
+    grid_handover_sets: int = 0
+    grid_handover_inflation: float = 1.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if f.type in ("float", "float | None") and v is not None:
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise _bad(f.name, "a finite number", v)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or (
+                        math.isinf(v) and not (f.name == "grid_memory" and v > 0)):
+                    raise _bad(f.name, "a finite number" + (" or inf" if f.name == "grid_memory" else ""), v)
             if f.type == "bool" and not isinstance(v, bool):
                 raise _bad(f.name, "true or false", v)
         for name in ("a_c", "a_ratio", "initial_friction_factor", "friction_prior_std_fraction",
                      "initial_increment_factor", "x1_prior_std", "x4_prior_std",
                      "stuck_confidence_sigmas", "max_correction_fraction", "fd_step",
-                     "overshoot_factor"):
+                     "overshoot_factor", "grid_memory"):
             if not getattr(self, name) > 0:
                 raise _bad(name, "> 0", getattr(self, name))
         for name in ("a_cov", "a_gain", "min_inc_factor"):
@@ -176,6 +204,13 @@ class SolnicOptions:
         for name in ("motion_confidence", "no_motion_power"):
             if not 0.5 < getattr(self, name) < 1:
                 raise _bad(name, "in (0.5, 1)", getattr(self, name))
+        if isinstance(self.grid_handover_sets, bool) or not isinstance(self.grid_handover_sets, int) \
+                or self.grid_handover_sets < 0:
+            raise _bad("grid_handover_sets", "an integer >= 0", self.grid_handover_sets)
+        if not self.grid_handover_inflation >= 1:
+            raise _bad("grid_handover_inflation", ">= 1", self.grid_handover_inflation)
+        if not self.grid_model_error >= 0:
+            raise _bad("grid_model_error", ">= 0", self.grid_model_error)
         if not self.dtu_opt_initial >= 0:
             raise _bad("dtu_opt_initial", ">= 0 [s]", self.dtu_opt_initial)
         if self.dtu_inc_initial is not None and not self.dtu_inc_initial > 0:
@@ -190,7 +225,9 @@ class SolnicOptions:
             raise _bad("friction_constraints", "'clip' or 'distribution'", self.friction_constraints)
         if self.friction_estimator not in ("modified-kalman", "joint-ekf"):
             raise _bad("friction_estimator", "'modified-kalman' or 'joint-ekf'", self.friction_estimator)
-        for name in ("evaluation_samples", "max_undecided_cycles"):
+        if self.friction_grid and self.friction_estimator != "joint-ekf":
+            raise _bad("friction_grid", "false unless friction_estimator is 'joint-ekf'", self.friction_grid)
+        for name in ("evaluation_samples", "max_undecided_cycles", "grid_points"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise _bad(name, "an integer >= 1", v)

@@ -1,0 +1,202 @@
+"""The closed loop of a fixed linear law, compiled whole (the runner's fast path).
+
+For a controller that describes its step as a :class:`controllers.law.LinearLaw`, the loop of
+:func:`bench.runner.run_closed_loop` — sensor, compensator, dither segments, the plant's
+interval kernel, the scoring window — runs inside one numba function over chunks of
+:data:`CHUNK` samples. Every floating-point operation is the one the Python loop performs, in
+the same order (the compensator as :func:`controllers.linear.compensator_step`, the dither as
+:func:`controllers.dithered.square_wave_segments`, the window sums as
+:class:`bench.metrics.WindowTotals`), and the plant noise is read from the same stream at the
+same positions, so the results are bit-identical to the Python loop (tests/test_compiled_loop.py).
+Between chunks Python checks the wall-clock limit and extends the noise buffer.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import njit
+
+from bench.metrics import WindowTotals
+from controllers.law import LinearLaw
+from plant.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
+                            SHEET_FLYBACK, SHEET_MODE, SHEET_PEAK, SHEET_SIZE, SHEET_SQ, SHEET_STATUS,
+                            SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel, interval_status, kernel_inputs)
+from plant.params import PlantParams
+from plant.randomness import NoiseExhausted, NoiseStream
+from plant.state import N_STATE, PlantState, SimOptions, Status
+
+__all__ = ["run_law", "CHUNK"]
+
+CHUNK = 1000            # samples per compiled call (the wall-clock limit is checked between them)
+NOISE_MARGIN = 1 << 15  # unread normals guaranteed before each interval (else back to Python)
+_EDGE_TOL_S = 1e-12     # as controllers.dithered
+_NEED_NOISE = -1
+
+# totals vector: as WindowTotals' fields
+_DUR, _PEAK, _IABS, _ISQ, _CHG, _NEV, _NBRK, _NSUB = range(8)
+
+
+@njit(cache=True)
+def _segments(t0, duration, base, amplitude, frequency_hz, phase, limit, offs, levs):
+    """controllers.dithered.square_wave_segments into (offs, levs); returns their number."""
+    if amplitude == 0.0:
+        offs[0] = 0.0
+        levs[0] = min(max(base, -limit), limit)
+        return 1
+    high = min(max(base + amplitude, -limit), limit)
+    low = min(max(base - amplitude, -limit), limit)
+    cycles0 = frequency_hz * t0 + phase
+    k = math.floor(2.0 * cycles0) + 1
+    n_seg = 0
+    a = 0.0
+    last = math.nan
+    have_last = False
+    off = (0.5 * k - cycles0) / frequency_hz
+    done = False
+    while not done:
+        if off < duration - _EDGE_TOL_S:
+            if not (off > _EDGE_TOL_S):
+                k += 1
+                off = (0.5 * k - cycles0) / frequency_hz
+                continue
+            b = off
+            k += 1
+            off = (0.5 * k - cycles0) / frequency_hz
+        else:
+            b = duration
+            done = True
+        theta = cycles0 + frequency_hz * 0.5 * (a + b)
+        level = high if theta - math.floor(theta) < 0.5 else low
+        if not have_last or level != last:
+            offs[n_seg] = a
+            levs[n_seg] = level
+            n_seg += 1
+            last = level
+            have_last = True
+        a = b
+    return n_seg
+
+
+@njit(cache=True)
+def _chunk(n0, n1, n_warm, sensor, x, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, o, TP, TL,
+           BPh, BPw, BG, BC, z, zpos, margin, ev, out, totals, x1_window, prog):
+    """Samples n0 ≤ n < n1. ``prog`` gets (samples done, noise position); returns a kernel status
+    code, or _NEED_NOISE when fewer than ``margin`` normals are left before an interval.
+    """
+    n_c = cx.shape[0]
+    cxn = np.empty(n_c)
+    n_max = int(2.0 * freq * tau) + 4 if amp != 0.0 else 1
+    offs = np.empty(n_max)
+    levs = np.empty(n_max)
+    prog[0], prog[1] = n0, zpos
+    for n in range(n0, n1):
+        if z.shape[0] > 0 and z.shape[0] - zpos < margin:
+            return _NEED_NOISE
+        x1 = x[0]
+        y = x1 + sensor[n]
+        # compensator (controllers.linear.compensator_step), then the clip
+        v = D[0, 0] * y
+        for j in range(n_c):
+            v += C[0, j] * cx[j]
+        for i in range(n_c):
+            acc = A[i, 0] * cx[0]
+            for j in range(1, n_c):
+                acc += A[i, j] * cx[j]
+            cxn[i] = B[i, 0] * y + acc
+        level = min(max(-v, -u_max), u_max)
+        k = _segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
+        pos = interval_kernel(x, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(), levs[:k].copy(),
+                              False, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
+        S = out[N_STATE:]
+        if n >= n_warm:
+            x1_window[n - n_warm] = x1
+            totals[_DUR] += S[SHEET_DURATION]
+            if S[SHEET_PEAK] > totals[_PEAK]:
+                totals[_PEAK] = S[SHEET_PEAK]
+            totals[_IABS] += S[SHEET_ABS]
+            totals[_ISQ] += S[SHEET_SQ]
+            totals[_CHG] += S[SHEET_CHARGE]
+            totals[_NEV] += S[SHEET_EVENTS]
+            totals[_NBRK] += S[SHEET_BREAKAWAYS]
+            totals[_NSUB] += S[SHEET_SUBSTEPS]
+        for i in range(N_STATE):
+            x[i] = out[i]
+        sheet[0], sheet[1], sheet[2] = S[SHEET_T], S[SHEET_MODE], S[SHEET_FLYBACK]
+        for i in range(n_c):
+            cx[i] = cxn[i]
+        zpos = pos
+        prog[0], prog[1] = n + 1, zpos
+        if S[SHEET_STATUS] != STATUS_OK:
+            return int(S[SHEET_STATUS])
+    return STATUS_OK
+
+
+def run_law(law: LinearLaw, params: PlantParams, options: SimOptions, state: PlantState, sensor: np.ndarray,
+            n_warm: int, noise: NoiseStream | None, deadline: float
+            ) -> tuple[PlantState, WindowTotals, np.ndarray, Status, str]:
+    """Run ``len(sensor)`` samples of ``law`` from ``state``; what the runner's Python loop computes.
+
+    Returns the final state, the scoring window's totals, x1 at the window's sample instants
+    (with the final one when the run completes), the status and its message. The run stops with
+    status ``error`` when ``time.perf_counter()`` passes ``deadline`` (checked every
+    :data:`CHUNK` samples).
+    """
+    n_samples = sensor.shape[0]
+    noisy = options.noise and noise is not None
+    o, TP, TL, BPh, BPw, BG, BC = kernel_inputs(params, options, noisy)
+    prm = params.kernel_record()
+    A, B, C, D = (np.ascontiguousarray(m, dtype=np.float64) for m in (law.A, law.B, law.C, law.D))
+    cx = np.zeros(A.shape[0])
+    x = np.array(state.x, dtype=np.float64)
+    sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
+    out = np.empty(N_STATE + SHEET_SIZE)
+    totals = np.zeros(8)
+    x1_window = np.empty(n_samples - n_warm + 1)
+    prog = np.zeros(2, dtype=np.int64)
+    if noisy:
+        z, zpos = noise.window()
+    else:
+        z, zpos = np.empty(0), 0
+    margin = NOISE_MARGIN if noisy else 0
+    n, code = 0, STATUS_OK
+    while n < n_samples:
+        stop = min(n + CHUNK, n_samples)
+        try:
+            code = _chunk(n, stop, n_warm, sensor, x, sheet, A, B, C, D, cx, float(law.u_max),
+                          float(law.dither_amplitude), float(law.dither_frequency), float(law.dither_phase),
+                          params.sample_period, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, margin, NO_EVENTS, out,
+                          totals, x1_window, prog)
+        except NoiseExhausted:        # one interval wanted more than the margin: extend, redo it
+            code = _NEED_NOISE
+        n, zpos = int(prog[0]), int(prog[1])
+        if code == _NEED_NOISE:
+            z, zpos = noise.grow(zpos)
+            while z.shape[0] - zpos < NOISE_MARGIN:
+                z, zpos = noise.grow(zpos)
+            continue
+        if code != STATUS_OK:
+            break
+        if time.perf_counter() > deadline and n < n_samples:
+            break
+    if noisy:
+        noise.consumed(zpos)
+    x.flags.writeable = False
+    final = PlantState(float(sheet[0]), x, int(sheet[1]), sheet[2] != 0.0)
+    n_window = max(0, n - n_warm)
+    if code != STATUS_OK:
+        status, message = interval_status(code, final, options)
+    elif n < n_samples:
+        status = Status.ERROR
+        message = "time limit exceeded"   # completed by the runner
+    else:
+        status, message = Status.OK, ""
+        x1_window[n_window] = final.x[0]
+        n_window += 1
+    t = WindowTotals(duration=float(totals[_DUR]), peak_abs_error=float(totals[_PEAK]),
+                     int_abs_current=float(totals[_IABS]), int_sq_current=float(totals[_ISQ]),
+                     supply_charge=float(totals[_CHG]), n_events=int(totals[_NEV]),
+                     n_breakaways=int(totals[_NBRK]), n_substeps=int(totals[_NSUB]))
+    return final, t, x1_window[:n_window], status, message

@@ -1,0 +1,306 @@
+"""A grid posterior over the friction (k_c, k_s) from the pulse-response likelihood.
+
+solnic-modern's option ``friction_grid``. The linearised friction filters (the text's (5-15)–
+(5-18) and the joint EKF) see one pulse size at a time through its quasipartials; from the
+section-7.3 start (k̂ at half their values) they can run along the k_s/k_c ridge of Δc — many
+(k_c, k_s) give the same motion for one Δt_u — and stay there (quiet-friction seed 2: k̂s ≈ 3.8
+against a true 2.2). Here the posterior density of k = (k_c, k_s) [ozf·in] is kept on a
+lattice of points and every pulse multiplies it by its exact likelihood:
+
+    p(k | data) ∝ p0(k) · Π_j N(m_j; sign_j·D_j(k), R_j + v_j(k))            (1)
+
+* p0 is the prior N(k̂(0), P_b(0)) restricted to the valid set 0 < k_c ≤ k_s < u_max: the
+  constraints act on the distribution (points outside have zero mass), never by clipping.
+* D_j(k) is the noise-free motion of pulse j with friction k, the plant's own closed form
+  (:func:`plant.pulse_response`, compiled), plus the friction-noise bias b_j when the shaft
+  moves; D_j(k) = 0 where k_s ≥ the pulse's peak torque (no breakaway).
+* (m_j, R_j) is the samples' own evidence about the pulse's motion d: the posterior of d in
+  the mode-2/joint filter with its prior divided out
+  (:meth:`controllers.solnic.joint_filter.JointFilter.motion_likelihood`), so the
+  prediction is not used twice.
+* v_j(k) = v_w2 (the friction-noise variance of :mod:`controllers.solnic.noise_model`, where
+  the shaft moves) + the spread of D_j over the lattice cell, |∇D|²h²/12 per lattice axis:
+  the likelihood averaged over the cell that the point stands for, to first order. Without it
+  a cell whose centre misses a sharp ridge of (1) would get no mass although part of the cell
+  lies on it.
+
+"No motion" needs no special case: where the samples say d ≈ 0, (1) favours the points with
+k_s ≥ the peak torque (D = 0), i.e. it is censored evidence k_s ≥ peak torque, weighted by how
+well the samples could have seen the predicted motion. An "undecided" cycle is the same
+likelihood with a wide R.
+
+The lattice is affine, k = c + A·(u, v) with (u, v) on a regular n × n grid of cell centres in
+[−1, 1]². It starts as the box [0, hi]² (hi = max k̂(0) + 6σ, at most u_max) and is re-fitted
+("zoom") to the posterior — centre at its mean, axes along the eigenvectors of its covariance,
+half-widths ``width_sigmas``·σ — when the fitted box would have less than a quarter of the
+current box's area or the mass on the edge cells exceeds 1e-4; all stored pulses are then
+re-evaluated on the new lattice, so (1) stays exact up to the lattice. x5's drift while moving
+(σ5² over ~3 ms per pulse, 5e-4 ozf²·in² in a 100 s run) is neglected.
+
+The friction-noise moments at each lattice point scale with f = α²σ2²T_m³/3 (T_m that
+point's moving time): variance r_v·f and bias r_b·√f, the ratios r_v, r_b taken from
+:func:`controllers.solnic.noise_model.pulse_noise` at the point estimate (an approximation;
+exact when σ2 = 0).
+
+Limitation: each pulse's evidence (m_j, R_j) leans on the same drift estimate x̂4, so the
+evidence of successive pulses is correlated while (1) multiplies it as independent. Over a
+whole run the posterior grows confident in a Δc that is slightly off and x̂4 absorbs the
+difference (quiet-friction NEES of (x̂1, x̂4) in the hundreds). solnic-modern therefore uses
+the grid for the start-up only and hands its moments to the joint EKF, which carries the
+k–x4 correlation (``grid_handover_sets``, :mod:`controllers.solnic.modern`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from plant.params import PlantParams
+from plant.pulse import _closed_form_kernel
+
+__all__ = ["FrictionGrid", "Predictive", "pulse_table"]
+
+
+@njit(cache=True)
+def _table_kernel(dt_u, U, t3, a, kc, ks, dc, t_stop, t_brk):
+    for i in range(kc.size):
+        d, tb, _, ts = _closed_form_kernel(dt_u, U, t3, a, ks[i], kc[i])
+        if tb < 0.0:
+            dc[i], t_stop[i], t_brk[i] = 0.0, 0.0, -1.0
+        else:
+            dc[i], t_stop[i], t_brk[i] = d, ts, tb
+
+
+def pulse_table(params: PlantParams, dt_u: float, kc: np.ndarray, ks: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Δc [rad], t_stop [s], t_breakaway [s] or −1) of a +u_max pulse for every (k_c, k_s).
+
+    The same closed form as the noise-free :func:`plant.pulse_response`, looped in compiled
+    code; k_c must be > 0 (with k_c = 0 the shaft coasts for ever: Δc = nan).
+    """
+    kc = np.ascontiguousarray(kc, dtype=float)
+    ks = np.ascontiguousarray(ks, dtype=float)
+    dc, ts, tb = np.empty_like(kc), np.empty_like(kc), np.empty_like(kc)
+    _table_kernel(float(dt_u), params.u_max, params.motor_time_constant, params.alpha, kc, ks, dc, ts, tb)
+    return dc, ts, tb
+
+
+@dataclass(frozen=True)
+class Predictive:
+    """The posterior predictive of one +u_max pulse of Δt_u under the grid posterior.
+
+    Attributes
+    ----------
+    p_motion : float
+        Posterior probability that the pulse breaks the shaft away.
+    dc_mean, dc_var : float
+        Centre [rad] and spread² [rad²] of Δc given motion (nan without motion mass); see
+        :meth:`FrictionGrid.predictive`.
+    t_stop_mean, t_stop_var : float
+        Stop time [s] and its variance [s²] (see :meth:`FrictionGrid.predictive`).
+    """
+
+    p_motion: float
+    dc_mean: float
+    dc_var: float
+    t_stop_mean: float
+    t_stop_var: float
+
+
+class FrictionGrid:
+    """Posterior of (k_c, k_s) on an adaptive affine lattice, equation (1) of the module.
+
+    Parameters
+    ----------
+    params : PlantParams
+        The nominal plant (α, τ3, u_max; its friction fields are not used).
+    k0, P0 : array_like
+        Prior mean (k_c, k_s) [ozf·in] and 2×2 covariance.
+    n : int
+        Points per lattice axis.
+    width_sigmas : float
+        Half-width of a re-fitted lattice in posterior standard deviations.
+    memory : float
+        Evidence of the pulse j steps back is weighted e^(−j/memory) (exponential forgetting
+        of the log-likelihood; inf, the default, keeps all of it). See the module docstring.
+    """
+
+    def __init__(self, params: PlantParams, k0, P0, n: int = 64, width_sigmas: float = 6.0,
+                 memory: float = math.inf) -> None:
+        self.params = params
+        self.u_max = float(params.u_max)
+        self.k0 = np.asarray(k0, dtype=float).reshape(2)
+        self.P0 = np.asarray(P0, dtype=float).reshape(2, 2)
+        self.P0inv = np.linalg.inv(self.P0)
+        self.n = int(n)
+        self.width_sigmas = float(width_sigmas)
+        if not memory > 0:
+            raise ValueError(f"memory must be > 0 pulses, got {memory!r}")
+        self.forget = math.exp(-1.0 / memory)       # weight of the evidence one pulse older
+        self.obs: list[tuple[float, int, float, float, float, float]] = []
+        sd = np.sqrt(np.diag(self.P0))
+        hi = min(self.u_max, float(np.max(self.k0 + 6.0 * sd)))
+        self.n_regrids = 0
+        self._set_lattice(np.array([hi / 2, hi / 2]), np.diag([hi / 2, hi / 2]))
+
+    # -- lattice --------------------------------------------------------------------------
+    def _set_lattice(self, centre: np.ndarray, axes: np.ndarray) -> None:
+        n = self.n
+        g = (np.arange(n) + 0.5) / n * 2.0 - 1.0                  # cell centres in [−1, 1]
+        U, V = np.meshgrid(g, g, indexing="ij")
+        self.centre, self.axes = np.asarray(centre, float), np.asarray(axes, float)
+        pts = self.centre[:, None] + self.axes @ np.vstack([U.ravel(), V.ravel()])
+        self.kc, self.ks = pts[0], pts[1]
+        self.valid = (self.kc > 0) & (self.kc <= self.ks) & (self.ks < self.u_max)
+        self._idx = np.flatnonzero(self.valid)
+        e = pts[:, self._idx] - self.k0[:, None]
+        self._log_prior = -0.5 * np.einsum("in,ij,jn->n", e, self.P0inv, e)
+        self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.version = getattr(self, "version", 0) + 1
+        logL = np.zeros_like(self._log_prior)
+        for ob in self.obs:
+            logL = self.forget * logL + self._loglik(*ob)
+        self._set_weights(logL)
+
+    def _set_weights(self, logL: np.ndarray) -> None:
+        self._logL = logL
+        logw = self._log_prior + logL
+        w = np.exp(logw - np.max(logw))
+        self.w = w / np.sum(w)
+        kc, ks = self.kc[self._idx], self.ks[self._idx]
+        self._mean = np.array([np.dot(self.w, kc), np.dot(self.w, ks)])
+        dk = np.vstack([kc - self._mean[0], ks - self._mean[1]])
+        # a cell is the parallelogram of edges axes·(2/n): uniform within it, COV = Σ e e'/12
+        cell = self.axes * (2.0 / self.n)
+        self._cov = (dk * self.w) @ dk.T + cell @ cell.T / 12.0
+
+    def table(self, dt_u: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Δc, t_stop, t_breakaway, spread² of Δc over the cell) at the valid points."""
+        key = float(dt_u)
+        hit = self._tables.get(key)
+        if hit is None:
+            # invalid points are evaluated at the nearest valid friction (a continuous
+            # extension, for the cell spread of their valid neighbours only)
+            ks = np.clip(self.ks, 1e-6, self.u_max * (1 - 1e-9))
+            kc = np.clip(self.kc, 1e-6, ks)
+            dc, ts, tb = pulse_table(self.params, key, kc, ks)
+            grid = dc.reshape(self.n, self.n)
+            spread = np.zeros_like(grid)
+            for ax in (0, 1):
+                # |∂D/∂u|·(2/n) is the change over one cell along lattice axis ax
+                step = np.abs(np.gradient(grid, axis=ax))
+                spread += step * step / 12.0
+            spread = spread.ravel()
+            i = self._idx
+            hit = (dc[i], ts[i], tb[i], spread[i])
+            if len(self._tables) > 64:
+                self._tables.clear()
+            self._tables[key] = hit
+        return hit
+
+    # -- the posterior -------------------------------------------------------------------
+    @property
+    def mean(self) -> np.ndarray:
+        """Posterior mean (k_c, k_s) [ozf·in]."""
+        return self._mean.copy()
+
+    @property
+    def cov(self) -> np.ndarray:
+        """Posterior covariance, including the spread within a cell [ozf²·in²]."""
+        return self._cov.copy()
+
+    def points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(k_c, k_s, weight) of the valid lattice points."""
+        return self.kc[self._idx].copy(), self.ks[self._idx].copy(), self.w.copy()
+
+    def noise_moments(self, dt_u: float, var_ratio: float, bias_ratio: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Δc + bias, VAR from w2 + cell spread, moves, t_stop) at the valid points.
+
+        The friction-noise moments scale with f = α²σ2²T_m³/3 (T_m the moving time at the
+        point): variance ``var_ratio``·f and bias ``bias_ratio``·√f, the ratios taken from
+        :func:`controllers.solnic.noise_model.pulse_noise` at the point estimate.
+        """
+        dc, ts, tb, spread = self.table(dt_u)
+        moves = tb >= 0.0
+        s2 = self.params.alpha**2 * self.params.sigma2_sq
+        if s2 > 0 and (var_ratio > 0 or bias_ratio > 0):
+            f = np.where(moves, s2 * np.maximum(ts - tb, 0.0) ** 3 / 3.0, 0.0)
+            return dc + bias_ratio * np.sqrt(f), spread + var_ratio * f, moves, ts
+        return dc, spread, moves, ts
+
+    def _loglik(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float,
+                bias_ratio: float) -> np.ndarray:
+        mean, var, moves, _ = self.noise_moments(dt_u, var_ratio, bias_ratio)
+        d = np.where(moves, sign * mean, 0.0)
+        var = R + var
+        return -0.5 * (m - d) ** 2 / var - 0.5 * np.log(var)
+
+    def update(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float = 0.0,
+               bias_ratio: float = 0.0) -> None:
+        """Multiply by the likelihood of one pulse: evidence d ~ N(m, R) [rad, rad²] about its
+        signed motion; ``var_ratio``/``bias_ratio`` scale the friction-noise moments
+        (:meth:`noise_moments`)."""
+        if not (math.isfinite(m) and R > 0 and math.isfinite(R)):
+            return
+        ob = (float(dt_u), int(sign), float(m), float(R), float(var_ratio), float(bias_ratio))
+        self.obs.append(ob)
+        self._set_weights(self.forget * self._logL + self._loglik(*ob))
+        self._maybe_regrid()
+
+    def _edge_mass(self) -> float:
+        n = self.n
+        full = np.zeros(n * n)
+        full[self._idx] = self.w
+        full = full.reshape(n, n)
+        return float(full[0].sum() + full[-1].sum() + full[1:-1, 0].sum() + full[1:-1, -1].sum())
+
+    def _maybe_regrid(self) -> None:
+        lam, vec = np.linalg.eigh(self._cov)
+        lam = np.maximum(lam, 1e-10)
+        new_axes = vec * (self.width_sigmas * np.sqrt(lam))
+        area_new = abs(np.linalg.det(new_axes))
+        area_now = abs(np.linalg.det(self.axes))
+        edge = self._edge_mass()
+        if area_new < 0.25 * area_now or edge > 1e-4:
+            if not area_new < 0.25 * area_now:
+                # mass on the edge: re-centre, and do not shrink below half the current box
+                half = 0.5 * np.linalg.norm(self.axes, axis=0).min()
+                new_axes = vec * np.maximum(self.width_sigmas * np.sqrt(lam), half)
+            self.n_regrids += 1
+            self._set_lattice(self._mean, new_axes)
+
+    def predictive(self, dt_u: float, var_ratio: float = 0.0, bias_ratio: float = 0.0) -> Predictive:
+        """The posterior predictive of a +u_max pulse of ``dt_u`` given that it moves the shaft.
+
+        Robust statistics: the posterior puts small mass on far points (k_c → 0 coasts for a
+        long way) whose Δc would dominate a mean, so ``dc_mean`` is the weighted median of
+        E[Δc | k] (friction-noise bias included, :meth:`noise_moments`), ``dc_var`` the square
+        of half the 16–84 % range plus the friction-noise variance at the median; likewise the stop
+        time's median and spread² (t_max = median + 3·spread, (5-11)). A far quantile of the
+        stop time (0.9987) would wait for those far points: on quiet-friction seed 3 it kept
+        the mode-2 filter blind for 1.8 s after every start-up pulse (peak 864 µrad).
+        """
+        mean, var, moves, ts = self.noise_moments(dt_u, var_ratio, bias_ratio)
+        w = self.w * moves
+        p = float(np.sum(w))
+        if not p > 0:
+            return Predictive(0.0, math.nan, math.nan, math.nan, math.nan)
+        keep = w > 1e-9 * p                         # negligible points cannot move a quantile much
+        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
+        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
+        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
+        # the friction-noise variance at the median point
+        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2)
+
+
+def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs) -> tuple[list[float], int]:
+    """Quantiles of Σ w_i δ(x_i) (w sums to ≤ 1; lower convention), and the index of the
+    point at the middle requested quantile."""
+    order = np.argsort(x, kind="stable")
+    cw = np.cumsum(w[order])
+    idx = np.minimum(np.searchsorted(cw, np.asarray(qs) * cw[-1]), len(x) - 1)
+    return [float(v) for v in x[order][idx]], int(order[idx[len(idx) // 2]])

@@ -1,0 +1,97 @@
+"""The compiled closed loop of a linear law (bench.compiled_loop) against the Python loop.
+
+The Python loop — ``step`` then ``advance`` at every sample — is the reference; the compiled
+path must give bit-identical metrics for the linear and dithered controllers, with and without
+noise, on several plants and seeds, also when the noise buffer runs out inside an interval.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bench import compiled_loop
+from bench.runner import run_closed_loop
+from bench.scenarios import builtin_scenarios
+from controllers import make_controller
+from controllers.base import register
+from controllers.linear import LinearController
+
+RUNTIME = ("runtime_s", "realtime_factor")
+
+
+def _both(name, scenario, seed, noise=True, duration=12.0, **options):
+    params = builtin_scenarios()[scenario].params
+    runs = [run_closed_loop(params, make_controller(name, **options), duration_s=duration, warmup_s=3.0, seed=seed,
+                            noise=noise, compiled=compiled) for compiled in (False, True)]
+    return [({k: v for k, v in r.metrics.items() if k not in RUNTIME}, r.status, r.summary) for r in runs]
+
+
+@pytest.mark.parametrize("name, scenario, seed, noise, options", [
+    ("linear", "thesis", 0, True, {}),
+    ("linear", "ratio-2", 5, True, {"crossover": 20.0, "lag_ratio": 2.0}),
+    ("linear", "thesis", 1, False, {}),
+    ("dithered", "thesis", 2, True, {}),
+    ("dithered", "quiet-friction", 3, True, {"dither_frequency": 125.0, "dither_amplitude": 8.0}),
+    ("dithered", "thesis", 4, False, {"dither_amplitude": 0.0}),
+])
+def test_compiled_law_is_bit_identical_to_the_python_loop(name, scenario, seed, noise, options):
+    python, compiled = _both(name, scenario, seed, noise, **options)
+    assert python[1] == compiled[1] == "ok"
+    assert python[0] == compiled[0]          # every metric, exactly
+    assert python[2] == compiled[2]
+
+
+def test_noise_buffer_refills_and_overruns_inside_an_interval_change_nothing(monkeypatch):
+    """A tiny margin makes the compiled loop return for noise before most intervals and lets
+    dithered intervals run out of normals inside the kernel (NoiseExhausted, redone)."""
+    params = builtin_scenarios()["thesis"].params
+    python = run_closed_loop(params, make_controller("dithered"), duration_s=3.0, warmup_s=1.0, seed=7,
+                             compiled=False)
+    monkeypatch.setattr(compiled_loop, "NOISE_MARGIN", 64)
+    grown = []
+    original = compiled_loop.NoiseStream.grow
+    monkeypatch.setattr(compiled_loop.NoiseStream, "grow", lambda self, pos: grown.append(pos) or original(self, pos))
+    compiled = run_closed_loop(params, make_controller("dithered"), duration_s=3.0, warmup_s=1.0, seed=7)
+    assert len(grown) > 10
+    assert python.status == compiled.status == "ok"
+    assert {k: v for k, v in python.metrics.items() if k not in RUNTIME} == \
+           {k: v for k, v in compiled.metrics.items() if k not in RUNTIME}
+
+
+def test_a_subclass_that_overrides_step_is_not_compiled():
+    @register("t-linear-offset")
+    class Offset(LinearController):
+        def step(self, y):
+            return super().step(y + 1e-6)
+
+    c = make_controller("t-linear-offset")
+    c.reset(builtin_scenarios()["thesis"].params, None)
+    assert c.linear_law() is None
+    assert make_controller("linear").linear_law() is None           # before reset: no design yet
+
+
+def test_time_limit_stops_the_compiled_loop():
+    params = builtin_scenarios()["thesis"].params
+    r = run_closed_loop(params, make_controller("linear"), duration_s=50.0, seed=0, time_limit_s=1e-9)
+    assert r.status == "error" and r.message.startswith("time limit of 1e-09 s exceeded at t = ")
+    assert 1.0 <= r.simulated_s <= 20.0       # within the first chunks of 1000 samples (10 s)
+    assert math.isnan(r.metrics["peak_error_rad"])
+
+
+def test_compiled_dither_segments_equal_the_python_ones():
+    """bench.compiled_loop._segments against controllers.dithered.square_wave_segments on random
+    intervals, levels, amplitudes (some clipping), frequencies and phases."""
+    import numpy as np
+
+    from controllers.dithered import square_wave_segments
+    rng = np.random.default_rng(3)
+    offs, levs = np.empty(64), np.empty(64)
+    for _ in range(3000):
+        t0 = int(rng.integers(0, 100000)) * 0.01
+        base, amp = rng.uniform(-30, 30), float(rng.choice([0.0, 2.0, 18.0, 40.0, rng.uniform(0, 30)]))
+        freq, phase = float(rng.choice([25.0, 125.0, 250.0, 500.0, rng.uniform(1, 1000)])), rng.random()
+        k = compiled_loop._segments(t0, 0.01, base, amp, freq, phase, 26.0, offs, levs)
+        assert tuple(zip(offs[:k].tolist(), levs[:k].tolist())) == \
+            square_wave_segments(t0, 0.01, base, amp, freq, phase, 26.0)

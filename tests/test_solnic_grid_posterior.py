@@ -1,0 +1,141 @@
+"""The grid posterior over (k_c, k_s) (controllers/solnic/grid_posterior.py) against
+independent truth: the event-driven pulse simulator for its motion table, and rejection
+sampling from the prior for the posterior (the lattice, its zooms and the cell spread are what
+is under test; the likelihood's model D(k) is the table checked in the first test)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.solnic.grid_posterior import FrictionGrid, pulse_table
+from plant import PlantParams, pulse_response
+from plant.state import SimOptions
+
+QUIET = PlantParams().replace(friction_noise_psd=0.0)
+
+
+def test_table_matches_the_event_driven_simulator():
+    """The compiled table against the general simulator (pulse_response with options)."""
+    rng = np.random.default_rng(1)
+    ks = rng.uniform(0.5, 3.5, 6)
+    kc = ks * rng.uniform(0.2, 1.0, 6)
+    for dtu in (0.9e-3, 1.4e-3, 2.0e-3):
+        dc, ts, tb = pulse_table(QUIET, dtu, kc, ks)
+        for i in range(ks.size):
+            r = pulse_response(QUIET.with_friction(ks[i], kc[i]), dtu, options=SimOptions(noise=False))
+            if r.t_breakaway is None:
+                assert tb[i] < 0 and dc[i] == 0.0
+            else:
+                assert dc[i] == pytest.approx(r.delta_c, rel=1e-6, abs=1e-12)
+                assert ts[i] == pytest.approx(r.t_stop, rel=1e-6)
+
+
+def _rejection(prior_mean, prior_cov, obs, n=400_000, seed=0):
+    """Samples of the exact posterior: prior on the valid set, accept with L/L_max."""
+    rng = np.random.default_rng(seed)
+    k = rng.multivariate_normal(prior_mean, prior_cov, size=n)
+    kc, ks = k[:, 0], k[:, 1]
+    ok = (kc > 0) & (kc <= ks) & (ks < QUIET.u_max)
+    kc, ks = kc[ok], ks[ok]
+    logL = np.zeros(kc.size)
+    for dtu, m, R in obs:
+        dc, _, tb = pulse_table(QUIET, dtu, kc, ks)
+        d = np.where(tb >= 0, dc, 0.0)
+        logL += -0.5 * (m - d) ** 2 / R
+    acc = rng.uniform(size=kc.size) < np.exp(logL - logL.max())
+    return kc[acc], ks[acc]
+
+
+def _grid(prior_mean, prior_cov, obs, n=64):
+    g = FrictionGrid(QUIET, prior_mean, prior_cov, n=n)
+    for dtu, m, R in obs:
+        g.update(dtu, 1, m, R)
+    return g
+
+
+def _compare(g, kc, ks, tol_sd=0.15):
+    """Posterior mean within 0.15 posterior sd (+ MC error), sd within 15 %."""
+    assert kc.size > 3000
+    mc_mean = np.array([kc.mean(), ks.mean()])
+    mc_sd = np.array([kc.std(), ks.std()])
+    sd = np.sqrt(np.diag(g.cov))
+    err = np.abs(g.mean - mc_mean)
+    assert np.all(err < tol_sd * mc_sd + 4 * mc_sd / math.sqrt(kc.size)), (g.mean, mc_mean, mc_sd)
+    assert np.all(np.abs(sd / mc_sd - 1) < 0.15), (sd, mc_sd)
+
+
+PRIOR = (np.array([0.7, 1.05]), np.diag([0.7**2, 1.05**2]))     # section 7.3 start
+
+
+def test_constraints_act_on_the_distribution():
+    """No data: the prior restricted to 0 < k_c ≤ k_s < u_max, also for a prior mean outside."""
+    for mean in (PRIOR[0], np.array([1.5, 1.2])):
+        cov = PRIOR[1] if mean is PRIOR[0] else np.diag([0.3**2, 0.3**2])
+        g = _grid(mean, cov, [])
+        kc, ks, w = g.points()
+        assert np.all(kc > 0) and np.all(kc <= ks) and np.all(ks < QUIET.u_max)
+        assert w.sum() == pytest.approx(1.0)
+        rkc, rks = _rejection(mean, cov, [])
+        _compare(g, rkc, rks)
+    assert g.mean[0] < g.mean[1]            # the mean is pulled inside kc ≤ ks, not clipped
+
+
+def test_posterior_matches_rejection_sampling_after_pulses():
+    """Three pulses of different sizes at a true (1.5, 2.2): the ridges of one size intersect.
+    Enough evidence to zoom the lattice; the posterior stays exact up to it."""
+    true = (1.5, 2.2)
+    obs = []
+    for dtu, noise in ((1.3e-3, 0.3e-6), (1.6e-3, -0.2e-6), (1.9e-3, 0.4e-6)):
+        dc = pulse_table(QUIET, dtu, np.array([true[0]]), np.array([true[1]]))[0][0]
+        obs.append((dtu, dc + noise, (1.0e-6) ** 2))
+    g = _grid(*PRIOR, obs)
+    assert g.n_regrids >= 1
+    kc, ks = _rejection(*PRIOR, obs, n=2_000_000)
+    _compare(g, kc, ks)
+
+
+def test_no_motion_is_censored_evidence():
+    """A pulse that did not move the shaft (d ≈ 0, sd 0.3 µrad): the posterior is the prior
+    restricted to the frictions under which that pulse moves by less than ~1 µrad — k_s above
+    its peak torque, or just below it (a late breakaway moves little) — by rejection
+    sampling; the grid puts the same mass above the peak torque."""
+    dtu = 1.0e-3
+    peak = QUIET.u_max * -math.expm1(-dtu / QUIET.motor_time_constant)
+    obs = [(dtu, 0.0, (0.3e-6) ** 2)]
+    g = _grid(*PRIOR, obs)
+    kc, ks = _rejection(*PRIOR, obs)
+    _compare(g, kc, ks, tol_sd=0.2)
+    gkc, gks, w = g.points()
+    mc_above = float(np.mean(ks >= peak))
+    assert mc_above > 0.6                   # measured 0.78; the prior has 0.10 above
+    assert float(np.mean(_rejection(*PRIOR, [])[1] >= peak)) < 0.2
+    assert float(np.sum(w[gks >= peak])) == pytest.approx(mc_above, abs=0.03)
+    # against the prior alone, the evidence raised k_s
+    assert g.mean[1] > PRIOR[0][1] + 0.5
+
+
+def test_wide_evidence_changes_nothing_and_bad_evidence_is_ignored():
+    g = _grid(*PRIOR, [])
+    before, sd = g.mean, np.sqrt(np.diag(g.cov))
+    g.update(1.5e-3, 1, 3e-6, 1.0)                 # R = 1 rad²: no information
+    # up to the lattice (the first update may re-fit it to the prior's mass)
+    assert np.all(np.abs(g.mean - before) < 0.1 * sd)
+    g.update(1.5e-3, 1, math.nan, 1e-12)           # nothing measured
+    g.update(1.5e-3, 1, 3e-6, math.inf)
+    assert len(g.obs) == 1
+
+
+def test_predictive_brackets_the_truth():
+    """After the three pulses the predictive of a fourth size contains its true motion."""
+    true = (1.5, 2.2)
+    obs = []
+    for dtu in (1.3e-3, 1.6e-3, 1.9e-3):
+        dc = pulse_table(QUIET, dtu, np.array([true[0]]), np.array([true[1]]))[0][0]
+        obs.append((dtu, dc, (0.5e-6) ** 2))
+    g = _grid(*PRIOR, obs)
+    dtu = 1.45e-3
+    dc = pulse_table(QUIET, dtu, np.array([true[0]]), np.array([true[1]]))[0][0]
+    p = g.predictive(dtu)
+    assert p.p_motion > 0.99
+    assert abs(p.dc_mean - dc) < 3 * math.sqrt(p.dc_var) + 0.2e-6
