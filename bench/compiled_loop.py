@@ -81,7 +81,7 @@ def _segments(t0, duration, base, amplitude, frequency_hz, phase, limit, offs, l
 
 
 @njit(cache=True)
-def _chunk(n0, n1, n_warm, sensor, x, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, o, TP, TL,
+def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, o, TP, TL,
            BPh, BPw, BG, BC, z, zpos, margin, ev, out, totals, x1_window, prog):
     """Samples n0 ≤ n < n1. ``prog`` gets (samples done, noise position); returns a kernel status
     code, or _NEED_NOISE when fewer than ``margin`` normals are left before an interval.
@@ -108,8 +108,8 @@ def _chunk(n0, n1, n_warm, sensor, x, sheet, A, B, C, D, cx, u_max, amp, freq, p
             cxn[i] = B[i, 0] * y + acc
         level = min(max(-v, -u_max), u_max)
         k = _segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
-        pos = interval_kernel(x, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(), levs[:k].copy(),
-                              False, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
+        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
+                              levs[:k].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
         S = out[N_STATE:]
         if n >= n_warm:
             x1_window[n - n_warm] = x1
@@ -151,6 +151,8 @@ def run_law(law: LinearLaw, params: PlantParams, options: SimOptions, state: Pla
     A, B, C, D = (np.ascontiguousarray(m, dtype=np.float64) for m in (law.A, law.B, law.C, law.D))
     cx = np.zeros(A.shape[0])
     x = np.array(state.x, dtype=np.float64)
+    x_view = x.view()
+    x_view.flags.writeable = False
     sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
     out = np.empty(N_STATE + SHEET_SIZE)
     totals = np.zeros(8)
@@ -165,7 +167,7 @@ def run_law(law: LinearLaw, params: PlantParams, options: SimOptions, state: Pla
     while n < n_samples:
         stop = min(n + CHUNK, n_samples)
         try:
-            code = _chunk(n, stop, n_warm, sensor, x, sheet, A, B, C, D, cx, float(law.u_max),
+            code = _chunk(n, stop, n_warm, sensor, x, x_view, False, sheet, A, B, C, D, cx, float(law.u_max),
                           float(law.dither_amplitude), float(law.dither_frequency), float(law.dither_phase),
                           params.sample_period, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, margin, NO_EVENTS, out,
                           totals, x1_window, prog)

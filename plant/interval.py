@@ -41,7 +41,7 @@ from plant.randomness import NoiseExhausted, NoiseStream
 from plant.segments import torque_crossing_time, torque_integrals
 from plant.state import EVENT_FIELDS, N_STATE, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.stuck import stuck_propagate
-from plant.zero_velocity import bisection_tables, bridge_segment, newton_segment, substep_tables
+from plant.zero_velocity import LADDER, bisection_tables, bridge_segment, ladder_thresholds, newton_segment, substep_tables
 
 __all__ = ["advance"]
 
@@ -50,8 +50,12 @@ A1, A2, A3, A4, A5, AKC, AU = range(7)
 # Work sheet S (float64) shared by the kernel's parts.
 _T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC = range(15)
 _SHEET = 15
-# Options vector (SimOptions.kernel_vector).
+# Plan vector: SimOptions.kernel_vector, then the step-ladder thresholds TH (2 × LADDER) of
+# plant.zero_velocity.ladder_thresholds.
 _O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
+_O_LADDER = 7
+# Scratch floats of bridge_segment, allocated once per interval.
+_WORK = 400
 # Kernel status codes.
 _OK, _CHATTER, _DIVERGED, _BAD_LEVEL = 0, 1, 2, 3
 _STATUS_OF = {_OK: Status.OK, _CHATTER: Status.CHATTER, _DIVERGED: Status.DIVERGED}
@@ -200,7 +204,7 @@ def _velocity_zero(X, S, p):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev):
+def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
     """Moving until t_end or the next event; True when the interval must stop."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
@@ -221,9 +225,10 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev):
     white = noise_on and p.sigma2_sq > 0.0
     if white and (reflecting or o[_O_NEWTON] == 0.0):
         budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
+        TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
         advanced, stopped, peak, n, chattered = bridge_segment(
-            X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, BPh, BPw, BG, BC, z, cursor,
-            S[_PEAK], budget)
+            X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
+            S[_PEAK], budget, W)
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -275,6 +280,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
     X = np.empty(7)
+    W = np.zeros(_WORK)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
         S[i] = 0.0
@@ -292,7 +298,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev)
+                stop = _moving(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
@@ -411,7 +417,9 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
 
 
 def _plan(params: PlantParams, options: SimOptions, noisy: bool) -> tuple[np.ndarray, ...]:
-    """(options vector, sub-step and bisection tables) for this plant and these options.
+    """(plan vector, step-ladder and bisection tables) for this plant and these options.
+
+    The plan vector is the options vector followed by the ladder thresholds (``_O_LADDER``).
 
     Kept on the options object next to the params it was built for (an identity check, cheaper
     than hashing both at every interval); the tables themselves are a pure function of
@@ -420,27 +428,34 @@ def _plan(params: PlantParams, options: SimOptions, noisy: bool) -> tuple[np.nda
     memo = options.__dict__.get("_plan")
     if memo is None or memo[0] is not params or memo[1] != noisy:
         o = options.kernel_vector() if noisy else _quiet_vector(options)
-        memo = (params, noisy, (o, *_tables(params, options)))
+        TH, *tables = _tables(params, options)
+        o = np.concatenate((o, TH.ravel()))
+        o.flags.writeable = False
+        memo = (params, noisy, (o, *tables))
         object.__setattr__(options, "_plan", memo)
     return memo[2]
 
 
 @lru_cache(maxsize=64)
 def _tables(params: PlantParams, options: SimOptions) -> tuple[np.ndarray, ...]:
-    """Φ, noise factors and bridge laws of the fixed sub-step widths, for both moving modes.
+    """Ladder thresholds, Φ and noise factors of the step ladder, bridge laws of the bisection.
 
-    A memo of a pure function of (params, options): it saves recomputing them at every
-    segment and bisection level and cannot change a result (the kernels compute the same
-    numbers when a width is not in the table).
+    The ladder (plant.zero_velocity): widths h_j·2^k, k < LADDER, from h_0 = ``substep`` and
+    h_1 = ``reflect_substep``, for both moving modes, with the thresholds TH[j, k] that decide
+    when a rung may be used. A memo of a pure function of (params, options): it saves
+    recomputing them at every segment and bisection level and cannot change a result (the
+    kernels compute the same numbers when a width is not in the table).
     """
     prm = params.kernel_record()[0]
-    TP, TL = np.empty((2, 2, 7, 7)), np.empty((2, 2, 4, 4))
+    TP, TL = np.empty((2, 2, LADDER, 7, 7)), np.empty((2, 2, LADDER, 4, 4))
     substep_tables(prm, options.substep, options.reflect_substep, TP, TL)
+    TH = ladder_thresholds(params.alpha, params.sigma2_sq, params.sigma5_sq, params.beta5, options.substep,
+                           options.reflect_substep)
     levels = max(0, math.ceil(math.log2(options.substep / options.bisection_tol)))
     BPh, BPw = np.empty((2, levels, 7, 7)), np.empty((2, levels, 7, 7))
     BG, BC = np.empty((2, levels, 4, 4)), np.empty((2, levels, 4, 4))
     bisection_tables(prm, options.substep, BPh, BPw, BG, BC)
-    tables = (TP, TL, BPh, BPw, BG, BC)
+    tables = (TH, TP, TL, BPh, BPw, BG, BC)
     for a in tables:
         a.flags.writeable = False
     return tables

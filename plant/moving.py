@@ -18,9 +18,10 @@ With y3 = β3·τ, y5 = β5·τ and s = +1 in mode 1, −1 in mode 3, the mean p
     x3(τ) = e^(−y3)·x3 + e1(y3)·u     x4(τ) = e^(−β4τ)·x4     x5(τ) = e^(−y5)·x5
 
 The noise enters through the x2, x4 and x5 columns only, so its covariance lives on the block
-(x1, x2, x4, x5); it is integrated by 8-node Gauss–Legendre on panels with β·Δ ≤ 0.25, exact
-to round-off because those columns are polynomials in v times e^(−β4 v), e^(−β5 v)
-(plant.transition documents the same rule; Van Loan is the test oracle).
+(x1, x2, x4, x5); the w2 share is closed form and the w4, w5 shares are integrated by 4-node
+Gauss–Legendre on panels with β·Δ ≤ 1e-3, exact to round-off because those columns are
+polynomials in v times e^(−β4 v), e^(−β5 v) (:func:`q_moving`; plant.transition uses an 8-node
+rule for the same integrals; Van Loan is the test oracle).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.expfun import e1, e2, e3
+from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.segments import hermite_peak, torque_crossing_time
 
@@ -39,7 +40,9 @@ __all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 NOISY_BLOCK = np.array([A1, A2, A4, A5])
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
+_PANEL_RATE = 1e-3
+_SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
 
 
@@ -86,54 +89,140 @@ def mean_path(mode, tau, X, p):
 
 
 @njit(cache=True)
+def mean_velocity(mode, tau, X, p):
+    """x2(τ) of Φ(τ)·X, the second line of the mean path in the module docstring."""
+    a, b3, b5 = p.alpha, p.beta3, p.beta5
+    s = 1.0 if mode == 1 else -1.0
+    y3 = b3 * tau
+    return (X[A2] + a * e1(y3) / b3 * X[A3] + a * e2(y3) / b3 * X[AU] + s * a * e1(b5 * tau) / b5 * X[A5]
+            + s * a * tau * X[AKC])
+
+
+@njit(cache=True)
+def _fint(y, kind):
+    """F(y) = ∫₀^y f(x) dx for f = e2(x)·e^(−x) (kind 0), e2(x)·e1(x) (1), e2(x)² (2), |y| < 0.5.
+
+    Taylor series of the integrands: the coefficient of x^m is (−1)^m·c_m/m! with
+    c_m = 2^m − 1 − m (kind 0, m ≥ 2), 2 − 2^m + m (kind 1, m ≥ 2), 2^m − 2 − 2m (kind 2, m ≥ 3);
+    the terms shrink by ≤ 2|y|/m ≤ 1/m, summed until below half an ulp (leading terms y³/6,
+    y⁴/8, y⁵/20).
+    """
+    m0 = 3 if kind == 2 else 2
+    fact = 2.0 if m0 == 2 else 6.0
+    pw2 = 4.0 if m0 == 2 else 8.0
+    ypow = y ** (m0 + 1)
+    total = 0.0
+    for m in range(m0, 80):
+        if m > m0:
+            fact *= m
+            pw2 *= 2.0
+            ypow *= y
+        if kind == 0:
+            c = pw2 - 1.0 - m
+        elif kind == 1:
+            c = 2.0 - pw2 + m
+        else:
+            c = pw2 - 2.0 - 2.0 * m
+        term = c / fact * ypow / (m + 1)
+        if m % 2 == 1:
+            term = -term
+        total += term
+        if term != 0.0 and abs(term) <= 2.0 ** -60 * abs(total):
+            break
+    return total
+
+
+@njit(cache=True)
+def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
+    """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
+
+    w2: q2·[h³/3, h²/2; ·, h] on (x1, x2);
+    w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.stuck);
+    w5: x1x1 q5·α²·F2(y5)/β5⁵, x1x2 q5·α²·F1(y5)/β5⁴, x1x5 q5·s·α·F0(y5)/β5³,
+        x2x2 q5·α²·e4(y5)/β5³, x2x5 q5·s·α·e1(y5)²/(2β5²), x5x5 q5·e1(2y5)/(2β5),
+    with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`).
+    """
+    E4, E5 = e1(y4), e1(y5)
+    Q[0, 0] = q2 * h * h * h / 3.0 + q4 * e4(y4) / b4 ** 3 + q5 * a * a * _fint(y5, 2) / b5 ** 5
+    Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + q5 * a * a * _fint(y5, 1) / b5 ** 4
+    Q[1, 1] = q2 * h + q5 * a * a * e4(y5) / b5 ** 3
+    Q[0, 2] = Q[2, 0] = -q4 * E4 * E4 / (2.0 * b4 * b4)
+    Q[0, 3] = Q[3, 0] = q5 * s * a * _fint(y5, 0) / b5 ** 3
+    Q[1, 2] = Q[2, 1] = 0.0
+    Q[1, 3] = Q[3, 1] = q5 * s * a * E5 * E5 / (2.0 * b5 * b5)
+    Q[2, 2] = q4 * e1(2.0 * y4) / (2.0 * b4)
+    Q[2, 3] = Q[3, 2] = 0.0
+    Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
+
+
+@njit(cache=True)
 def q_moving(mode, h, p, Q):
-    """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8)."""
+    """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8).
+
+    The w2 column of Φ(v) is (v, 1, 0, 0) on the block, so its share is closed form:
+    α²σ2²·[h³/3, h²/2; h²/2, h] on (x1, x2). The w4 and w5 columns, (−e1(β4v)/β4, 0, e^(−β4v), 0)
+    and (s·α·e2(β5v)/β5², s·α·e1(β5v)/β5, 0, e^(−β5v)), are polynomials of degree ≤ 2 times a power
+    series in β·v. For β·h < 0.5 their integrals are closed forms (:func:`_q_closed`); beyond,
+    the products (degree ≤ 4) are integrated by 4-node Gauss–Legendre, exact through degree 7,
+    on panels with β·Δ ≤ 1e-3: the first neglected term is below (2β·Δ)⁴·2e-7 ≈ 3e-18 of the
+    entry, i.e. round-off (Van Loan is the test oracle).
+    """
     a, b4, b5 = p.alpha, p.beta4, p.beta5
     q2, q4, q5 = a * a * p.sigma2_sq, p.sigma4_sq, p.sigma5_sq
     s = 1.0 if mode == 1 else -1.0
-    for i in range(4):
-        for j in range(4):
-            Q[i, j] = 0.0
+    y4, y5 = b4 * h, b5 * h
+    if max(y4, y5) < _SERIES_LIMIT:
+        _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q)
+        return
+    i11 = i12 = i14 = i15 = i22 = i25 = i44 = i55 = 0.0
     rate = max(b4, b5)
-    panels = max(1, int(math.ceil(rate * h / 0.25)))
+    panels = max(1, int(math.ceil(rate * h / _PANEL_RATE)))
     width = h / panels
-    r = np.empty(4)
     for pnl in range(panels):
         lo = pnl * width
-        for k in range(_GL_X.shape[0]):
-            v = lo + 0.5 * width * (_GL_X[k] + 1.0)
-            w = 0.5 * width * _GL_W[k]
-            # x2 column (w2 enters x2 with gain α, already in q2)
-            r[0], r[1], r[2], r[3] = v, 1.0, 0.0, 0.0
-            for i in range(4):
-                for j in range(4):
-                    Q[i, j] += w * q2 * r[i] * r[j]
-            # x4 column
-            r[0], r[1], r[2], r[3] = -e1(b4 * v) / b4, 0.0, math.exp(-b4 * v), 0.0
-            for i in range(4):
-                for j in range(4):
-                    Q[i, j] += w * q4 * r[i] * r[j]
-            # x5 column
-            r[0] = s * a * e2(b5 * v) / (b5 * b5)
-            r[1] = s * a * e1(b5 * v) / b5
-            r[2], r[3] = 0.0, math.exp(-b5 * v)
-            for i in range(4):
-                for j in range(4):
-                    Q[i, j] += w * q5 * r[i] * r[j]
+        for k in range(_GL4_X.shape[0]):
+            v = lo + 0.5 * width * (_GL4_X[k] + 1.0)
+            w = 0.5 * width * _GL4_W[k]
+            r1 = -e1(b4 * v) / b4            # x4 column: x1 and x4 rows
+            r4 = math.exp(-b4 * v)
+            c1 = s * a * e2(b5 * v) / (b5 * b5)   # x5 column: x1, x2 and x5 rows
+            c2 = s * a * e1(b5 * v) / b5
+            c5 = math.exp(-b5 * v)
+            wq4, wq5 = w * q4, w * q5
+            i11 += wq4 * r1 * r1 + wq5 * c1 * c1
+            i14 += wq4 * r1 * r4
+            i44 += wq4 * r4 * r4
+            i12 += wq5 * c1 * c2
+            i22 += wq5 * c2 * c2
+            i15 += wq5 * c1 * c5
+            i25 += wq5 * c2 * c5
+            i55 += wq5 * c5 * c5
+    Q[0, 0] = q2 * h * h * h / 3.0 + i11
+    Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + i12
+    Q[1, 1] = q2 * h + i22
+    Q[0, 2] = Q[2, 0] = i14
+    Q[0, 3] = Q[3, 0] = i15
+    Q[1, 2] = Q[2, 1] = 0.0
+    Q[1, 3] = Q[3, 1] = i25
+    Q[2, 2] = i44
+    Q[2, 3] = Q[3, 2] = 0.0
+    Q[3, 3] = i55
+
+
+@njit(cache=True)
+def _sqrt_pos(q):
+    return math.sqrt(q) if q > 0 else 0.0
 
 
 @njit(cache=True)
 def chol_psd(Q, L):
     """Lower factor L·Lᵀ = Q of a PSD 4 × 4 (4-29)–(4-34), in diagonally scaled coordinates;
     zero rows (4-28) and rank-deficient directions give zero columns."""
-    n = Q.shape[0]
-    d = np.empty(n)
-    for i in range(n):
-        d[i] = math.sqrt(Q[i, i]) if Q[i, i] > 0 else 0.0
-    for i in range(n):
-        for j in range(n):
+    d = (_sqrt_pos(Q[0, 0]), _sqrt_pos(Q[1, 1]), _sqrt_pos(Q[2, 2]), _sqrt_pos(Q[3, 3]))
+    for i in range(4):
+        for j in range(4):
             L[i, j] = 0.0
-    for j in range(n):
+    for j in range(4):
         if d[j] == 0.0:
             continue
         acc = 1.0
@@ -143,15 +232,15 @@ def chol_psd(Q, L):
             continue
         piv = math.sqrt(acc)
         L[j, j] = piv
-        for i in range(j + 1, n):
+        for i in range(j + 1, 4):
             if d[i] == 0.0:
                 continue
             acc2 = Q[i, j] / (d[i] * d[j])
             for k in range(j):
                 acc2 -= L[i, k] * L[j, k]
             L[i, j] = acc2 / piv
-    for i in range(n):
-        for j in range(n):
+    for i in range(4):
+        for j in range(4):
             L[i, j] *= d[i]
 
 

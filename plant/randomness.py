@@ -50,6 +50,21 @@ def uniform(z, cursor):
     return 0.5 * math.erfc(-normal(z, cursor) / math.sqrt(2.0))
 
 
+@njit(cache=True)
+def uniform_below(z, cursor, p):
+    """U < p for U = Φ(Z) of the next unit normal, the same decision as ``uniform(z, cursor) < p``.
+
+    Φ(Z) ≥ ½ for Z ≥ 0 and < ½ for Z < 0, so the sign of Z decides whenever p and ½ lie on
+    opposite sides of it; only the remaining draws pay for erfc.
+    """
+    x = normal(z, cursor)
+    if x >= 0.0 and p <= 0.5:
+        return False
+    if x < 0.0 and p > 0.5:
+        return True
+    return 0.5 * math.erfc(-x / math.sqrt(2.0)) < p
+
+
 class NoiseStream:
     """Unit normals from ``rng`` with a read position; the plant's only source of randomness.
 
@@ -61,7 +76,7 @@ class NoiseStream:
         Normals drawn per refill. Does not change any result.
     """
 
-    __slots__ = ("_rng", "_buf", "_pos", "_block", "_minimum")
+    __slots__ = ("_rng", "_buf", "_pos", "_block", "_minimum", "_spare")
 
     def __init__(self, rng: np.random.Generator, block: int = 8192) -> None:
         if not isinstance(rng, np.random.Generator):
@@ -71,6 +86,7 @@ class NoiseStream:
         self._pos = 0
         self._block = int(block)
         self._minimum = min(2048, self._block // 2)
+        self._spare = np.empty(0)
 
     @classmethod
     def from_seed(cls, seed: int, block: int = 8192) -> "NoiseStream":
@@ -89,7 +105,21 @@ class NoiseStream:
         return self._buf, self._pos
 
     def _refill(self, pos: int, n: int) -> None:
-        self._buf = np.concatenate((self._buf[pos:], self._rng.standard_normal(n)))
+        """Keep the unread normals from ``pos`` on and append ``n`` new ones.
+
+        Two storage arrays alternate (the buffer handed to the kernel is a view of one), so a
+        refill writes into memory that is already mapped instead of a fresh allocation.
+        """
+        keep = self._buf.shape[0] - pos
+        size = keep + n
+        store = self._spare
+        if store.shape[0] < size:
+            store = np.empty(max(size, 2 * self._block))
+        buf = store[:size]
+        buf[:keep] = self._buf[pos:]
+        self._rng.standard_normal(out=buf[keep:])
+        self._spare = self._buf.base if self._buf.base is not None else self._buf
+        self._buf = buf
         self._pos = 0
 
     def consumed(self, pos: int) -> None:

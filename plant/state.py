@@ -94,10 +94,15 @@ class SimOptions:
         crossing test and bridge bisection (SPEC §2), or the seed's method (4-38), Z held
         fixed and Newton on the velocity.
     substep : float
-        Gaussian sub-step inside noisy moving segments [s].
+        Gaussian sub-step inside noisy moving segments near a velocity zero [s]; the first
+        rung of the step ladder h·2^k (plant.zero_velocity): longer rungs are used only when
+        the mean velocity stays 8.5σ of the step's noise away from 0 (crossing probability
+        ≤ 6e-17 per step).
     reflect_substep : float
-        Sub-step while zero crossings are reflected [s]. The reflected x2 is exact at any
-        step; its push enters x1 as ½·L·h, whose bias shrinks like √h.
+        Sub-step while zero crossings are reflected, at zero velocity [s]. The reflected x2 is
+        exact at any step; its push L enters x1 as ½·L·h, whose bias shrinks like √h. Rungs
+        up to ``substep`` are used while the bound on that x1 error per unit time is no larger
+        than this sub-step's at zero velocity (``ladder_thresholds``).
     bisection_tol : float
         Width [s] at which bridge bisection stops (≤ 1 µs by SPEC). At 1 µs the position
         error it leaves is |x2|·1 µs ≈ 1e-9 rad, a thousandth of the smallest corrections.

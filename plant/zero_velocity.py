@@ -2,10 +2,11 @@
 
 Two locators, both compiled:
 
-* **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N; a zero crossing of
-  x2 inside a sub-step is a sign change or, with both ends on one side, happens with the
-  Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by bridge bisection,
-  each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
+* **bridge** (default): advance in exact Gaussian sub-steps X⁺ = Φ(h)X + N, their widths taken
+  from a ladder h·2^k (:func:`ladder_thresholds`: long far from a zero, the fixed sub-step near
+  one); a zero crossing of x2 inside a sub-step is a sign change or, with both ends on one side,
+  happens with the Brownian-bridge probability exp(−2·v_a·v_b/(α²σ2²·h)); it is located by
+  bridge bisection, each midpoint drawn from its Gaussian law given both ends (Matheron's rule:
   X_m = X_m,free + G·(X_b − X_b,free), G = Q(w/2)·Φ(w/2)ᵀ·Q(w)⁻¹), accepted in proportion to
   the probability that the halves contain a crossing, so the located time has the exact law of
   the first crossing of the bridge. It stops at ``bisection_tol`` (≤ 1 µs).
@@ -25,11 +26,12 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.moving import (NOISY_BLOCK, chol_psd, gaussian_step, mean_path, noise_factor_moving, phi_moving,
-                          q_moving, substep_peak)
-from plant.randomness import normal, uniform
+from plant.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
+                          q_moving, substep_peak, velocity_extremum_time)
+from plant.randomness import normal, uniform, uniform_below
 
-__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables"]
+__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
+           "FAR_SIGMAS"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -43,7 +45,7 @@ def _cross_prob(va, vb, h, sig_v2):
 
 
 @njit(cache=True)
-def _bridge_law(mode, w, p, Ph, Pw, G, C):
+def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
     """The law of the midpoint X(w/2) of a sub-step of width w given both its ends.
 
     On the noisy block (x1, x2, x4, x5), with Q_h = COV[N(w/2)], Q_w = COV[N(w)] and Φ_h the
@@ -55,74 +57,132 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C):
     Pw = Φ(w), G, and C with √Σ_22 in C[0, 0], the regression of (x1, x4, x5) on x2 in
     C[1:, 0] and the Cholesky factor of their conditional covariance in C[1:, 1:], so that the
     bisection draws x2 alone first.
+
+    Q_w⁻¹ is applied through the Cholesky factor of the diagonally scaled Q_w; a direction
+    without noise (a zero row, e.g. x4 when σ4 = 0) gets a zero column of G, which is the
+    least-squares solution there. ``V`` is scratch space of ≥ 116 floats.
     """
     phi_moving(mode, w / 2, p, Ph)
     phi_moving(mode, w, p, Pw)
-    Q1 = np.empty((4, 4))
-    Qw = np.empty((4, 4))
+    Q1 = V[0:16].reshape((4, 4))
+    Qw = V[16:32].reshape((4, 4))
+    Lw = V[32:48].reshape((4, 4))
+    M = V[48:64].reshape((4, 4))
+    S = V[64:80].reshape((4, 4))
+    R = V[80:96].reshape((4, 4))
+    Lc = V[96:112].reshape((4, 4))
     q_moving(mode, w / 2, p, Q1)
     q_moving(mode, w, p, Qw)
-    P2 = np.empty((4, 4))
+    # M = Q1·P2ᵀ with P2 the noisy block of Φ(w/2)
     for i in range(4):
         for j in range(4):
-            P2[i, j] = Ph[NOISY_BLOCK[i], NOISY_BLOCK[j]]
-    d = np.empty(4)
-    for i in range(4):
-        d[i] = math.sqrt(Qw[i, i]) if Qw[i, i] > 0 else 1.0
-    Qs = np.empty((4, 4))
-    M = np.empty((4, 4))      # M = Q1·P2ᵀ scaled by columns
-    for i in range(4):
-        for j in range(4):
-            Qs[i, j] = Qw[i, j] / (d[i] * d[j])
             acc = 0.0
             for k in range(4):
-                acc += Q1[i, k] * P2[j, k]
-            M[i, j] = acc / d[j]
-    # G = M · Qs⁻¹ · D⁻¹  →  Gᵀ = D⁻¹ · solve(Qs, Mᵀ)
-    Gt = np.linalg.lstsq(Qs, M.T.copy(), 1e-13)[0]
+                acc += Q1[i, k] * Ph[NOISY_BLOCK[j], NOISY_BLOCK[k]]
+            M[i, j] = acc
+    # Gᵀ = Qw⁻¹·Mᵀ, column by column, with Qw = Lw·Lwᵀ (zero columns of Lw: no noise there)
+    chol_psd(Qw, Lw)
+    for i in range(4):
+        y = V[112:116]
+        for r in range(4):
+            if Lw[r, r] == 0.0:
+                y[r] = 0.0          # no noise in this direction (its column of Lw is zero too)
+                continue
+            acc = M[i, r]
+            for c in range(r):
+                acc -= Lw[r, c] * y[c]
+            y[r] = acc / Lw[r, r]
+        for r in range(3, -1, -1):
+            if Lw[r, r] == 0.0:
+                G[i, r] = 0.0
+                continue
+            acc = y[r]
+            for c in range(r + 1, 4):
+                acc -= Lw[c, r] * G[i, c]
+            G[i, r] = acc / Lw[r, r]
+    # Σ = Q1 − G·P2·Q1 = Q1 − G·Mᵀ, symmetrised
     for i in range(4):
         for j in range(4):
-            G[i, j] = Gt[j, i] / d[j]
-    # Σ = Q1 − G·P2·Q1, symmetrised
-    GP = G @ P2
-    S = Q1 - GP @ Q1
-    S = 0.5 * (S + S.T)
+            acc = 0.0
+            for k in range(4):
+                acc += G[i, k] * M[j, k]
+            S[i, j] = Q1[i, j] - acc
+    for i in range(4):
+        for j in range(i + 1, 4):
+            S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
     for i in range(4):
         for j in range(4):
             C[i, j] = 0.0
     s22 = max(S[1, 1], 0.0)
     C[0, 0] = math.sqrt(s22)
-    others = (0, 2, 3)
-    R = np.empty((3, 3))
     for a in range(3):
-        ia = others[a]
+        ia = 0 if a == 0 else a + 1
         C[1 + a, 0] = S[ia, 1] / s22 if s22 > 0.0 else 0.0
+    for a in range(4):
+        for b in range(4):
+            R[a, b] = 0.0
     for a in range(3):
+        ia = 0 if a == 0 else a + 1
         for b in range(3):
-            R[a, b] = S[others[a], others[b]] - C[1 + a, 0] * S[1, others[b]]
-    Lc = np.empty((3, 3))
-    _chol3(R, Lc)
+            ib = 0 if b == 0 else b + 1
+            R[a, b] = S[ia, ib] - C[1 + a, 0] * S[1, ib]
+    chol_psd(R, Lc)
     for a in range(3):
         for b in range(3):
             C[1 + a, 1 + b] = Lc[a, b]
 
 
 @njit(cache=True)
-def _chol3(R, L):
-    """Lower factor of a PSD 3 × 3 (zero columns for zero or rank-deficient directions)."""
-    Q = np.zeros((4, 4))
-    for i in range(3):
-        for j in range(3):
-            Q[i, j] = R[i, j]
-    L4 = np.empty((4, 4))
-    chol_psd(Q, L4)
-    for i in range(3):
-        for j in range(3):
-            L[i, j] = L4[i, j]
+def _phi_times(P, X, out):
+    """out = P·X for a moving-mode Φ (3-20)/(3-21), without its structural zeros."""
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    out[A1] = x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc + P[A1, AU] * u
+    out[A2] = x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4
+    out[A5] = P[A5, A5] * x5
+    out[AKC] = kc
+    out[AU] = u
 
 
 @njit(cache=True)
-def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC):
+def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
+    """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
+    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`;
+    ``Fb`` is scratch for Φ(w)·Xa."""
+    _phi_times(Ph, Xa, Xm)
+    _phi_times(Pw, Xa, Fb)
+    d0 = Xb[A1] - Fb[A1]
+    d1 = Xb[A2] - Fb[A2]
+    d2 = Xb[A4] - Fb[A4]
+    d3 = Xb[A5] - Fb[A5]
+    for q in range(4):
+        Xm[NOISY_BLOCK[q]] += G[q, 0] * d0 + G[q, 1] * d1 + G[q, 2] * d2 + G[q, 3] * d3
+    mean2 = Xm[A2]
+    a, b = Xa[A2], Xb[A2]
+    if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
+        x2m = mean2 + C[0, 0] * normal(z, cursor)        # a sign change: both halves possible
+    else:
+        sgn = 1.0 if a > 0 else -1.0
+        x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
+    pl = _cross_prob(a, x2m, half, sig_v2)
+    pr = _cross_prob(x2m, b, half, sig_v2)
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
+    Xm[A2] = x2m
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    dv = x2m - mean2
+    Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
+    Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
+    Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
+    if pl >= 1.0:
+        return True
+    return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)
+
+
+@njit(cache=True)
+def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC, V):
     """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
 
     At each level the midpoint is drawn from its law given both ends (:func:`_bridge_law`)
@@ -131,54 +191,32 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     left half with probability p_left/p_any.
 
     ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
-    plant.interval); levels beyond the table are computed here.
+    plant.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 274 floats.
     """
     m = 0 if mode == 1 else 1
-    Xa = Xa0.copy()
-    Xb = Xb0.copy()
+    Xa = V[0:7]
+    Xb = V[7:14]
+    Xm = V[14:21]
+    Ph = V[21:70].reshape((7, 7))
+    Pw = V[70:119].reshape((7, 7))
+    G = V[119:135].reshape((4, 4))
+    C = V[135:151].reshape((4, 4))
+    Vl = V[151:267]
+    Fb = V[267:274]
+    Xa[:] = Xa0
+    Xb[:] = Xb0
     ta = 0.0
     w = h
-    Ph = np.empty((7, 7))
-    Pw = np.empty((7, 7))
-    G = np.empty((4, 4))
-    C = np.empty((4, 4))
-    E = np.empty(7)
     levels = 0
     while w > tol:
         half = w / 2
         if levels < BPh.shape[1]:
-            Ph[:, :] = BPh[m, levels]
-            Pw[:, :] = BPw[m, levels]
-            G[:, :] = BG[m, levels]
-            C[:, :] = BC[m, levels]
+            left = _bisect_level(BPh[m, levels], BPw[m, levels], BG[m, levels], BC[m, levels], Xa, Xb, Xm, Fb,
+                                 half, sig_v2, z, cursor)
         else:
-            _bridge_law(mode, w, p, Ph, Pw, G, C)
-        E[:] = Ph @ Xa
-        Fb = Pw @ Xa
-        for r in range(4):
-            acc = 0.0
-            for c in range(4):
-                acc += G[r, c] * (Xb[NOISY_BLOCK[c]] - Fb[NOISY_BLOCK[c]])
-            E[NOISY_BLOCK[r]] += acc
-        a, b = Xa[A2], Xb[A2]
-        if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
-            x2m = E[A2] + C[0, 0] * normal(z, cursor)       # a sign change: both halves possible
-        else:
-            sgn = 1.0 if a > 0 else -1.0
-            x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * E[A2], C[0, 0], sig_v2 * half, z, cursor)
-        pl = _cross_prob(a, x2m, half, sig_v2)
-        pr = _cross_prob(x2m, b, half, sig_v2)
-        p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
-        Xm = E.copy()
-        Xm[A2] = x2m
-        z1 = normal(z, cursor)
-        z2 = normal(z, cursor)
-        z3 = normal(z, cursor)
-        dv = x2m - E[A2]
-        Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
-        Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
-        Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
-        if pl >= 1.0 or uniform(z, cursor) * p_any < pl:
+            _bridge_law(mode, w, p, Ph, Pw, G, C, Vl)
+            left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor)
+        if left:
             Xb[:] = Xm                  # the first crossing is in the left half
         else:
             ta += half
@@ -252,75 +290,227 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
 @njit(cache=True)
 def bisection_tables(p, sub, BPh, BPw, BG, BC):
     """Tabulate :func:`_bridge_law` for w = sub/2^k, k < BPh.shape[1], both moving modes."""
+    V = np.zeros(116)
     for m in range(2):
         mode = 1 if m == 0 else 3
         w = sub
         for k in range(BPh.shape[1]):
-            _bridge_law(mode, w, p, BPh[m, k], BPw[m, k], BG[m, k], BC[m, k])
+            _bridge_law(mode, w, p, BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], V)
             w = w / 2
+
+
+# --- the step ladder ---------------------------------------------------------------------------
+
+LADDER = 12
+"""Rungs of the step ladder: widths h_j·2^k, k < LADDER (h_0 = substep, h_1 = reflect_substep)."""
+
+FAR_SIGMAS = 8.5
+"""K of the far-from-zero rule: a step is long only if its mean velocity stays K·σ away from 0."""
+
+
+def _push_bound(kappa: float) -> float:
+    """G(κ) = E[(|Z| − κ)⁺] = 2·(φ(κ) − κ·Φ(−κ)), Z a unit normal.
+
+    For a driftless x2 = κ·σ_v·√h at the start of a reflecting step of width h the push is
+    L_h = σ_v·√h·(S − κ)⁺ with S = sup of a standard Brownian motion on [0, 1] ~ |Z|, so
+    E[L_h] = σ_v·√h·G(κ); a drift away from 0 only lowers it.
+    """
+    phi = math.exp(-0.5 * kappa * kappa) / math.sqrt(2.0 * math.pi)
+    return 2.0 * (phi - kappa * 0.5 * math.erfc(kappa / math.sqrt(2.0)))
+
+
+def ladder_thresholds(alpha: float, sigma2_sq: float, sigma5_sq: float, beta5: float, sub: float,
+                      rsub: float) -> np.ndarray:
+    """TH[j, k]: the least |mean velocity| [rad/s] over a step at which rung k of ladder j is used.
+
+    j = 0 (looking for a velocity zero) and j = 1 (reflecting); rung k has width h = h_j·2^k,
+    h_0 = ``sub``, h_1 = ``rsub`` [s]; rung 0 is always allowed (TH = −inf). Rung k > 0 is
+    allowed when the mean velocity s·x̄2(τ) stays ≥ TH[j, k] for all τ in [0, h]:
+
+    * **far from zero** (both ladders): TH = c(h) = K·(σ_v·√h + α·σ5·h^(3/2)·e^(β5·h)),
+      K = :data:`FAR_SIGMAS`, σ_v² = α²σ2². The noise of x2 over the step is α·σ2·W2(τ), plus
+      α·∫N5, N5 the x5 noise (an Ornstein–Uhlenbeck martingale ×e^(−β5τ), quadratic variation
+      ≤ σ5²·h·e^(2β5h)). By the reflection principle P(min_τ α·σ2·W2 ≤ −K·σ_v√h) = 2Φ(−K) and
+      P(sup_τ |N5| ≥ K·σ5·√h·e^(β5h)) ≤ 4Φ(−K), so the path touches 0 within the step with
+      probability ≤ 6·Φ(−K) = 5.7e-17 (K = 8.5): a long step then equals the sub-steps in law
+      up to that probability (the transition Φ(h)X + N is exact for any h).
+    * **reflecting near zero** (j = 1, widths up to ``sub``): the Skorokhod push L_h of a step
+      (the bridge minimum, exact) enters x1 as ½·L_h·h, whose error is at most ½·L_h·h since
+      ∫₀ʰ L dτ ∈ [0, L_h·h]. The torque beyond ks makes the drift of s·x2 ≥ 0, so
+      E[L_h | x2 = v] ≤ σ_v·√h·G(v/(σ_v√h)) with G(κ) = 2(φ(κ) − κΦ(−κ)). Rung k is allowed
+      once this bound per unit time, ½·σ_v·√h·G(κ), is no larger than that of the reflect
+      sub-step at zero velocity, ½·σ_v·√h_1·G(0): the expected x1 error rate never exceeds the
+      worst case of today's fixed reflect sub-step (TH = smaller of this and c(h)).
+
+    Beyond the regular sub-step ``sub`` a reflecting step must be far from zero (c(h)), so near
+    zero no step is longer than the fixed sub-steps' Brownian-bridge approximations assume.
+    """
+    sig_v = alpha * math.sqrt(sigma2_sq)
+    sig5 = math.sqrt(sigma5_sq)
+    TH = np.empty((2, LADDER))
+    for j, base in enumerate((sub, rsub)):
+        TH[j, 0] = -math.inf
+        for k in range(1, LADDER):
+            h = base * 2.0**k
+            far = FAR_SIGMAS * (sig_v * math.sqrt(h) + alpha * sig5 * h**1.5 * math.exp(beta5 * h))
+            TH[j, k] = far
+            if j == 1 and h <= sub * (1 + 1e-12) and sig_v > 0:
+                target = _push_bound(0.0) / math.sqrt(2.0**k)    # G(κ) ≤ G(0)·√(h_1/h)
+                lo, hi = 0.0, 40.0
+                for _ in range(200):                             # G decreases in κ
+                    mid = 0.5 * (lo + hi)
+                    if _push_bound(mid) > target:
+                        lo = mid
+                    else:
+                        hi = mid
+                TH[j, k] = min(far, hi * sig_v * math.sqrt(h))
+    return TH
 
 
 @njit(cache=True)
 def substep_tables(p, o_sub, o_rsub, TP, TL):
-    """Φ and noise factors of the regular (j = 0) and reflection (j = 1) sub-steps, both modes."""
+    """Φ and noise factors of the ladder widths h_j·2^k (j = 0 regular, 1 reflection), both modes.
+
+    TP[m, j, k], TL[m, j, k], m = 0 for mode 1 and 1 for mode 3, k < TP.shape[2].
+    """
     Q = np.empty((4, 4))
     for m in range(2):
         mode = 1 if m == 0 else 3
         for j in range(2):
             h = o_sub if j == 0 else o_rsub
-            phi_moving(mode, h, p, TP[m, j])
-            q_moving(mode, h, p, Q)
-            chol_psd(Q, TL[m, j])
+            for k in range(TP.shape[2]):
+                phi_moving(mode, h, p, TP[m, j, k])
+                q_moving(mode, h, p, Q)
+                chol_psd(Q, TL[m, j, k])
+                h = h * 2.0
 
 
 @njit(cache=True)
-def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, BPh, BPw, BG, BC, z, cursor, peak,
-                   max_steps):
+def _step(X, P, L, z, cursor, out):
+    """out = P·X + N with the sparsity of Φ_1/Φ_3 (3-20)/(3-21); N = L·ζ on the noisy block.
+
+    :func:`plant.moving.gaussian_step` without the structural zeros of Φ and of the lower
+    triangular L.
+    """
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    z0 = normal(z, cursor)
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    out[A1] = (x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc
+               + P[A1, AU] * u + L[0, 0] * z0)
+    out[A2] = (x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+               + L[1, 0] * z0 + L[1, 1] * z1)
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4 + L[2, 0] * z0 + L[2, 1] * z1 + L[2, 2] * z2
+    out[A5] = P[A5, A5] * x5 + L[3, 0] * z0 + L[3, 1] * z1 + L[3, 2] * z2 + L[3, 3] * z3
+    out[AKC] = kc
+    out[AU] = u
+
+
+@njit(cache=True)
+def _mean_min(mode, X, p, h, t_ext):
+    """min over τ in [0, h] of s·x̄2(τ), the mean velocity in the direction of motion.
+
+    x̄2 has at most one extremum, at ``t_ext`` (:func:`plant.moving.velocity_extremum_time`).
+    """
+    s = 1.0 if mode == 3 else -1.0
+    v = min(s * X[A2], s * mean_velocity(mode, h, X, p))
+    if 0.0 < t_ext < h:
+        v = min(v, s * mean_velocity(mode, t_ext, X, p))
+    return v
+
+
+@njit(cache=True)
+def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor, peak,
+                   max_steps, W):
     """Advance a noisy moving segment of length h in place (bridge locator, or reflection).
 
-    ``TP[m, j], TL[m, j]``: Φ and the noise factor of the regular (j = 0) and reflection
-    (j = 1) sub-steps, m = 0 for mode 1 and 1 for mode 3 (:func:`substep_tables`). While
-    reflecting, a sub-step is the short one only when x2 is within 8 standard deviations of a
-    regular sub-step's velocity noise of 0: farther out, the bridge minimum falls below 0 with
-    probability < e^(−128), the push is 0 and the long step is exact.
+    Steps come from a ladder of widths h_j·2^k (``TP[m, j, k], TL[m, j, k]``: Φ and noise
+    factor, :func:`substep_tables`; j = 0 regular with h_0 = ``o_sub``, j = 1 reflecting with
+    h_1 = ``o_rsub``; m = 0 for mode 1, 1 for mode 3). Each step takes the longest rung k whose
+    threshold ``TH[j, k]`` (:func:`ladder_thresholds`) the mean velocity clears over the whole
+    step; near zero that is rung 0, the fixed sub-step. When that rung reaches the segment's end
+    the rest of the segment is one step, factored afresh (a shorter width is admissible too,
+    since both bounds grow with h); otherwise the step is the longest admissible rung leaving
+    more than half of it, and the last ≤ 1.5·h_j is again one fresh step. The choice depends on
+    the state at the step's start only, so the chain of exact transitions X⁺ = Φ(h)X + N stays
+    exact; what a long step neglects is bounded in ``ladder_thresholds`` (crossing probability
+    ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the reflect sub-step's at
+    zero velocity). Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
+    (reflecting) below.
+
+    ``W`` is scratch space (≥ 370 floats) owned by the caller.
 
     Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
     velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
     """
     s = 1.0 if mode == 3 else -1.0
     m = 0 if mode == 1 else 1
+    j = 1 if reflect else 0
+    base = o_rsub if reflect else o_sub
     sig_v2 = p.alpha * p.alpha * p.sigma2_sq
-    near = 8.0 * math.sqrt(sig_v2 * o_sub)
+    nrung = TP.shape[2]
     no_tables = BPh[:, :0]
-    P = np.empty((7, 7))
-    L = np.empty((4, 4))
-    Qtmp = np.empty((4, 4))
-    Xb = np.empty(7)
-    Xc = np.empty(7)
+    Xb = W[0:7]
+    Xc = W[7:14]
+    P = W[14:63].reshape((7, 7))
+    L = W[63:79].reshape((4, 4))
+    Qtmp = W[79:95].reshape((4, 4))
     t = 0.0
     n = 0
     while h - t > 0.0:
         rem = h - t
-        j = 1 if reflect and s * X[A2] < near else 0
-        sub = o_rsub if j == 1 else o_sub
-        regular = rem > 1.5 * sub
+        k = 0
+        if nrung > 1 and s * X[A2] >= TH[j, 1] and base < rem:
+            # the rung the start velocity allows, up to the first one reaching the segment end;
+            # then the mean path over the width w actually used (TH grows with h: conservative)
+            k = 1
+            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and base * 2.0**k < rem:
+                k += 1
+            if reflect:
+                # the torque beyond ks keeps the mean drift of s·x2 ≥ −α·|x5|·β5·τ (x5's mean
+                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·w²/2
+                while k > 0:
+                    w = min(base * 2.0**k, rem)
+                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * w * w >= TH[j, k]:
+                        break
+                    k -= 1
+            else:
+                t_ext = velocity_extremum_time(mode, X, p)
+                while k > 0 and _mean_min(mode, X, p, min(base * 2.0**k, rem), t_ext) < TH[j, k]:
+                    k -= 1
+        sub = base * 2.0**k
+        # one fresh step to the segment's end when an admissible rung reaches it (any shorter
+        # width is admissible too: c(h) and E[L_h] grow with h), or the last ≤ 1.5 sub-steps
+        regular = not (rem <= sub or (k == 0 and rem <= 1.5 * sub))
         if regular:
+            while k > 0 and 1.5 * sub >= rem:
+                k -= 1
+                sub = sub / 2.0
             step = sub
-            gaussian_step(X, TP[m, j], TL[m, j], z, cursor, Xb)
+            _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
         else:
             step = rem
             phi_moving(mode, step, p, P)
             q_moving(mode, step, p, Qtmp)
             chol_psd(Qtmp, L)
-            gaussian_step(X, P, L, z, cursor, Xb)
+            _step(X, P, L, z, cursor, Xb)
         n += 1
         if n > max_steps:
             return t, False, peak, n, True
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
             if sig_v2 > 0:
-                u = uniform(z, cursor)
-                low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
+                # the bridge minimum is below 0 iff U < exp(−2·va·vb/(σ_v²·h)) (va, vb > 0): when the
+                # normal behind U already decides "no", skip the inversion
+                p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+                x = normal(z, cursor)
+                if x >= 0.0 and p_push <= 0.5:
+                    low = min(va, vb)
+                else:
+                    u = 0.5 * math.erfc(-x / math.sqrt(2.0))
+                    low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
             else:
                 low = min(va, vb)
             if low < 0.0:
@@ -328,12 +518,12 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, BPh, BPw,
                 Xb[A1] += s * (-low) * step / 2.0
         else:
             pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
-            if pc >= 1.0 or uniform(z, cursor) < pc:
-                if regular:
-                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC)
+            if pc >= 1.0 or uniform_below(z, cursor, pc):
+                if regular and k == 0:
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
                 else:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
-                                     BG[:, :0], BG[:, :0])
+                                     BG[:, :0], BG[:, :0], W[96:])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
                 X[:] = Xc

@@ -15,7 +15,6 @@ from bench import compiled_loop
 from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
 from controllers import make_controller
-from controllers.base import register
 from controllers.linear import LinearController
 
 RUNTIME = ("runtime_s", "realtime_factor")
@@ -37,7 +36,9 @@ def _both(name, scenario, seed, noise=True, duration=12.0, **options):
     ("dithered", "thesis", 4, False, {"dither_amplitude": 0.0}),
 ])
 def test_compiled_law_is_bit_identical_to_the_python_loop(name, scenario, seed, noise, options):
+    from plant.interval import interval_kernel
     python, compiled = _both(name, scenario, seed, noise, **options)
+    assert len(interval_kernel.signatures) == 1      # the compiled loop adds no specialization
     assert python[1] == compiled[1] == "ok"
     assert python[0] == compiled[0]          # every metric, exactly
     assert python[2] == compiled[2]
@@ -61,12 +62,11 @@ def test_noise_buffer_refills_and_overruns_inside_an_interval_change_nothing(mon
 
 
 def test_a_subclass_that_overrides_step_is_not_compiled():
-    @register("t-linear-offset")
-    class Offset(LinearController):
+    class Offset(LinearController):       # not registered: the registry stays as shipped
         def step(self, y):
             return super().step(y + 1e-6)
 
-    c = make_controller("t-linear-offset")
+    c = Offset()
     c.reset(builtin_scenarios()["thesis"].params, None)
     assert c.linear_law() is None
     assert make_controller("linear").linear_law() is None           # before reset: no design yet
@@ -78,3 +78,20 @@ def test_time_limit_stops_the_compiled_loop():
     assert r.status == "error" and r.message.startswith("time limit of 1e-09 s exceeded at t = ")
     assert 1.0 <= r.simulated_s <= 20.0       # within the first chunks of 1000 samples (10 s)
     assert math.isnan(r.metrics["peak_error_rad"])
+
+
+def test_compiled_dither_segments_equal_the_python_ones():
+    """bench.compiled_loop._segments against controllers.dithered.square_wave_segments on random
+    intervals, levels, amplitudes (some clipping), frequencies and phases."""
+    import numpy as np
+
+    from controllers.dithered import square_wave_segments
+    rng = np.random.default_rng(3)
+    offs, levs = np.empty(64), np.empty(64)
+    for _ in range(3000):
+        t0 = int(rng.integers(0, 100000)) * 0.01
+        base, amp = rng.uniform(-30, 30), float(rng.choice([0.0, 2.0, 18.0, 40.0, rng.uniform(0, 30)]))
+        freq, phase = float(rng.choice([25.0, 125.0, 250.0, 500.0, rng.uniform(1, 1000)])), rng.random()
+        k = compiled_loop._segments(t0, 0.01, base, amp, freq, phase, 26.0, offs, levs)
+        assert tuple(zip(offs[:k].tolist(), levs[:k].tolist())) == \
+            square_wave_segments(t0, 0.01, base, amp, freq, phase, 26.0)

@@ -122,6 +122,9 @@ def test_frontier_matrix_covers_every_registered_controller_with_shared_seeds(qu
     assert {"thesis", "quiet-friction"} <= names
     levels = {p["params"].get("friction_noise_psd") for p in m.sweep["scenarios"].values()}
     assert max(v for v in levels if v is not None) == pytest.approx(2 * 4e-4)
+    if not quick:                                                  # σ1 from 1 to 20 µrad
+        sigma1 = {p["params"].get("measurement_noise_std") for p in m.sweep["scenarios"].values()} - {None}
+        assert min(sigma1) == pytest.approx(1e-6) and max(sigma1) == pytest.approx(2e-5)
 
 
 def test_crossing_level_interpolates_and_flags_out_of_range():
