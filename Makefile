@@ -13,9 +13,8 @@ OUT    ?= results
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-# --no-compile: byte-compile only what is imported, not every installed package up front.
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet --no-compile -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
 # The quick inequality check and speed comparison go into the same directory first, so the
