@@ -23,7 +23,8 @@ from plant.params import PlantParams
 from plant.randomness import NoiseStream
 from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
 
-__all__ = ["PulseResponse", "pulse_response", "max_on_time"]
+__all__ = ["PulseResponse", "pulse_response", "max_on_time", "closed_form_kernel", "move_closed_form",
+           "velocity_root"]
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
 
 
 @njit(cache=True)
-def _move(x1, x2, x3, u, kc, tau, t3, a):
+def move_closed_form(x1, x2, x3, u, kc, tau, t3, a):
     """Mode-3 motion under constant u for tau seconds (closed form of (3-20)/(3-21), x4 = x5 = 0)."""
     y = tau / t3
     g = x3 - u
@@ -148,26 +149,32 @@ def _move(x1, x2, x3, u, kc, tau, t3, a):
 
 
 @njit(cache=True)
-def _closed_form_kernel(dt_u, U, t3, a, ks, kc):
-    """(Δc for sign +1, t_breakaway or −1, t_current_zero, t_stop) of a noise-free pulse."""
+def closed_form_kernel(dt_u, U, t3, a, ks, kc):
+    """(Δc for sign +1, t_breakaway or −1, t_current_zero, t_stop) of a noise-free pulse.
+
+    The compiled core of :func:`pulse_response` without noise (scalars in: Δt_u [s], u_max
+    [ozf·in], τ3 [s], α [1/(ozf·in·s²)], k_s, k_c [ozf·in]); callable from other numba kernels
+    (the solnic predictor, its grid posterior and noise model). k_c = 0 returns Δc = nan and
+    t_stop = inf: the shaft coasts for ever.
+    """
     x3_on = U * e1(dt_u / t3)
     t_cz = dt_u + t3 * math.log1p(x3_on / U)
     t_b = -t3 * math.log1p(-ks / U)
     if not dt_u > t_b:
         return 0.0, -1.0, t_cz, 0.0
-    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)             # driven, reflecting
+    x1, x2, x3 = move_closed_form(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)             # driven, reflecting
     t = dt_u
     t_r = t3 * math.log((x3 + U) / (ks + U)) if x3 > ks else 0.0          # flyback down to ks
-    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_r, t3, a)
+    x1, x2, _ = move_closed_form(x1, x2, x3, -U, kc, t_r, t3, a)
     x3 = ks                                                                # exactly at stiction
     t += t_r
     t_f = t3 * math.log1p(x3 / U)                                          # to current zero
-    v_end = _move(x1, x2, x3, -U, kc, t_f, t3, a)[1]
+    v_end = move_closed_form(x1, x2, x3, -U, kc, t_f, t3, a)[1]
     if v_end <= 0.0:
-        tau = _velocity_root(x1, x2, x3, -U, kc, t_f, t3, a)
-        x1 = _move(x1, x2, x3, -U, kc, tau, t3, a)[0]
+        tau = velocity_root(x1, x2, x3, -U, kc, t_f, t3, a)
+        x1 = move_closed_form(x1, x2, x3, -U, kc, tau, t3, a)[0]
         return x1, t_b, t_cz, t + tau
-    x1, x2, _ = _move(x1, x2, x3, -U, kc, t_f, t3, a)
+    x1, x2, _ = move_closed_form(x1, x2, x3, -U, kc, t_f, t3, a)
     t += t_f
     if kc <= 0.0:
         return math.nan, t_b, t_cz, math.inf                               # coasts for ever
@@ -184,7 +191,7 @@ def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
     solnic predictor's inner call.
     """
     p = params
-    dc, t_b, t_cz, t_stop = _closed_form_kernel(dt_u, p.u_max, p.motor_time_constant, p.alpha, p.stiction,
+    dc, t_b, t_cz, t_stop = closed_form_kernel(dt_u, p.u_max, p.motor_time_constant, p.alpha, p.stiction,
                                                 p.coulomb)
     if t_b < 0.0:
         return PulseResponse(0.0, None, t_cz, 0.0)
@@ -194,14 +201,14 @@ def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
 
 
 @njit(cache=True)
-def _velocity_root(x1, x2, x3, u, kc, h, t3, a):
+def velocity_root(x1, x2, x3, u, kc, h, t3, a):
     """First zero of the closed-form velocity on (0, h], given x2 > 0 at 0 and ≤ 0 at h."""
     # x2 rises while x3 > kc and falls after: the zero lies after x3 = kc.
     lo = t3 * math.log((x3 - u) / (kc - u)) if x3 > kc else 0.0
     hi = h
     tau = 0.5 * (lo + hi)
     for _ in range(200):
-        _, v, x3t = _move(x1, x2, x3, u, kc, tau, t3, a)
+        _, v, x3t = move_closed_form(x1, x2, x3, u, kc, tau, t3, a)
         if v == 0.0:
             return tau
         if v > 0.0:

@@ -135,3 +135,51 @@ def test_pair_noise_model_against_monte_carlo(x5, dtu):
     sd = d.std(ddof=1)
     assert abs(dc + model.bias - d.mean()) <= 3.0 * sd / math.sqrt(n) + 0.06 * sd
     assert 0.85 <= model.variance / sd**2 <= 1.15, (math.sqrt(model.variance) * 1e6, sd * 1e6)
+
+
+def test_timing_is_the_root_of_the_margin_condition():
+    """t_off against scipy's brentq on g(t_off) = v(t_cz2) − r_b·√(s²(t_cz2 − t_b)), and the
+    capped t_off against brentq on t_cz2(t_off) = 0.8 τs, over random plants and pulses."""
+    from scipy.optimize import brentq
+
+    from controllers.solnic.braking import _pair
+
+    p = PlantParams()
+    U, t3, a = p.u_max, p.motor_time_constant, p.alpha
+    cap = 0.8 * p.sample_period
+    rng = np.random.default_rng(11)
+    roots = capped = 0
+    for _ in range(300):
+        ks = rng.uniform(0.3, 3.5)
+        kc = rng.uniform(0.05, ks)
+        dtu = rng.uniform(0.5e-3, 3.5e-3)
+        margin = rng.uniform(0.5, 3.0)
+        sigma2_sq = rng.choice([5e-5, 2e-4, 4e-4, 8e-4])
+        q = p.replace(stiction=ks, coulomb=kc, friction_noise_psd=sigma2_sq)
+        t_off = brake_timing(q, dtu, margin)
+        if t_off is None:
+            continue
+        x3_on = -U * math.expm1(-dtu / t3)
+        t_cz = dtu + t3 * math.log1p(x3_on / U)
+        t_b = -t3 * math.log1p(-ks / U)
+        s2 = a * a * q.sigma2_sq
+
+        def t_cz2(t):
+            x3 = -U + (x3_on + U) * math.exp(-(t - dtu) / t3)
+            return t + t3 * math.log((U - x3) / U)
+
+        t_cap = brentq(lambda t: t_cz2(t) - cap, t_cz, cap, xtol=1e-16)
+
+        def g(t):
+            r = _pair(dtu, t, U, t3, a, ks, kc)
+            return r[4] - margin * math.sqrt(s2 * (r[2] - t_b))
+
+        if g(t_cap) >= 0:
+            capped += 1
+            assert t_off == pytest.approx(t_cap, abs=1e-14)
+        else:
+            roots += 1
+            ref = brentq(g, t_cz * (1 + 1e-15), t_cap, xtol=1e-16, rtol=1e-15)
+            assert abs(t_off - ref) <= 1e-14
+            assert g(t_off) > 0.0                  # the brake never exceeds the margin
+    assert roots > 50 and capped > 20

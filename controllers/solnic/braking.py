@@ -11,7 +11,7 @@ is the single pulse whose flyback voltage is held past the current zero: x3 goes
 the shaft decelerates at α(k_c − x3) > α·k_c.
 
 Noise-free response (sign +1; the plant's closed forms (3-20)/(3-21) through
-:func:`plant.pulse._move`): stuck until x3 = k_s at t_b = −τ3·ln(1 − k_s/u_max); driven to
+:func:`plant.pulse.move_closed_form`): stuck until x3 = k_s at t_b = −τ3·ln(1 − k_s/u_max); driven to
 Δt_u; u = −u_max to t_off; u = +u_max to t_cz2 = t_off + τ3·ln((u_max − x3(t_off))/u_max);
 coasting at −α·k_c to the stop t_stop = t_cz2 + v(t_cz2)/(α·k_c), Δc = x1(t_cz2) +
 v(t_cz2)²/(2α·k_c). If the velocity reaches zero earlier, the stop is that zero (a safeguarded
@@ -38,7 +38,7 @@ import math
 
 from numba import njit
 
-from plant.pulse import _closed_form_kernel, _move, _velocity_root
+from plant.pulse import closed_form_kernel, move_closed_form, velocity_root
 
 __all__ = ["brake_timing", "braked_response"]
 
@@ -53,27 +53,27 @@ def _pair(dt_u, t_off, U, t3, a, ks, kc):
     x3_on = -U * math.expm1(-dt_u / t3)
     t_cz = dt_u + t3 * math.log1p(x3_on / U)
     if not t_off > t_cz:
-        dc, tb, tcz, ts = _closed_form_kernel(dt_u, U, t3, a, ks, kc)
+        dc, tb, tcz, ts = closed_form_kernel(dt_u, U, t3, a, ks, kc)
         return dc, tb, tcz, ts, math.nan, 0.0
     t_b = -t3 * math.log1p(-ks / U)
     if not dt_u > t_b:
         return 0.0, -1.0, t_cz, 0.0, 0.0, 0.0
-    x1, x2, x3 = _move(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)           # driven
+    x1, x2, x3 = move_closed_form(0.0, 0.0, ks, U, kc, dt_u - t_b, t3, a)           # driven
     h = t_off - dt_u
-    e1_, v_end, x3e = _move(x1, x2, x3, -U, kc, h, t3, a)                 # flyback, then reverse drive
+    e1_, v_end, x3e = move_closed_form(x1, x2, x3, -U, kc, h, t3, a)                 # flyback, then reverse drive
     if v_end <= 0.0:
-        tau = _velocity_root(x1, x2, x3, -U, kc, h, t3, a)
-        x1s, _, x3s = _move(x1, x2, x3, -U, kc, tau, t3, a)
+        tau = velocity_root(x1, x2, x3, -U, kc, h, t3, a)
+        x1s, _, x3s = move_closed_form(x1, x2, x3, -U, kc, tau, t3, a)
         return x1s, t_b, t_off + t3 * math.log((U - x3e) / U), dt_u + tau, -1.0, x3s
     x1, x2, x3 = e1_, v_end, x3e
     t_f = t3 * math.log((U - x3) / U)                                     # diodes +U to x3 = 0
     t_cz2 = t_off + t_f
-    v_cz2 = _move(x1, x2, x3, U, kc, t_f, t3, a)[1]
+    v_cz2 = move_closed_form(x1, x2, x3, U, kc, t_f, t3, a)[1]
     if v_cz2 <= 0.0:
-        tau = _velocity_root(x1, x2, x3, U, kc, t_f, t3, a)
-        x1s, _, x3s = _move(x1, x2, x3, U, kc, tau, t3, a)
+        tau = velocity_root(x1, x2, x3, U, kc, t_f, t3, a)
+        x1s, _, x3s = move_closed_form(x1, x2, x3, U, kc, tau, t3, a)
         return x1s, t_b, t_cz2, t_off + tau, -1.0, x3s
-    x1 = _move(x1, x2, x3, U, kc, t_f, t3, a)[0]
+    x1 = move_closed_form(x1, x2, x3, U, kc, t_f, t3, a)[0]
     return x1 + v_cz2 * v_cz2 / (2.0 * a * kc), t_b, t_cz2, t_cz2 + v_cz2 / (a * kc), v_cz2, 0.0
 
 
@@ -91,32 +91,53 @@ def _timing(dt_u, U, t3, a, ks, kc, s2, margin, max_duration, min_ratio):
     v_cz = a * kc * (r[3] - t_cz)
     if v_cz <= max(margin, min_ratio) * math.sqrt(s2 * (t_cz - t_b)):
         return -1.0
-    # the longest reverse drive whose current is back to zero by max_duration
-    lo, hi = t_cz, max_duration
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        x3m = -U + (x3_on + U) * math.exp(-(mid - dt_u) / t3)
-        if mid + t3 * math.log((U - x3m) / U) <= max_duration:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-14:
-            break
-    t_cap = lo
-    g = _pair(dt_u, t_cap, U, t3, a, ks, kc)
-    if g[4] >= margin * math.sqrt(s2 * (g[2] - t_b)):
+    # the longest reverse drive whose current is back to zero by max_duration T: with
+    # y = e^(−(t_off − Δt_u)/τ3), x3(t_off) = −U + (x3_on + U)·y and t_cz2 = t_off +
+    # τ3·ln((U − x3(t_off))/U) = T give 2/y − (1 + x3_on/U) = e^((T − Δt_u)/τ3), so
+    t_cap = dt_u + t3 * math.log(0.5 * (1.0 + x3_on / U + math.exp((max_duration - dt_u) / t3)))
+    g_hi = _brake_excess(dt_u, t_cap, U, t3, a, ks, kc, s2, margin, t_b)
+    if g_hi >= 0.0:
         return t_cap                                                      # capped: brake as much as fits
-    lo, hi = t_cz, t_cap                                                  # g(lo) > 0 ≥ g(hi)
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        g = _pair(dt_u, mid, U, t3, a, ks, kc)
-        if g[4] - margin * math.sqrt(s2 * (g[2] - t_b)) > 0.0:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-14:
+    # the root of g(t_off) = v(t_cz2) − r_b·√(s²(t_cz2 − t_b)), decreasing: g(lo) > 0 ≥ g(hi).
+    # Illinois regula falsi (the retained end's g halved), a bisection step whenever the bracket
+    # has not halved in two steps (g jumps to −1 where the pair stops early), and every trial
+    # point at least tol/2 inside the bracket, so a root at an end closes it at once: ~10
+    # evaluations of the pair instead of bisection's ~40. Returns lo, g(lo) > 0, within tol.
+    tol = 1e-14
+    lo, hi = t_cz, t_cap
+    g_lo = v_cz - margin * math.sqrt(s2 * (t_cz - t_b))                  # the single pulse: > 0
+    side, width, stale = 0, hi - lo, 0
+    for _ in range(200):
+        if hi - lo <= tol:
             break
+        if stale >= 2:
+            mid, stale, width = 0.5 * (lo + hi), 0, 0.5 * (hi - lo)
+        else:
+            mid = lo + (hi - lo) * (g_lo / (g_lo - g_hi))
+            mid = min(max(mid, lo + 0.5 * tol), hi - 0.5 * tol)
+        g = _brake_excess(dt_u, mid, U, t3, a, ks, kc, s2, margin, t_b)
+        if g > 0.0:
+            lo, g_lo = mid, g
+            if side == 1:
+                g_hi *= 0.5
+            side = 1
+        else:
+            hi, g_hi = mid, g
+            if side == -1:
+                g_lo *= 0.5
+            side = -1
+        if hi - lo <= 0.5 * width:
+            width, stale = hi - lo, 0
+        else:
+            stale += 1
     return lo
+
+
+@njit(cache=True)
+def _brake_excess(dt_u, t_off, U, t3, a, ks, kc, s2, margin, t_b):
+    """g(t_off) = v(t_cz2) − r_b·√(s²(t_cz2 − t_b)) [rad/s] of the pair (the timing's root)."""
+    g = _pair(dt_u, t_off, U, t3, a, ks, kc)
+    return g[4] - margin * math.sqrt(s2 * (g[2] - t_b))
 
 
 def brake_timing(params, dt_u: float, margin: float, max_duration: float | None = None,

@@ -59,7 +59,7 @@ import numpy as np
 from numba import njit
 
 from plant.params import PlantParams
-from plant.pulse import _closed_form_kernel
+from plant.pulse import closed_form_kernel
 
 __all__ = ["FrictionGrid", "Predictive", "pulse_table"]
 
@@ -67,7 +67,7 @@ __all__ = ["FrictionGrid", "Predictive", "pulse_table"]
 @njit(cache=True)
 def _table_kernel(dt_u, U, t3, a, kc, ks, dc, t_stop, t_brk):
     for i in range(kc.size):
-        d, tb, _, ts = _closed_form_kernel(dt_u, U, t3, a, ks[i], kc[i])
+        d, tb, _, ts = closed_form_kernel(dt_u, U, t3, a, ks[i], kc[i])
         if tb < 0.0:
             dc[i], t_stop[i], t_brk[i] = 0.0, 0.0, -1.0
         else:

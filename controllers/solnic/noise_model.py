@@ -81,7 +81,7 @@ import numpy as np
 from numba import njit
 
 from plant.params import PlantParams
-from plant.pulse import _closed_form_kernel
+from plant.pulse import closed_form_kernel
 
 __all__ = ["PulseNoise", "pulse_noise", "braked_pulse_noise", "velocity_std_after"]
 
@@ -208,7 +208,7 @@ def _pulse_noise(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_st
     if w > 0.0:
         m1, m2 = _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero,
                                    _PDE_N_X, _PDE_N_ABS, _PDE_N_REFL)
-        dc0 = _closed_form_kernel(dt_u, U, tau, al, ks, kc)[0]
+        dc0 = closed_form_kernel(dt_u, U, tau, al, ks, kc)[0]
         bias, variance = w * (m1 - dc0), w * (m2 - m1 * m1)
     if w < 1.0:
         b, v = _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop,

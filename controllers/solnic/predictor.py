@@ -16,6 +16,13 @@ Returned per pulse:
 The plant's shaft error is x1 = c − r, so the real x1 also drifts by −x4·t during a pulse; the
 pulse response (and so Δc_p) is the shaft motion Δc only.
 
+Compiled: with the plant's own model (no ``response_fn`` injected) one numba call
+(:func:`_predict_kernel`) does the brake timing, the base response and both partial
+differences; the Python path below is the same arithmetic step by step, kept for injected
+models, and the two agree to the bit (``tests/test_solnic_predictor.py``). The controller asks
+for a prediction at every sample with that sample's k̂ (the joint filter moves k̂ at every
+sample), so a cache rarely hits and the per-call cost is what counts.
+
 Choice left open by the text: the step of the partial differences. We use a forward step of
 ``fd_step`` [ozf·in] and fall back to a backward step where the forward one would leave the
 valid parameter set (k̂c ≤ k̂s < u_max) or would cross the motion/no-motion discontinuity of Δc
@@ -26,12 +33,14 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
+from numba import njit
 
+from controllers.solnic.braking import _pair, _timing
 from plant.params import PlantParams
+from plant.pulse import closed_form_kernel
 
 __all__ = ["PulsePrediction", "Predictor", "peak_torque"]
 
@@ -48,8 +57,7 @@ def peak_torque(params: PlantParams, dt_u: float) -> float:
     return -params.u_max * math.expm1(-dt_u / params.motor_time_constant)
 
 
-@dataclass(frozen=True)
-class PulsePrediction:
+class PulsePrediction(NamedTuple):
     """Prediction of one pulse of ``sign``·u_max for ``dt_u`` with estimates (k̂c, k̂s).
 
     Attributes
@@ -93,6 +101,94 @@ class PulsePrediction:
         """True when the model predicts a breakaway."""
         return self.t_breakaway is not None and self.delta_c != 0.0
 
+# -- the compiled path ------------------------------------------------------------------------
+_OK, _INVALID, _COASTS = 0, 1, 2
+
+
+@njit(cache=True)
+def _valid(ks, kc, U):
+    return 0.0 <= kc and kc <= ks and ks < U
+
+
+@njit(cache=True)
+def _response_kernel(ks, kc, dt_u, t_off, U, t3, a):
+    """(Δc, t_b or −1, t_current_zero, t_stop, code) of a +u_max pulse, noise-free; ``t_off``
+    < 0 is the single pulse (:func:`plant.pulse_response`), else the braking pair
+    (:func:`controllers.solnic.braking.braked_response`). code 2: the shaft coasts for ever."""
+    if t_off >= 0.0:
+        dc, tb, tcz, ts, _, _ = _pair(dt_u, t_off, U, t3, a, ks, kc)
+        return dc, tb, tcz, (ts if tb >= 0.0 else 0.0), _OK
+    if dt_u == 0.0:
+        return 0.0, -1.0, 0.0, 0.0, _OK
+    dc, tb, tcz, ts = closed_form_kernel(dt_u, U, t3, a, ks, kc)
+    if tb < 0.0:
+        return 0.0, -1.0, tcz, 0.0, _OK
+    if ts == math.inf:
+        return dc, tb, tcz, ts, _COASTS
+    return dc, tb, tcz, ts, _OK
+
+
+@njit(cache=True)
+def _partial_kernel(ks, kc, dt_u, t_off, which, b_dc, b_tb, b_ts, h, U, t3, a):
+    """(∂Δc, ∂t_stop, model runs, code) by a forward, else backward, step (Predictor._partial)."""
+    runs = 0
+    for i in range(2):
+        step = h if i == 0 else -h
+        kcp, ksp = kc, ks
+        if which == 0:
+            kcp = kc + step
+        else:
+            ksp = ks + step
+        if not _valid(ksp, kcp, U):
+            continue
+        dc, tb, _, ts, code = _response_kernel(ksp, kcp, dt_u, t_off, U, t3, a)
+        runs += 1
+        if code != _OK:
+            return 0.0, 0.0, runs, code
+        if (tb >= 0.0) != (b_tb >= 0.0):
+            continue
+        return (dc - b_dc) / step, (ts - b_ts) / step, runs, _OK
+    return 0.0, 0.0, runs, _OK
+
+
+@njit(cache=True)
+def _predict_kernel(ks, kc, dt_u, U, t3, a, h, brake, margin, s2, cap, min_ratio):
+    """One prediction (Predictor.predict, sign +1): (code, runs, Δc, t_b, t_cz, t_stop,
+    ∂Δc/∂kc, ∂Δc/∂ks, ∂t/∂kc, ∂t/∂ks, t_off or −1)."""
+    nan = math.nan
+    ok = _valid(ks, kc, U)
+    t_off = -1.0
+    if brake and ok:
+        t_off = _timing(dt_u, U, t3, a, ks, kc, s2, margin, cap, min_ratio)
+    if not ok:
+        return _INVALID, 0, nan, nan, nan, nan, nan, nan, nan, nan, t_off
+    dc, tb, tcz, ts, code = _response_kernel(ks, kc, dt_u, t_off, U, t3, a)
+    runs = 1
+    if code != _OK:
+        return code, runs, nan, nan, nan, nan, nan, nan, nan, nan, t_off
+    d0, t0, n, code = _partial_kernel(ks, kc, dt_u, t_off, 0, dc, tb, ts, h, U, t3, a)
+    runs += n
+    if code != _OK:
+        return code, runs, nan, nan, nan, nan, nan, nan, nan, nan, t_off
+    d1, t1, n, code = _partial_kernel(ks, kc, dt_u, t_off, 1, dc, tb, ts, h, U, t3, a)
+    runs += n
+    return code, runs, dc, tb, tcz, ts, d0, d1, t0, t1, t_off
+
+
+@njit(cache=True)
+def _conditional_kernel(ks, kc, dt_u, U, t3, a, h, brake, margin, s2, cap, min_ratio, shrink):
+    """Predictor.conditional (sign +1): the prediction, or the one with k̂s just below the peak
+    torque when it predicts no motion; also returns the (k̂s, k̂c) used and the runs of both."""
+    r = _predict_kernel(ks, kc, dt_u, U, t3, a, h, brake, margin, s2, cap, min_ratio)
+    if r[0] == _OK and not (r[3] >= 0.0 and r[2] != 0.0):
+        peak = -U * math.expm1(-dt_u / t3) if dt_u > 0 else 0.0
+        ks_c = peak * (1.0 - shrink)
+        if ks_c > 0:
+            kc_c = min(kc, ks_c)
+            r2 = _predict_kernel(ks_c, kc_c, dt_u, U, t3, a, h, brake, margin, s2, cap, min_ratio)
+            return r2, ks_c, kc_c, r[1]
+    return r, ks, kc, 0
+
 
 class Predictor:
     """Pulse predictions from the estimated plant, with per-(k̂s, k̂c, Δt_u) caching.
@@ -122,6 +218,7 @@ class Predictor:
         self.brake_min_ratio = float(brake_min_ratio)
         if not (fd_step > 0 and math.isfinite(fd_step)):
             raise ValueError(f"fd_step must be a finite positive number, got {fd_step!r}")
+        self._compiled = response_fn is None       # the plant's own model: the compiled path
         if response_fn is None:
             from plant import pulse_response as response_fn  # the plant's exact model
         self.params = params
@@ -130,6 +227,11 @@ class Predictor:
         self._cache: OrderedDict[tuple[float, float, float], tuple[float, float | None, float, float]] = OrderedDict()
         self._cache_size = int(cache_size)
         self.n_model_runs = 0
+        self._constants = (float(params.u_max), float(params.motor_time_constant), float(params.alpha),
+                           self.fd_step)
+        # brake_timing's defaults: s² = α²σ2² and t_cz2 capped at 0.8 τs
+        self._brake_constants = (params.alpha**2 * params.sigma2_sq, 0.8 * params.sample_period,
+                                 self.brake_min_ratio)
 
     # -- the noise-free model ------------------------------------------------------------
     def valid(self, ks: float, kc: float) -> bool:
@@ -202,6 +304,29 @@ class Predictor:
             raise ValueError(f"sign must be +1 or -1, got {sign!r}")
         if not (dt_u >= 0 and math.isfinite(dt_u)):
             raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
+        if self._compiled:
+            r = _predict_kernel(float(ks), float(kc), float(dt_u), *self._constants, *self._brake_args())
+            return self._prediction(r, ks, kc, dt_u, sign)
+        return self._predict_python(ks, kc, dt_u, sign)
+
+    def _brake_args(self) -> tuple[bool, float, float, float, float]:
+        margin = self.brake_margin
+        return (margin is not None, 0.0 if margin is None else float(margin), *self._brake_constants)
+
+    def _prediction(self, r: tuple, ks: float, kc: float, dt_u: float, sign: int) -> PulsePrediction:
+        """A :class:`PulsePrediction` from a :func:`_predict_kernel` result, or its error."""
+        code, runs, dc, tb, tcz, ts, d0, d1, t0, t1, t_off = r
+        self.n_model_runs += runs
+        if code == _INVALID:
+            raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
+        if code == _COASTS:
+            raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
+        return PulsePrediction(float(dt_u), sign, sign * dc, ts, None if tb < 0.0 else tb, tcz,
+                               np.array((sign * d0, sign * d1)), np.array((t0, t1)),
+                               peak_torque(self.params, dt_u), None if t_off < 0.0 else t_off)
+
+    def _predict_python(self, ks: float, kc: float, dt_u: float, sign: int) -> PulsePrediction:
+        """:meth:`predict` step by step through :meth:`response` (the injected model)."""
         t_off = self.brake_off(ks, kc, dt_u)
         base = self.response(ks, kc, dt_u, t_off)
         dc_kc, t_kc = self._partial(ks, kc, dt_u, 0, base, t_off)
@@ -225,11 +350,21 @@ class Predictor:
         hit = memo.get(key)
         if hit is not None:
             return hit
-        pred = self.predict(ks, kc, dt_u, sign)
-        if not pred.moves:
-            ks_c = pred.peak_torque * (1.0 - shrink)
-            if ks_c > 0:
-                pred = self.predict(ks_c, min(kc, ks_c), dt_u, sign)
+        if self._compiled:
+            if sign not in (1, -1):
+                raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+            if not (dt_u >= 0 and math.isfinite(dt_u)):
+                raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
+            r, ks_u, kc_u, runs = _conditional_kernel(float(ks), float(kc), float(dt_u), *self._constants,
+                                                      *self._brake_args(), float(shrink))
+            self.n_model_runs += runs
+            pred = self._prediction(r, ks if ks_u == ks else ks_u, kc if kc_u == kc else kc_u, dt_u, sign)
+        else:
+            pred = self.predict(ks, kc, dt_u, sign)
+            if not pred.moves:
+                ks_c = pred.peak_torque * (1.0 - shrink)
+                if ks_c > 0:
+                    pred = self.predict(ks_c, min(kc, ks_c), dt_u, sign)
         if len(memo) > 256:
             memo.clear()
         memo[key] = pred
