@@ -8,7 +8,6 @@ reason while the healthy cells complete, on the local executor and on dask.
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -20,90 +19,11 @@ import pandas as pd
 import pytest
 
 from bench.cells import RUNTIME_COLUMNS
-
-ROOT = Path(__file__).resolve().parent.parent
+from cli_helpers import ROOT, cli, write_matrix
 
 pytestmark = pytest.mark.slow
 
-PLUGIN = '''
-import ctypes, os, signal
-from controllers.base import Controller, register
-from plant.drive import DriveCommand
-
-LEVEL = 0.0
-
-
-class _Hostile(Controller):
-    description = "test only: misbehaves at its 21st sample"
-
-    def reset(self, params, rng):
-        self.n = 0
-
-    def step(self, y):
-        self.n += 1
-        if self.n > 20:
-            self.misbehave()
-        return DriveCommand.hold(LEVEL)
-
-    def misbehave(self):
-        pass
-
-
-@register("t-hold")
-class Hold(_Hostile):
-    pass
-
-
-@register("t-exit")
-class Exit(_Hostile):
-    def misbehave(self):
-        os._exit(3)
-
-
-@register("t-kill")
-class Kill(_Hostile):
-    def misbehave(self):
-        os.kill(os.getpid(), signal.SIGKILL)
-
-
-@register("t-hang")
-class Hang(_Hostile):
-    def misbehave(self):          # once: sleep in C, where no Python-level check can run
-        if not getattr(self, "slept", False):
-            self.slept = True
-            ctypes.CDLL(None).sleep(int(os.environ.get("T_HANG_S", "30")))
-
-
-@register("t-sysexit")
-class SysExit(_Hostile):
-    def misbehave(self):
-        raise SystemExit(4)
-
-
-@register("t-kbint")
-class KbInt(_Hostile):
-    def misbehave(self):
-        raise KeyboardInterrupt
-'''
-
 HOSTILE = ["t-exit", "t-kill", "t-hang", "t-sysexit", "t-kbint"]
-
-
-def cli(*args, cwd=ROOT, timeout: float = 240, env=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bench.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, timeout=timeout, env=env)
-
-
-def write_matrix(directory: Path, controllers, seeds=(0,), duration=1, time_limit=None, name="m.toml",
-                 extra="") -> Path:
-    (directory / "hostile_plugin.py").write_text(PLUGIN)
-    text = (f'[matrix]\nplugins = ["hostile_plugin"]\ncontrollers = {json.dumps(list(controllers))}\n'
-            f'scenarios = ["thesis"]\nseeds = {list(seeds)}\nduration_s = {duration}\nwarmup_s = 0.2\n')
-    if time_limit is not None:
-        text += f"time_limit_s = {time_limit}\n"
-    path = directory / name
-    path.write_text(text + extra)
-    return path
 
 
 def _check_hostile(out: Path) -> pd.DataFrame:
@@ -225,75 +145,3 @@ def test_sigkill_of_the_main_process_leaves_no_orphan(tmp_path):
     finally:
         if _session_processes(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
-
-
-def test_a_second_matrix_into_the_same_out_is_refused_and_a_grown_one_is_accepted(tmp_path):
-    """Before: a 5 s matrix silently replaced the 20 s rows of the same ids and dropped the others."""
-    first = write_matrix(tmp_path, ["t-hold"], seeds=(0, 1), duration=2, name="first.toml")
-    out = tmp_path / "run"
-    assert cli("run", "--matrix", first, "--out", out, "--traces", "none").returncode == 0
-    before = {p.name: p.read_bytes() for p in (out / "cells").iterdir()}
-    shorter = write_matrix(tmp_path, ["t-hold"], seeds=(0, 1), duration=1, name="shorter.toml")
-    fewer = write_matrix(tmp_path, ["t-hold"], seeds=(0,), duration=2, name="fewer.toml")
-    for matrix, fragment in ((shorter, "cell 't-hold__thesis__s0' was run with another definition (duration_s 2"),
-                             (fewer, "holds cell 't-hold__thesis__s1', which this matrix does not have")):
-        proc = cli("run", "--matrix", matrix, "--out", out, "--traces", "none")
-        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        assert proc.returncode == 2 and len(lines) == 1 and fragment in lines[0], proc.stderr
-        assert "use another --out" in lines[0]
-    assert {p.name: p.read_bytes() for p in (out / "cells").iterdir()} == before
-    grown = write_matrix(tmp_path, ["t-hold"], seeds=(0, 1, 2), duration=2, name="grown.toml")
-    proc = cli("run", "--matrix", grown, "--out", out, "--traces", "none")
-    assert proc.returncode == 0 and "1 computed, 2 resumed" in proc.stdout, proc.stdout + proc.stderr
-    first = pd.read_parquet(out / "results.parquet")
-    assert len(first) == 3
-    # an edited plugin (same definition, new source) is run again. Before: the config hash
-    # ignored plugin source, so the stale rows were reported as done.
-    plugin = tmp_path / "hostile_plugin.py"
-    plugin.write_text(plugin.read_text().replace("LEVEL = 0.0", "LEVEL = 0.05"))
-    proc = cli("run", "--matrix", grown, "--out", out, "--traces", "none")
-    assert proc.returncode == 0 and "3 computed, 0 resumed" in proc.stdout, proc.stdout
-    second = pd.read_parquet(out / "results.parquet")
-    assert (second["config_hash"] != first["config_hash"]).all()
-    assert (second["mean_abs_current"] != first["mean_abs_current"]).all()    # the new level was simulated
-
-
-def _mount_tmpfs(path: Path, size: str) -> bool:
-    path.mkdir()
-    try:
-        return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
-                              capture_output=True, timeout=10).returncode == 0
-    except (OSError, subprocess.SubprocessError):
-        return False
-
-
-def test_a_full_disk_is_one_line_exit_1_and_nothing_half_written(tmp_path):
-    matrix = write_matrix(tmp_path, ["t-hold"], seeds=(0, 1), duration=1)
-    disk = tmp_path / "disk"
-    if not _mount_tmpfs(disk, "8m"):
-        pytest.skip("cannot mount a tmpfs here (the patched-writer test in test_store_hostile covers ENOSPC)")
-    try:
-        out = disk / "run"
-        first = write_matrix(tmp_path, ["t-hold"], seeds=(0,), duration=1, name="one.toml")
-        assert cli("run", "--matrix", first, "--out", out, "--traces", "none").returncode == 0
-        fd = os.open(disk / "filler", os.O_WRONLY | os.O_CREAT)      # fill the disk to the last byte
-        try:
-            for size in (65536, 4096, 1):
-                try:
-                    while True:
-                        os.write(fd, b"\0" * size)
-                except OSError:
-                    pass
-        finally:
-            os.close(fd)
-        proc = cli("run", "--matrix", matrix, "--out", out, "--traces", "none")
-        lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("error")]
-        assert proc.returncode == 1, proc.stderr
-        assert "Traceback" not in proc.stderr and len(lines) == 1
-        assert "No space left on device" in lines[0] and str(out) in lines[0]
-        assert not list(out.rglob("*.tmp"))                    # no half-written file
-        for p in (out / "cells").glob("*.json"):
-            json.loads(p.read_text())                          # every stored cell is whole
-        pd.read_parquet(out / "results.parquet")
-    finally:
-        subprocess.run(["umount", str(disk)], capture_output=True, timeout=10)
