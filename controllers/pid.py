@@ -20,10 +20,9 @@ reference velocity x̂4 is the exponentially averaged −ẏ̂ over stuck sample
 from __future__ import annotations
 
 import math
-from collections import deque
-
 import numpy as np
 
+from controllers._fma import lead_step1, lead_step2
 from controllers.linear import LinearDesign, _cascade_ss
 
 __all__ = ["PidRealisation", "SlopeEstimator"]
@@ -44,12 +43,45 @@ class PidRealisation:
         self.x = np.zeros(self.A.shape[0])
         self.v_prev = 0.0
         self.q = 0.0
+        n = self.A.shape[0]
+        # compiled straight-line step for one or two lead states (the same bits as the numpy form)
+        if n == 1:
+            self._xs = (0.0,)
+            self._consts = (float(self.C[0]), self.D, float(self.A[0, 0]), float(self.B[0]))
+            self.proportional = self._proportional1
+        elif n == 2:
+            self._xs = (0.0, 0.0)
+            self._consts = (float(self.C[0]), float(self.C[1]), self.D,
+                            float(self.A[0, 0]), float(self.A[0, 1]), float(self.A[1, 0]),
+                            float(self.A[1, 1]), float(self.B[0]), float(self.B[1]))
+            self.proportional = self._proportional2
 
     def proportional(self, e: float) -> float:
-        """Advance the lead path with e(n) [rad]; returns v(n) [ozf·in] (no integrator update)."""
+        """Advance the lead path with e(n) [rad]; returns v(n) [ozf·in] (no integrator update).
+
+        v(n) = C·x(n) + D·e(n), x(n+1) = A·x(n) + B·e(n). One or two lead states (every design
+        of :func:`~controllers.linear.highest_crossover`) use a compiled kernel of
+        :mod:`controllers._fma` that rounds as numpy does; ``x`` is then only the state at
+        construction (see :meth:`state`).
+        """
         v = float(self.C @ self.x) + self.D * e
         self.x = self.A @ self.x + self.B * e
         return v
+
+    def _proportional1(self, e: float) -> float:
+        v, x0 = lead_step1(self._xs[0], e, *self._consts)
+        self._xs = (x0,)
+        return v
+
+    def _proportional2(self, e: float) -> float:
+        x0, x1 = self._xs
+        v, x0, x1 = lead_step2(x0, x1, e, *self._consts)
+        self._xs = (x0, x1)
+        return v
+
+    def state(self) -> np.ndarray:
+        """The lead-path state x(n) (a copy)."""
+        return np.array(self._xs) if hasattr(self, "_xs") else self.x.copy()
 
     def integrate(self, v: float) -> float:
         """q(n) = q(n−1) + g·(v(n) + v(n−1)); returns q(n) [ozf·in]."""
@@ -72,14 +104,20 @@ class SlopeEstimator:
         self.n, self.tau_s = n, tau_s
         k = np.arange(n) - (n - 1) / 2.0
         self._w = k / (float(k @ k) * tau_s)   # slope = Σ w_k y_k
-        self._y: deque[float] = deque(maxlen=n)
+        self._dot = self._w.dot
+        self._buf = np.zeros(n)                # the window, oldest first
+        self._count = 0
 
     def update(self, y: float) -> float:
         """Add y(n); the slope over the window, NaN until it holds ``n`` samples."""
-        self._y.append(y)
-        if len(self._y) < self.n:
-            return math.nan
-        return float(self._w @ np.fromiter(self._y, float, self.n))
+        buf = self._buf
+        buf[:-1] = buf[1:]
+        buf[-1] = y
+        if self._count < self.n:
+            self._count += 1
+            if self._count < self.n:
+                return math.nan
+        return float(self._dot(buf))
 
     @property
     def std_per_sigma(self) -> float:
