@@ -37,6 +37,7 @@ __all__ = ["OraclePulse", "OraclePulseOptions"]
 
 _BISECTIONS = 48
 _FIT = 1.0 - 1e-9     # a segment must start strictly inside the interval
+_OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,7 @@ class OraclePulse(Controller):
         if s is None:
             raise RuntimeError("oracle-pulse needs observe_truth before step (privileged hook)")
         self._truth = None
-        off = DriveCommand.hold(0.0, DriveType.BRIDGE)
+        off = _OFF
         x = s.x
         if s.mode != 2 or s.flyback or x[X3] != 0.0:
             return off                          # wait until the shaft is stuck and current is zero
