@@ -260,25 +260,26 @@ class ObserverPidController(_PidFrictionBase):
         self._moving_samples = 0
         self._breakaways = 0
         self._was_moving = False
+        self._breakaway_jump = o.breakaway_jump
+        self._proportional = self.pid.proportional
 
     def step(self, y: float) -> DriveCommand:
         """u(n) = clip(u_pid + d̂); at breakaway d̂ := k̂c·sign(x̂2) (see module docstring)."""
         self._observe(y)
         obs = self.observer
         x2_hat = obs.velocity + self.x4_hat
-        moving = abs(x2_hat) > self.options.stick_velocity
-        if moving and not self._was_moving and self.options.breakaway_jump:
-            obs.disturbance = math.copysign(self.kc_hat, x2_hat)   # static → Coulomb level at breakaway
-            self._breakaways += 1
+        moving = abs(x2_hat) > self._stick_velocity
         if moving:
+            if not self._was_moving and self._breakaway_jump:
+                obs.disturbance = math.copysign(self.kc_hat, x2_hat)   # static → Coulomb level at breakaway
+                self._breakaways += 1
             self._moving_samples += 1
             # after Friedland & Park: k̂c follows the observed friction in the direction of motion
             self.kc_hat += self._alpha_kc * (math.copysign(obs.disturbance, x2_hat) - self.kc_hat)
             self.kc_hat = max(self.kc_hat, 0.0)
         self._was_moving = moving
-        self._u_comp = obs.disturbance
-        v = self.pid.proportional(y)
-        cmd = self._hold(v, self._u_comp)
+        self._u_comp = u_comp = obs.disturbance
+        cmd = self._hold(self._proportional(y), u_comp)
         obs.update(y, self._level)
         return cmd
 
