@@ -19,10 +19,11 @@ import math
 
 import llvmlite.ir as ir
 import numba
+import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = ["fma", "lead_step1", "lead_step2", "cubic_predict", "cubic_invert"]
+__all__ = ["fma", "lead_step1", "lead_step2", "cubic_predict", "cubic_invert", "rls_update"]
 
 
 @intrinsic
@@ -87,3 +88,40 @@ def cubic_invert(t0, t1, t2, t3, target, lo, hi, width_unit, out_unit, iteration
         else:
             hi = mid
     return 0.5 * (lo + hi)
+
+
+@numba.njit(cache=True)
+def _dot4(a, b):
+    # OpenBLAS dot: s = fma(a_k, b_k, s) from s = 0
+    return _fma(a[3], b[3], _fma(a[2], b[2], _fma(a[1], b[1], _fma(a[0], b[0], 0.0))))
+
+
+@numba.njit(cache=True)
+def rls_update(P, theta, phi, target, lam):
+    """One step of :class:`controllers.pulse_width.PulseModelRls` on 4 × 4 ``P``; returns
+    (P', θ') as new arrays, with numpy's operations and rounding here:
+
+    ``Pφ = P @ φ`` (4 × 4 product rows summed (P_i0·φ0 + P_i2·φ2) + (P_i1·φ1 + P_i3·φ3), unfused),
+    ``K = Pφ / (λ + φ @ Pφ)``, ``θ' = θ + K·(target − φ @ θ)``, ``P₁ = (P − K Pφᵀ)/λ``,
+    ``P' = 0.5·(P₁ + P₁ᵀ)``.
+    """
+    Pphi = np.empty(4)
+    for i in range(4):
+        Pphi[i] = (P[i, 0] * phi[0] + P[i, 2] * phi[2]) + (P[i, 1] * phi[1] + P[i, 3] * phi[3])
+    den = lam + _dot4(phi, Pphi)
+    K = np.empty(4)
+    for i in range(4):
+        K[i] = Pphi[i] / den
+    innov = target - _dot4(phi, theta)
+    theta_new = np.empty(4)
+    for i in range(4):
+        theta_new[i] = theta[i] + K[i] * innov
+    P1 = np.empty((4, 4))
+    for i in range(4):
+        for j in range(4):
+            P1[i, j] = (P[i, j] - K[i] * Pphi[j]) / lam
+    P2 = np.empty((4, 4))
+    for i in range(4):
+        for j in range(4):
+            P2[i, j] = 0.5 * (P1[i, j] + P1[j, i])
+    return P2, theta_new

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers._fma import cubic_invert, cubic_predict
+from controllers._fma import cubic_invert, cubic_predict, rls_update
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -89,11 +89,9 @@ class PulseModelRls:
     def update(self, width: float, delta_c: float) -> None:
         """Add one pulse: width [s], displacement [rad]."""
         phi = self.features(width)
-        Pphi = self.P @ phi
-        K = Pphi / (self.lam + phi @ Pphi)
-        self.theta = self._theta + K * (delta_c / _URAD - phi @ self._theta)
-        self.P = (self.P - np.outer(K, Pphi)) / self.lam
-        self.P = 0.5 * (self.P + self.P.T)
+        # compiled: the numpy operations of the class docstring, rounded as numpy does here
+        self.P, self.theta = rls_update(np.ascontiguousarray(self.P, dtype=float), self._theta, phi,
+                                        delta_c / _URAD, float(self.lam))
         self.n += 1
 
     def predict(self, width: float) -> float:

@@ -113,3 +113,21 @@ def test_oracle_on_time_bisection_matches_pulse_response(motion):
         assert pulse_response(law, dtu * (1 - 1e-9)).delta_c < motion <= dc
     else:
         assert dc <= motion
+
+
+def test_rls_update_is_the_numpy_recursion():
+    rng = np.random.default_rng(6)
+    model = PulseModelRls(forgetting=0.98)
+    P, theta = model.P.copy(), model.theta.copy()
+    for _ in range(40):
+        w, dc = float(rng.uniform(0.5e-3, 3e-3)), float(rng.normal(3e-6, 1e-6))
+        phi = PulseModelRls.features(w)
+        Pphi = P @ phi
+        K = Pphi / (model.lam + phi @ Pphi)
+        theta = theta + K * (dc / 1e-6 - phi @ theta)
+        P = (P - np.outer(K, Pphi)) / model.lam
+        P = 0.5 * (P + P.T)
+        model.update(w, dc)
+        np.testing.assert_allclose(model.theta, theta, rtol=1e-12, atol=1e-12 * np.abs(theta).max())
+        np.testing.assert_allclose(model.P, P, rtol=1e-12, atol=1e-12 * np.abs(P).max())
+    assert model.n == 40
