@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import math
+
 import numpy as np
 
 from controllers._fma import lead_step1, lead_step2
@@ -50,7 +51,7 @@ class PidRealisation:
         self.A, self.B, self.C, self.D = _lead_path(design)
         wc, ts = design.crossover_target_rad_s, design.params.sample_period
         self.g = design.lag_corner_rad_s * math.tan(wc * ts / 2.0) / wc
-        self.x = np.zeros(self.A.shape[0])
+        self._x = np.zeros(self.A.shape[0])
         self.v_prev = 0.0
         self.q = 0.0
         n = self.A.shape[0]
@@ -71,11 +72,10 @@ class PidRealisation:
 
         v(n) = C·x(n) + D·e(n), x(n+1) = A·x(n) + B·e(n). One or two lead states (every design
         of :func:`~controllers.linear.highest_crossover`) use a compiled kernel of
-        :mod:`controllers._fma` that rounds as numpy does; ``x`` is then only the state at
-        construction (see :meth:`state`).
+        :mod:`controllers._fma` that rounds as numpy does; more states use numpy.
         """
-        v = float(self.C @ self.x) + self.D * e
-        self.x = self.A @ self.x + self.B * e
+        v = float(self.C @ self._x) + self.D * e
+        self._x = self.A @ self._x + self.B * e
         return v
 
     def _proportional1(self, e: float) -> float:
@@ -89,9 +89,10 @@ class PidRealisation:
         self._xs = (x0, x1)
         return v
 
-    def state(self) -> np.ndarray:
+    @property
+    def x(self) -> np.ndarray:
         """The lead-path state x(n) (a copy)."""
-        return np.array(self._xs) if hasattr(self, "_xs") else self.x.copy()
+        return np.array(self._xs) if hasattr(self, "_xs") else self._x.copy()
 
     def integrate(self, v: float) -> float:
         """q(n) = q(n−1) + g·(v(n) + v(n−1)); returns q(n) [ozf·in]."""

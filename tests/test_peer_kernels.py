@@ -63,7 +63,7 @@ def test_pid_lead_path_is_the_state_space_form(crossover):
         v = float(pid.C @ x) + pid.D * e
         x = pid.A @ x + pid.B * e
         assert pid.proportional(e) == pytest.approx(v, rel=1e-12, abs=1e-300)
-        np.testing.assert_allclose(pid.state(), x, rtol=1e-12, atol=1e-300)
+        np.testing.assert_allclose(pid.x, x, rtol=1e-12, atol=1e-300)
 
 
 def test_slope_window_is_the_least_squares_slope():
