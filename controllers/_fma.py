@@ -23,7 +23,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = ["fma", "lead_step1", "lead_step2", "cubic_predict", "cubic_invert", "rls_update"]
+__all__ = ["fma", "lead_step1", "lead_step2", "cubic_predict", "cubic_invert", "rls_update", "window_push_dot"]
 
 
 @intrinsic
@@ -125,3 +125,17 @@ def rls_update(P, theta, phi, target, lam):
         for j in range(4):
             P2[i, j] = 0.5 * (P1[i, j] + P1[j, i])
     return P2, theta_new
+
+
+@numba.njit(cache=True)
+def window_push_dot(buf, w, y):
+    """Shift ``buf`` one place towards index 0, put ``y`` last, and return ``w @ buf`` rounded
+    as numpy's dot does here (s = fma(w_k, buf_k, s) from s = 0)."""
+    n = buf.shape[0]
+    for i in range(n - 1):
+        buf[i] = buf[i + 1]
+    buf[n - 1] = y
+    s = 0.0
+    for i in range(n):
+        s = _fma(w[i], buf[i], s)
+    return s

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from controllers._fma import lead_step1, lead_step2
+from controllers._fma import lead_step1, lead_step2, window_push_dot
 from controllers.linear import LinearDesign, _cascade_ss
 
 __all__ = ["PidRealisation", "SlopeEstimator"]
@@ -115,20 +115,20 @@ class SlopeEstimator:
         self.n, self.tau_s = n, tau_s
         k = np.arange(n) - (n - 1) / 2.0
         self._w = k / (float(k @ k) * tau_s)   # slope = Σ w_k y_k
-        self._dot = self._w.dot
         self._buf = np.zeros(n)                # the window, oldest first
         self._count = 0
 
     def update(self, y: float) -> float:
-        """Add y(n); the slope over the window, NaN until it holds ``n`` samples."""
-        buf = self._buf
-        buf[:-1] = buf[1:]
-        buf[-1] = y
+        """Add y(n); the slope over the window, NaN until it holds ``n`` samples.
+
+        Σ w_k·y_k by a compiled kernel that rounds as ``w @ window`` does in numpy here.
+        """
+        s = window_push_dot(self._buf, self._w, float(y))
         if self._count < self.n:
             self._count += 1
             if self._count < self.n:
                 return math.nan
-        return float(self._dot(buf))
+        return s
 
     @property
     def std_per_sigma(self) -> float:
