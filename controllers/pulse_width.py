@@ -250,6 +250,7 @@ class PulseWidthController(Controller):
         self.params = params
         self._ts = ts
         self._sigma = max(params.measurement_noise_std, 1e-12)
+        self._sigma2 = self._sigma ** 2
         self._forget_slope = math.exp(-ts / o.slope_memory_s)
         self.model = PulseModelRls(o.forgetting)
         self.width = o.initial_width
@@ -276,10 +277,12 @@ class PulseWidthController(Controller):
     def _level(self, seg: _Segment, t: float, slope: float) -> tuple[float, float]:
         """x̂1(t) [rad] and its variance from the segment's samples and its prior."""
         mean, var = math.nan, math.inf
-        if seg.n > 0:
-            mean, var = seg.y_mean + slope * (t - seg.t_mean), self._sigma ** 2 / seg.n
-        if seg.prior is not None:
-            t0, level0, var0 = seg.prior
+        n = seg.n
+        if n > 0:   # seg.y_mean + slope·(t − seg.t_mean), σ1²/n
+            mean, var = seg.sy / n + slope * (t - seg.st / n), self._sigma2 / n
+        prior = seg.prior
+        if prior is not None:
+            t0, level0, var0 = prior
             prior = level0 + slope * (t - t0)
             if not math.isfinite(mean):
                 return prior, var0
@@ -295,16 +298,18 @@ class PulseWidthController(Controller):
         self._n += 1
         self._sxx *= self._forget_slope
         self._sxy *= self._forget_slope
+        seg = self._seg
+        early = t < o.startup_s
         if math.isfinite(y):   # samples before the first trigger decision enter the slope
-            self._seg.add(t, y, clean=self._seg.n < o.min_segment_samples or t < o.startup_s)
-        if self._seg.n == 0:
+            seg.add(t, y, clean=seg.n < o.min_segment_samples or early)
+        if seg.n == 0:
             return _OFF
         slope = self._slope()
         self.x4_hat = -slope
-        self.x1_hat, _ = self._level(self._seg, t, slope)
-        if t < o.startup_s or self._seg.n < o.min_segment_samples:
+        self.x1_hat, _ = self._level(seg, t, slope)
+        if early or seg.n < o.min_segment_samples:
             return _OFF
-        p, var_p = self._level(self._seg, t + self._ts, slope)
+        p, var_p = self._level(seg, t + self._ts, slope)
         step = o.target_step
         away = p * slope > 0 or slope == 0.0
         due = abs(p) >= 0.5 * step and away
@@ -333,7 +338,7 @@ class PulseWidthController(Controller):
             _, sign, width, predicted = self._pulse
             a, b = seg, self._prev
             dc = sign * (a.y_mean - b.y_mean - slope * (a.t_mean - b.t_mean))
-            var_e = self._sigma ** 2 * (1.0 / a.n + 1.0 / b.n)
+            var_e = self._sigma2 * (1.0 / a.n + 1.0 / b.n)
             self.last_dc = dc
             if self.counts["significant"] == 0 and dc < 2.0 * math.sqrt(var_e):
                 self.counts["no_motion"] += 1          # start-up: no motion yet, widen
