@@ -25,18 +25,20 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.pulse import max_on_time, pulse_response
+from plant.pulse import _closed_form_kernel, max_on_time
 from plant.state import X1, X3, X4, X5
 
 __all__ = ["OraclePulse", "OraclePulseOptions"]
 
 _BISECTIONS = 48
 _FIT = 1.0 - 1e-9     # a segment must start strictly inside the interval
+_OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,30 @@ class OraclePulseOptions:
             raise ValueError(f"OraclePulseOptions.landing_fraction must be in (0, 1], "
                              f"got {self.landing_fraction!r}")
 
+
+
+@numba.njit(cache=True)
+def _bisect_on_time(motion, lo, hi, u_max, tau3, alpha, ks, kc, iterations):
+    """(Δt_u, Δc, t_stop, coasts) — the bisection of :meth:`OraclePulse._dtu_for` on the
+    noise-free closed form (``plant.pulse._closed_form_kernel``, what ``pulse_response``
+    evaluates; Δc = t_stop = 0 when the pulse does not break away). ``coasts`` flags a pulse
+    that never stops (k̄c = 0), where ``pulse_response`` raises."""
+    dc, _, _, t_stop = _closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
+    if t_stop == math.inf:
+        return hi, dc, t_stop, True
+    if dc <= motion:
+        return hi, dc, t_stop, False
+    for _ in range(iterations):               # Δc(Δt_u) increases past breakaway
+        mid = 0.5 * (lo + hi)
+        dc, _, _, t_stop = _closed_form_kernel(mid, u_max, tau3, alpha, ks, kc)
+        if t_stop == math.inf:
+            return mid, dc, t_stop, True
+        if dc < motion:
+            lo = mid
+        else:
+            hi = mid
+    dc, _, _, t_stop = _closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
+    return hi, dc, t_stop, t_stop == math.inf
 
 
 @register("oracle-pulse")
@@ -97,27 +123,26 @@ class OraclePulse(Controller):
         return self._law[1]
 
     def _dtu_for(self, law: PlantParams, motion: float) -> tuple[float, float, float]:
-        """(Δt_u, |Δc|, t_stop) of the noise-free pulse whose |Δc| is closest to ``motion``."""
+        """(Δt_u, |Δc|, t_stop) of the noise-free pulse whose |Δc| is closest to ``motion``.
+
+        Bisection on Δt_u over [t_b, Δt_u,max] of ``pulse_response(law, Δt_u)`` (Δc increases
+        past breakaway), run by :func:`_bisect_on_time` inside compiled code on the kernel that
+        ``pulse_response`` itself calls, so the numbers are the same.
+        """
         t_b = -law.motor_time_constant * math.log1p(-law.stiction / law.u_max)
-        lo, hi = t_b, self.dtu_max
-        r_hi = pulse_response(law, hi)
-        if r_hi.delta_c <= motion:
-            return hi, r_hi.delta_c, r_hi.t_stop
-        for _ in range(_BISECTIONS):           # Δc(Δt_u) increases past breakaway
-            mid = 0.5 * (lo + hi)
-            if pulse_response(law, mid).delta_c < motion:
-                lo = mid
-            else:
-                hi = mid
-        r = pulse_response(law, hi)
-        return hi, r.delta_c, r.t_stop
+        dtu, dc, t_stop, coasts = _bisect_on_time(motion, t_b, self.dtu_max, law.u_max,
+                                                  law.motor_time_constant, law.alpha, law.stiction,
+                                                  law.coulomb, _BISECTIONS)
+        if coasts:
+            raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
+        return dtu, dc, t_stop
 
     def step(self, y: float) -> DriveCommand:
         s = self._truth
         if s is None:
             raise RuntimeError("oracle-pulse needs observe_truth before step (privileged hook)")
         self._truth = None
-        off = DriveCommand.hold(0.0, DriveType.BRIDGE)
+        off = _OFF
         x = s.x
         if s.mode != 2 or s.flyback or x[X3] != 0.0:
             return off                          # wait until the shaft is stuck and current is zero

@@ -19,14 +19,26 @@ reference velocity x̂4 is the exponentially averaged −ẏ̂ over stuck sample
 
 from __future__ import annotations
 
+import functools
 import math
-from collections import deque
 
 import numpy as np
 
+from controllers._fma import lead_step1, lead_step2, window_push_dot
 from controllers.linear import LinearDesign, _cascade_ss
 
 __all__ = ["PidRealisation", "SlopeEstimator"]
+
+
+@functools.lru_cache(maxsize=128)
+def _lead_path(design: LinearDesign) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(A, B, C, D) of K·Π lead_i(z), B and C as vectors (cached per design object: the
+    python-control realisation costs ~2 ms a run; the arrays are read-only)."""
+    A, B, C, D = _cascade_ss(design.gain, design.sections[1:])
+    B, C = B[:, 0].copy(), C[0].copy()
+    for a in (A, B, C):
+        a.flags.writeable = False
+    return A, B, C, float(D[0, 0])
 
 
 class PidRealisation:
@@ -36,20 +48,51 @@ class PidRealisation:
     def __init__(self, design: LinearDesign) -> None:
         if not design.integral:
             raise ValueError("PidRealisation needs an integral=True design")
-        leads = design.sections[1:]
-        self.A, self.B, self.C, self.D = _cascade_ss(design.gain, leads)
-        self.B, self.C, self.D = self.B[:, 0], self.C[0], float(self.D[0, 0])
+        self.A, self.B, self.C, self.D = _lead_path(design)
         wc, ts = design.crossover_target_rad_s, design.params.sample_period
         self.g = design.lag_corner_rad_s * math.tan(wc * ts / 2.0) / wc
-        self.x = np.zeros(self.A.shape[0])
+        self._x = np.zeros(self.A.shape[0])
         self.v_prev = 0.0
         self.q = 0.0
+        n = self.A.shape[0]
+        # compiled straight-line step for one or two lead states (the same bits as the numpy form)
+        if n == 1:
+            self._xs = (0.0,)
+            self._consts = (float(self.C[0]), self.D, float(self.A[0, 0]), float(self.B[0]))
+            self.proportional = self._proportional1
+        elif n == 2:
+            self._xs = (0.0, 0.0)
+            self._consts = (float(self.C[0]), float(self.C[1]), self.D,
+                            float(self.A[0, 0]), float(self.A[0, 1]), float(self.A[1, 0]),
+                            float(self.A[1, 1]), float(self.B[0]), float(self.B[1]))
+            self.proportional = self._proportional2
 
     def proportional(self, e: float) -> float:
-        """Advance the lead path with e(n) [rad]; returns v(n) [ozf·in] (no integrator update)."""
-        v = float(self.C @ self.x) + self.D * e
-        self.x = self.A @ self.x + self.B * e
+        """Advance the lead path with e(n) [rad]; returns v(n) [ozf·in] (no integrator update).
+
+        v(n) = C·x(n) + D·e(n), x(n+1) = A·x(n) + B·e(n). One or two lead states (every design
+        of :func:`~controllers.linear.highest_crossover`) use a compiled kernel of
+        :mod:`controllers._fma` that rounds as numpy does; more states use numpy.
+        """
+        v = float(self.C @ self._x) + self.D * e
+        self._x = self.A @ self._x + self.B * e
         return v
+
+    def _proportional1(self, e: float) -> float:
+        v, x0 = lead_step1(self._xs[0], e, *self._consts)
+        self._xs = (x0,)
+        return v
+
+    def _proportional2(self, e: float) -> float:
+        x0, x1 = self._xs
+        v, x0, x1 = lead_step2(x0, x1, e, *self._consts)
+        self._xs = (x0, x1)
+        return v
+
+    @property
+    def x(self) -> np.ndarray:
+        """The lead-path state x(n) (a copy)."""
+        return np.array(self._xs) if hasattr(self, "_xs") else self._x.copy()
 
     def integrate(self, v: float) -> float:
         """q(n) = q(n−1) + g·(v(n) + v(n−1)); returns q(n) [ozf·in]."""
@@ -72,14 +115,20 @@ class SlopeEstimator:
         self.n, self.tau_s = n, tau_s
         k = np.arange(n) - (n - 1) / 2.0
         self._w = k / (float(k @ k) * tau_s)   # slope = Σ w_k y_k
-        self._y: deque[float] = deque(maxlen=n)
+        self._buf = np.zeros(n)                # the window, oldest first
+        self._count = 0
 
     def update(self, y: float) -> float:
-        """Add y(n); the slope over the window, NaN until it holds ``n`` samples."""
-        self._y.append(y)
-        if len(self._y) < self.n:
-            return math.nan
-        return float(self._w @ np.fromiter(self._y, float, self.n))
+        """Add y(n); the slope over the window, NaN until it holds ``n`` samples.
+
+        Σ w_k·y_k by a compiled kernel that rounds as ``w @ window`` does in numpy here.
+        """
+        s = window_push_dot(self._buf, self._w, float(y))
+        if self._count < self.n:
+            self._count += 1
+            if self._count < self.n:
+                return math.nan
+        return s
 
     @property
     def std_per_sigma(self) -> float:

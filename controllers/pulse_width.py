@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers._fma import cubic_invert, cubic_predict, rls_update
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -55,6 +56,7 @@ __all__ = ["PulseWidthOptions", "PulseWidthController", "PulseModelRls"]
 
 _MS = 1e-3
 _URAD = 1e-6
+_OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command
 
 
 class PulseModelRls:
@@ -69,6 +71,16 @@ class PulseModelRls:
         self.P = np.eye(4) * prior_variance
         self.n = 0
 
+    @property
+    def theta(self) -> np.ndarray:
+        """θ [µrad] (a copy; assign to change it)."""
+        return self._theta.copy()
+
+    @theta.setter
+    def theta(self, value: np.ndarray) -> None:
+        self._theta = np.array(value, dtype=float)
+        self._t = tuple(float(v) for v in self._theta)
+
     @staticmethod
     def features(width: float) -> np.ndarray:
         v = width / _MS
@@ -77,30 +89,27 @@ class PulseModelRls:
     def update(self, width: float, delta_c: float) -> None:
         """Add one pulse: width [s], displacement [rad]."""
         phi = self.features(width)
-        Pphi = self.P @ phi
-        K = Pphi / (self.lam + phi @ Pphi)
-        self.theta = self.theta + K * (delta_c / _URAD - phi @ self.theta)
-        self.P = (self.P - np.outer(K, Pphi)) / self.lam
-        self.P = 0.5 * (self.P + self.P.T)
+        # compiled: the numpy operations of the class docstring, rounded as numpy does here
+        self.P, self.theta = rls_update(np.ascontiguousarray(self.P, dtype=float), self._theta, phi,
+                                        delta_c / _URAD, float(self.lam))
         self.n += 1
 
     def predict(self, width: float) -> float:
-        """Model displacement [rad] of a pulse of ``width`` [s]."""
-        return float(self.features(width) @ self.theta) * _URAD
+        """Model displacement [rad] of a pulse of ``width`` [s].
+
+        ``float(features(width) @ θ) · 1e−6``, evaluated by a compiled kernel that rounds as
+        numpy's dot does here (:mod:`controllers._fma`).
+        """
+        t0, t1, t2, t3 = self._t
+        return cubic_predict(t0, t1, t2, t3, width, _MS, _URAD)
 
     def invert(self, target: float, lo: float, hi: float) -> float | None:
         """Width in [lo, hi] [s] whose model displacement is ``target`` [rad] on an increasing
-        branch (bisection), or None when the model does not bracket it."""
-        f_lo, f_hi = self.predict(lo) - target, self.predict(hi) - target
-        if not (f_lo < 0 < f_hi):
-            return None
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            if self.predict(mid) < target:
-                lo = mid
-            else:
-                hi = mid
-        return 0.5 * (lo + hi)
+        branch (60 bisections of :meth:`predict`, compiled), or None when the model does not
+        bracket it."""
+        t0, t1, t2, t3 = self._t
+        w = cubic_invert(t0, t1, t2, t3, target, lo, hi, _MS, _URAD, 60)
+        return None if w != w else w
 
 
 @dataclass(frozen=True)
@@ -241,6 +250,7 @@ class PulseWidthController(Controller):
         self.params = params
         self._ts = ts
         self._sigma = max(params.measurement_noise_std, 1e-12)
+        self._sigma2 = self._sigma ** 2
         self._forget_slope = math.exp(-ts / o.slope_memory_s)
         self.model = PulseModelRls(o.forgetting)
         self.width = o.initial_width
@@ -267,10 +277,12 @@ class PulseWidthController(Controller):
     def _level(self, seg: _Segment, t: float, slope: float) -> tuple[float, float]:
         """x̂1(t) [rad] and its variance from the segment's samples and its prior."""
         mean, var = math.nan, math.inf
-        if seg.n > 0:
-            mean, var = seg.y_mean + slope * (t - seg.t_mean), self._sigma ** 2 / seg.n
-        if seg.prior is not None:
-            t0, level0, var0 = seg.prior
+        n = seg.n
+        if n > 0:   # seg.y_mean + slope·(t − seg.t_mean), σ1²/n
+            mean, var = seg.sy / n + slope * (t - seg.st / n), self._sigma2 / n
+        prior = seg.prior
+        if prior is not None:
+            t0, level0, var0 = prior
             prior = level0 + slope * (t - t0)
             if not math.isfinite(mean):
                 return prior, var0
@@ -286,22 +298,24 @@ class PulseWidthController(Controller):
         self._n += 1
         self._sxx *= self._forget_slope
         self._sxy *= self._forget_slope
+        seg = self._seg
+        early = t < o.startup_s
         if math.isfinite(y):   # samples before the first trigger decision enter the slope
-            self._seg.add(t, y, clean=self._seg.n < o.min_segment_samples or t < o.startup_s)
-        if self._seg.n == 0:
-            return DriveCommand.hold(0.0, DriveType.BRIDGE)
+            seg.add(t, y, clean=seg.n < o.min_segment_samples or early)
+        if seg.n == 0:
+            return _OFF
         slope = self._slope()
         self.x4_hat = -slope
-        self.x1_hat, _ = self._level(self._seg, t, slope)
-        if t < o.startup_s or self._seg.n < o.min_segment_samples:
-            return DriveCommand.hold(0.0, DriveType.BRIDGE)
-        p, var_p = self._level(self._seg, t + self._ts, slope)
+        self.x1_hat, _ = self._level(seg, t, slope)
+        if early or seg.n < o.min_segment_samples:
+            return _OFF
+        p, var_p = self._level(seg, t + self._ts, slope)
         step = o.target_step
         away = p * slope > 0 or slope == 0.0
         due = abs(p) >= 0.5 * step and away
         overshoot = abs(p) >= o.overshoot_factor * step and abs(p) >= 3.0 * math.sqrt(var_p)
         if not (due or overshoot):
-            return DriveCommand.hold(0.0, DriveType.BRIDGE)
+            return _OFF
         sign = -1 if p > 0 else 1
         self._close_segment(slope)
         width = self._next_width()
@@ -324,7 +338,7 @@ class PulseWidthController(Controller):
             _, sign, width, predicted = self._pulse
             a, b = seg, self._prev
             dc = sign * (a.y_mean - b.y_mean - slope * (a.t_mean - b.t_mean))
-            var_e = self._sigma ** 2 * (1.0 / a.n + 1.0 / b.n)
+            var_e = self._sigma2 * (1.0 / a.n + 1.0 / b.n)
             self.last_dc = dc
             if self.counts["significant"] == 0 and dc < 2.0 * math.sqrt(var_e):
                 self.counts["no_motion"] += 1          # start-up: no motion yet, widen

@@ -49,6 +49,8 @@ from plant.params import PlantParams
 
 __all__ = ["ResetPidOptions", "ResetPidController", "PidFrictionOptions"]
 
+_LINEAR = DriveType.LINEAR
+
 
 def _positive(name: str, value: Any, *, allow_none: bool = False, upper: float = math.inf) -> None:
     if value is None and allow_none:
@@ -157,6 +159,8 @@ class _PidFrictionBase(Controller):
         self.design = o.design(params)
         self.pid = PidRealisation(self.design)
         self.slope = SlopeEstimator(o.velocity_window, params.sample_period)
+        self._slope_update = self.slope.update
+        self._stick_velocity = o.stick_velocity
         self._alpha_ref = params.sample_period / o.reference_velocity_tau
         self._u_max = params.u_max
         self.x4_hat = 0.0
@@ -167,8 +171,8 @@ class _PidFrictionBase(Controller):
 
     def _observe(self, y: float) -> None:
         """Slope, stick detection and x̂4 from y(n)."""
-        ydot = self.slope.update(y)
-        self.stuck = math.isfinite(ydot) and abs(ydot + self.x4_hat) < self.options.stick_velocity
+        ydot = self._slope_update(y)
+        self.stuck = math.isfinite(ydot) and abs(ydot + self.x4_hat) < self._stick_velocity
         if self.stuck:
             self.x4_hat += self._alpha_ref * (-ydot - self.x4_hat)   # ẏ = −x4 while stuck
 
@@ -180,15 +184,17 @@ class _PidFrictionBase(Controller):
 
     def _hold(self, v: float, extra: float) -> DriveCommand:
         """u = clip(−(v + q) + extra); integrate q only when not clipped."""
-        q_before = self.pid.q
-        q = self.pid.integrate(v)
+        pid = self.pid
+        q_before = pid.q
+        q = pid.integrate(v)
         u = -(v + q) + extra
-        if abs(u) > self._u_max:   # conditional integration (anti-windup)
-            self.pid.q = q_before
+        u_max = self._u_max
+        if abs(u) > u_max:   # conditional integration (anti-windup)
+            pid.q = q_before
             u = -(v + q_before) + extra
-        self._level = min(max(u, -self._u_max), self._u_max)
+        self._level = level = min(max(u, -u_max), u_max)
         self._n += 1
-        return DriveCommand.hold(self._level, DriveType.LINEAR)
+        return DriveCommand.hold(level, _LINEAR)
 
 
 @register("reset-pid")

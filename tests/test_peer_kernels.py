@@ -1,0 +1,133 @@
+"""The peers' per-sample fast paths against the plain forms they replace and against independent
+truth: the compiled fused multiply–add against exact rational arithmetic; the straight-line
+disturbance observer and the compiled PID lead path against their matrix forms; the slope window
+against a least-squares fit; the compiled RLS cubic against numpy's polynomial and a plain
+bisection; the oracle's compiled on-time bisection against ``pulse_response``."""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from controllers._fma import fma
+from controllers.linear import design_linear
+from controllers.observer_pid import DisturbanceObserver
+from controllers.oracle_pulse import OraclePulse
+from controllers.pid import PidRealisation, SlopeEstimator
+from controllers.pulse_width import PulseModelRls
+from plant import PlantParams
+from plant.pulse import pulse_response
+
+P = PlantParams()
+
+
+def test_fma_is_the_correctly_rounded_a_times_b_plus_c():
+    rng = np.random.default_rng(1)
+    a, b, c = (rng.standard_normal(400) * 10.0 ** rng.uniform(-8, 8, 400) for _ in range(3))
+    for x, y, z in zip(a.tolist(), b.tolist(), c.tolist()):
+        assert fma(x, y, z) == float(Fraction(x) * Fraction(y) + Fraction(z))
+    # one rounding, not two: (1 + 2⁻³⁰)(1 − 2⁻³⁰) − 1 = −2⁻⁶⁰ exactly, lost by a*b + c
+    e = 2.0 ** -30
+    assert fma(1 + e, 1 - e, -1.0) == -(2.0 ** -60)
+    assert (1 + e) * (1 - e) - 1.0 == 0.0
+
+
+@pytest.mark.parametrize("bandwidth", [5.0, 160.0, 250.0])
+def test_observer_update_is_the_matrix_form(bandwidth):
+    obs = DisturbanceObserver(P.inertia, P.motor_time_constant, P.sample_period, bandwidth)
+    rng = np.random.default_rng(2)
+    z = np.zeros(4)
+    for _ in range(300):
+        y, u = float(rng.normal(0, 2e-5)), float(rng.normal(0, 1.0))
+        z = obs.Phi @ z + obs.Gamma * u + obs.L * (y - z[0])
+        obs.update(y, u)
+        np.testing.assert_allclose(obs.z, z, rtol=1e-12, atol=1e-300)
+    assert obs.disturbance == obs.z[3] and obs.velocity == obs.z[1]
+    obs.disturbance = 0.25                       # the breakaway jump sets d̂ alone
+    np.testing.assert_array_equal(obs.z, [z[0], z[1], z[2], 0.25])
+
+
+@pytest.mark.parametrize("crossover", [10.0, 48.0])     # one and two lead stages
+def test_pid_lead_path_is_the_state_space_form(crossover):
+    design = design_linear(P, crossover, integral=True)
+    pid = PidRealisation(design)
+    n = pid.A.shape[0]
+    assert n == (1 if crossover == 10.0 else 2)
+    rng = np.random.default_rng(3)
+    x = np.zeros(n)
+    for _ in range(300):
+        e = float(rng.normal(0, 1e-5))
+        v = float(pid.C @ x) + pid.D * e
+        x = pid.A @ x + pid.B * e
+        assert pid.proportional(e) == pytest.approx(v, rel=1e-12, abs=1e-300)
+        np.testing.assert_allclose(pid.x, x, rtol=1e-12, atol=1e-300)
+
+
+def test_slope_window_is_the_least_squares_slope():
+    ts, n = 0.01, 10
+    est = SlopeEstimator(n, ts)
+    rng = np.random.default_rng(4)
+    ys = rng.normal(0, 1e-5, 40) + 3e-5 * ts * np.arange(40)
+    for k, y in enumerate(ys):
+        s = est.update(float(y))
+        if k < n - 1:
+            assert math.isnan(s)
+        else:
+            fit = np.polyfit(ts * np.arange(n), ys[k - n + 1:k + 1], 1)[0]
+            assert s == pytest.approx(fit, rel=1e-9, abs=1e-15)
+
+
+def test_rls_cubic_predict_and_invert():
+    rng = np.random.default_rng(5)
+    model = PulseModelRls()
+    for _ in range(50):
+        theta = np.array([rng.normal(0, 1), 1 + abs(rng.normal(0, 3)), abs(rng.normal(0, 2)),
+                          abs(rng.normal(0, 0.3))])            # increasing on v > 0
+        model.theta = theta
+        w = float(rng.uniform(0.2e-3, 4e-3))
+        assert model.predict(w) == pytest.approx(np.polyval(theta[::-1], w / 1e-3) * 1e-6, rel=1e-12)
+        lo, hi = 0.5e-3, 3e-3
+        target = float(rng.uniform(model.predict(lo), model.predict(hi)))
+        got = model.invert(target, lo, hi)
+        a, b = lo, hi                               # plain bisection on numpy's polynomial
+        for _ in range(60):
+            mid = 0.5 * (a + b)
+            a, b = (mid, b) if np.polyval(theta[::-1], mid / 1e-3) * 1e-6 < target else (a, mid)
+        assert got == pytest.approx(0.5 * (a + b), rel=1e-9)
+        assert model.predict(got) == pytest.approx(target, rel=1e-9)
+        assert model.invert(model.predict(hi) * 2, lo, hi) is None    # not bracketed
+
+
+@pytest.mark.parametrize("motion", [0.5e-6, 3e-6, 20e-6, 1.0])
+def test_oracle_on_time_bisection_matches_pulse_response(motion):
+    oracle = OraclePulse()
+    oracle.reset(P, np.random.default_rng(0))
+    law = oracle._true_law(0.3)
+    dtu, dc, t_stop = oracle._dtu_for(law, motion)
+    r = pulse_response(law, dtu)
+    assert (dc, t_stop) == (r.delta_c, r.t_stop)
+    if dtu < oracle.dtu_max:                       # Δc(Δt_u) brackets the motion at 2⁻⁴⁸ resolution
+        assert pulse_response(law, dtu * (1 - 1e-9)).delta_c < motion <= dc
+    else:
+        assert dc <= motion
+
+
+def test_rls_update_is_the_numpy_recursion():
+    rng = np.random.default_rng(6)
+    model = PulseModelRls(forgetting=0.98)
+    P, theta = model.P.copy(), model.theta.copy()
+    for _ in range(40):
+        w, dc = float(rng.uniform(0.5e-3, 3e-3)), float(rng.normal(3e-6, 1e-6))
+        phi = PulseModelRls.features(w)
+        Pphi = P @ phi
+        K = Pphi / (model.lam + phi @ Pphi)
+        theta = theta + K * (dc / 1e-6 - phi @ theta)
+        P = (P - np.outer(K, Pphi)) / model.lam
+        P = 0.5 * (P + P.T)
+        model.update(w, dc)
+        np.testing.assert_allclose(model.theta, theta, rtol=1e-12, atol=1e-12 * np.abs(theta).max())
+        np.testing.assert_allclose(model.P, P, rtol=1e-12, atol=1e-12 * np.abs(P).max())
+    assert model.n == 40
