@@ -31,7 +31,7 @@ import numpy as np
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.pulse import _closed_form_kernel, max_on_time
+from plant.pulse import closed_form_kernel, max_on_time
 from plant.state import X1, X3, X4, X5
 
 __all__ = ["OraclePulse", "OraclePulseOptions"]
@@ -68,24 +68,24 @@ class OraclePulseOptions:
 @numba.njit(cache=True)
 def _bisect_on_time(motion, lo, hi, u_max, tau3, alpha, ks, kc, iterations):
     """(Δt_u, Δc, t_stop, coasts) — the bisection of :meth:`OraclePulse._dtu_for` on the
-    noise-free closed form (``plant.pulse._closed_form_kernel``, what ``pulse_response``
+    noise-free closed form (``plant.pulse.closed_form_kernel``, what ``pulse_response``
     evaluates; Δc = t_stop = 0 when the pulse does not break away). ``coasts`` flags a pulse
     that never stops (k̄c = 0), where ``pulse_response`` raises."""
-    dc, _, _, t_stop = _closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
+    dc, _, _, t_stop = closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
     if t_stop == math.inf:
         return hi, dc, t_stop, True
     if dc <= motion:
         return hi, dc, t_stop, False
     for _ in range(iterations):               # Δc(Δt_u) increases past breakaway
         mid = 0.5 * (lo + hi)
-        dc, _, _, t_stop = _closed_form_kernel(mid, u_max, tau3, alpha, ks, kc)
+        dc, _, _, t_stop = closed_form_kernel(mid, u_max, tau3, alpha, ks, kc)
         if t_stop == math.inf:
             return mid, dc, t_stop, True
         if dc < motion:
             lo = mid
         else:
             hi = mid
-    dc, _, _, t_stop = _closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
+    dc, _, _, t_stop = closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
     return hi, dc, t_stop, t_stop == math.inf
 
 
