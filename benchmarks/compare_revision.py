@@ -1,7 +1,7 @@
 """CPU per 100 s thesis cell: this checkout against another revision, measured in one run.
 
     git worktree add --detach /tmp/base e27ccb7
-    .venv/bin/python benchmarks/compare_revision.py /tmp/base [--rounds 3] [--json]
+    .venv/bin/python benchmarks/compare_revision.py /tmp/base [--rounds 3] [--json] [--controllers all|a,b]
 
 Each cell runs in a fresh interpreter with ``PYTHONPATH`` set to one tree (JIT compilation and
 imports are excluded: the child warms up on a 1 s cell first and times the 100 s cell with
@@ -49,23 +49,30 @@ def main() -> None:
     ap.add_argument("other", type=Path, help="work tree of the other revision")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--controllers", default=",".join(CONTROLLERS),
+                    help="comma-separated names, or 'all' (every controller registered in this tree)")
     args = ap.parse_args()
+    if args.controllers == "all":
+        from controllers import available_controllers
+        names = tuple(sorted(available_controllers()))
+    else:
+        names = tuple(n.strip() for n in args.controllers.split(",") if n.strip())
     here = Path(__file__).resolve().parent.parent
     times: dict[tuple[str, str], list[float]] = {}
     for _ in range(args.rounds):
-        for name in CONTROLLERS:
+        for name in names:
             for label, tree in (("this", here), ("other", args.other.resolve())):
                 times.setdefault((label, name), []).append(_cell(tree, name)["cpu_s"])
     rows = []
-    for name in CONTROLLERS:
+    for name in names:
         this, other = statistics.median(times["this", name]), statistics.median(times["other", name])
         rows.append({"controller": name, "this_cpu_s": this, "other_cpu_s": other, "speedup": other / this})
     if args.json:
         print(json.dumps(rows, indent=2))
         return
-    print(f"{'controller':<10} {'this [s]':>9} {'other [s]':>10} {'speed-up':>9}")
+    print(f"{'controller':<14} {'this [s]':>9} {'other [s]':>10} {'speed-up':>9}")
     for r in rows:
-        print(f"{r['controller']:<10} {r['this_cpu_s']:>9.3f} {r['other_cpu_s']:>10.3f} {r['speedup']:>8.1f}x")
+        print(f"{r['controller']:<14} {r['this_cpu_s']:>9.3f} {r['other_cpu_s']:>10.3f} {r['speedup']:>8.2f}x")
 
 
 if __name__ == "__main__":
