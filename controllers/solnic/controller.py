@@ -224,8 +224,7 @@ class SolnicController(Controller):
             self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
-        m = self.mode2
-        self._posterior = (m.x1, m.x4, m.p11, m.p14, m.p44)
+        self._posterior = self.mode2.moments()
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set

@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from controllers.solnic.filter_kernels import joint_predict, joint_update
 from controllers.solnic.mode2_filter import mode2_transition
 from controllers.solnic.truncation import condition_half_plane
 
@@ -44,11 +45,11 @@ class FrictionView:
 
     @property
     def kc(self) -> float:
-        return float(self._j.z[KC])
+        return self._j.z.item(KC)
 
     @property
     def ks(self) -> float:
-        return float(self._j.z[KS])
+        return self._j.z.item(KS)
 
     @property
     def P(self) -> np.ndarray:
@@ -107,7 +108,7 @@ class JointFilter:
         self.P[KC:KS + 1, KC:KS + 1] = np.asarray(Pk0, dtype=float).reshape(2, 2)
         self.u_max = float(u_max)
         self.t = float(t0)
-        self._cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._cache: dict[float, tuple[float, float, float, float, float]] = {}
         self.friction = FrictionView(self)
         self.n_motion_updates = 0
         self.motion_prior = (math.nan, math.nan)
@@ -115,11 +116,11 @@ class JointFilter:
         self._since: list[tuple[float, float]] = []      # samples since the last pulse
 
     # -- the mode-2 filter's API --------------------------------------------------------
-    x1 = property(lambda self: float(self.z[X1]))
-    x4 = property(lambda self: float(self.z[X4]))
-    p11 = property(lambda self: float(self.P[X1, X1]))
-    p14 = property(lambda self: float(self.P[X1, X4]))
-    p44 = property(lambda self: float(self.P[X4, X4]))
+    x1 = property(lambda self: self.z.item(X1))
+    x4 = property(lambda self: self.z.item(X4))
+    p11 = property(lambda self: self.P.item(X1, X1))
+    p14 = property(lambda self: self.P.item(X1, X4))
+    p44 = property(lambda self: self.P.item(X4, X4))
 
     @property
     def x(self) -> np.ndarray:
@@ -130,43 +131,41 @@ class JointFilter:
         return self.P[:2, :2].copy()
 
     def drift_std(self) -> float:
-        return math.sqrt(max(self.P[X4, X4], 0.0))
+        return math.sqrt(max(self.P.item(X4, X4), 0.0))
 
     def predict(self, t: float) -> None:
         """(x1, x4) over t − self.t with Φ (3-22) and COV[N] (4-11); k and d constant."""
         h = t - self.t
-        if h < -1e-12:
-            raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
         if h <= 0:
+            if h < -1e-12:
+                raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
             return
         hit = self._cache.get(h)
         if hit is None:
-            hit = mode2_transition(h, self.tau4, self.sigma4_sq)
+            Phi, Q = mode2_transition(h, self.tau4, self.sigma4_sq)
+            hit = (float(Phi[0, 1]), float(Phi[1, 1]), float(Q[0, 0]), float(Q[0, 1]), float(Q[1, 1]))
             if len(self._cache) >= 256:
                 self._cache.clear()
             self._cache[h] = hit
-        Phi, Q = hit
-        self.z[:2] = Phi @ self.z[:2]
-        self.P[:2, :] = Phi @ self.P[:2, :]
-        self.P[:, :2] = self.P[:, :2] @ Phi.T
-        self.P[:2, :2] += Q
+        joint_predict(self.z, self.P, *hit)
         self.t = float(t)
 
     def update(self, y: float) -> float:
         """y = x1 + w1: the whole state is corrected (k through its correlation with x1)."""
+        y = float(y)
         if self._snapshot is not None:
-            self._since.append((self.t, float(y)))
-        innovation = float(y) - self.z[X1]
-        col = self.P[:, X1].copy()
-        S = col[X1] + self.R
-        K = col / S
-        self.z += K * innovation
-        self.P -= np.outer(K, col)
-        self.P = 0.5 * (self.P + self.P.T)
+            self._since.append((self.t, y))
         z = self.z
-        if not 0.0 <= z[KC] <= z[KS] < self.u_max:     # the sample pushed k out of the valid set
+        innovation = joint_update(z, self.P, self.R, y)
+        kc = z.item(KC)
+        if not 0.0 <= kc <= z.item(KS) < self.u_max:  # the sample pushed k out of the valid set
             self._valid()
         return innovation
+
+    def moments(self) -> tuple[float, float, float, float, float]:
+        """(x̂1, x̂4, P11, P14, P44) as floats."""
+        z, P = self.z, self.P
+        return z.item(X1), z.item(X4), P.item(X1, X1), P.item(X1, X4), P.item(X4, X4)
 
     # -- pulses --------------------------------------------------------------------------
     def add_motion(self, sign: int, delta_c: float, H_b: np.ndarray, noise_var: float,

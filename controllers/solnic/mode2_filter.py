@@ -257,6 +257,10 @@ class Mode2Filter:
         R = 1.0 / info
         return R * (self.motion_mean / self.motion_var - prior_mean / prior_var), R
 
+    def moments(self) -> tuple[float, float, float, float, float]:
+        """(x̂1, x̂4, P11, P14, P44) as floats."""
+        return self.x1, self.x4, self.p11, self.p14, self.p44
+
     def drift_std(self) -> float:
         """√P44, the std of x̂4 [rad/s]."""
         return math.sqrt(max(self.p44, 0.0))
