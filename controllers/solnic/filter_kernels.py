@@ -17,11 +17,14 @@ contract them (no fastmath), so they are bit-identical too.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
 
-__all__ = ["fma", "joint_predict", "joint_update"]
+__all__ = ["fma", "joint_predict", "joint_update", "quadratic_form2", "friction_gain",
+           "friction_covariance", "friction_update_clip"]
 
 
 @intrinsic
@@ -86,3 +89,98 @@ def joint_update(z, P, R, y):
             P[i, j] = s
             P[j, i] = s
     return innovation
+
+
+# -- the faithful friction filter (2×2) -------------------------------------------------------
+# numpy forms these 2-term products through OpenBLAS as (verified bit for bit on this machine):
+#   A @ x  (gemv):  fma(A_i0, x_0, A_i1·x_1)        x @ A:  fma(x_1, A_1j, x_0·A_0j)
+#   x @ y  (dot):   fma(x_1, y_1, x_0·y_0)          A @ B (gemm):  fma(A_i1, B_1j, A_i0·B_0j)
+
+
+@njit(cache=True)
+def quadratic_form2(H, P):
+    """H P H' for H (2,) and P (2, 2): numpy's ``H @ P @ H``."""
+    h0 = H[0]
+    h1 = H[1]
+    v0 = fma(h1, P[1, 0], h0 * P[0, 0])
+    v1 = fma(h1, P[1, 1], h0 * P[0, 1])
+    return fma(v1, h1, v0 * h0)
+
+
+@njit(cache=True)
+def friction_gain(P, h0, h1, residual, R, limit):
+    """(K0, K1, S, R_used) of :meth:`FrictionFilter._gain` (5-16): R raised to the fictitious
+    variance that caps every |Δk_i| at ``limit`` (inf: no cap)."""
+    ph0 = fma(P[0, 0], h0, P[0, 1] * h1)             # P @ H
+    ph1 = fma(P[1, 0], h0, P[1, 1] * h1)
+    S0 = fma(h1, ph1, h0 * ph0)                      # H @ PH
+    R_used = R
+    if math.isfinite(limit):
+        a0 = abs(ph0 * residual)
+        a1 = abs(ph1 * residual)
+        need = (a0 if a0 >= a1 else a1) / limit - S0
+        if need > R:
+            R_used = need
+    S = S0 + R_used
+    if not S > 0:
+        return 0.0, 0.0, S0 + R, R_used
+    return ph0 / S, ph1 / S, S, R_used
+
+
+@njit(cache=True)
+def friction_covariance(P, K0, K1, h0, h1, a):
+    """(I − a·K H) P (5-18), symmetrised: a new (2, 2) array."""
+    A00 = 1.0 - a * (K0 * h0)
+    A01 = 0.0 - a * (K0 * h1)
+    A10 = 0.0 - a * (K1 * h0)
+    A11 = 1.0 - a * (K1 * h1)
+    n00 = fma(A01, P[1, 0], A00 * P[0, 0])
+    n01 = fma(A01, P[1, 1], A00 * P[0, 1])
+    n10 = fma(A11, P[1, 0], A10 * P[0, 0])
+    n11 = fma(A11, P[1, 1], A10 * P[0, 1])
+    out = np.empty((2, 2))
+    out[0, 0] = 0.5 * (n00 + n00)
+    out[1, 1] = 0.5 * (n11 + n11)
+    s = 0.5 * (n01 + n10)
+    out[0, 1] = s
+    out[1, 0] = s
+    return out
+
+
+@njit(cache=True)
+def friction_update_clip(k, P, H, residual, R, a, limit, ks_cap, max_shrinks):
+    """The text's update (5-16)–(5-18) with the section-5.3 shrinks and clips.
+
+    Returns (k_new, P_new, S, R_used, shrinks, clipped); ``H`` is not modified.
+    """
+    h0 = H[0]
+    h1 = H[1]
+    shrinks = 0
+    while True:
+        K0, K1, S, R_used = friction_gain(P, h0, h1, residual, R, limit)
+        kn0 = k[0] + K0 * residual                                  # (5-17)
+        kn1 = k[1] + K1 * residual
+        raising = K1 * residual > 0.0
+        if kn1 <= ks_cap or not raising or shrinks >= max_shrinks or h1 == 0.0:
+            break
+        h1 *= 0.5                                                   # shrink ∂Δc/∂k̂s
+        shrinks += 1
+    P_new = friction_covariance(P, K0, K1, h0, h1, a)              # (5-18)
+    clipped = False
+    if kn1 > ks_cap:
+        kn1 = ks_cap
+        clipped = True
+    if kn0 < 0.0:
+        kn0 = 0.0
+        clipped = True
+    if kn1 < kn0:                                                   # k̂s not below k̂c
+        kn1 = kn0
+        clipped = True
+    if kn0 > ks_cap:                                                # a valid plant model
+        kn0 = ks_cap
+        kn1 = ks_cap
+        clipped = True
+    k_new = np.empty(2)
+    k_new[0] = kn0
+    k_new[1] = kn1
+    return k_new, P_new, S, R_used, shrinks, clipped
