@@ -24,7 +24,8 @@ from numba import njit, types
 from numba.extending import intrinsic
 
 __all__ = ["fma", "joint_predict", "joint_update", "quadratic_form2", "friction_gain",
-           "friction_covariance", "friction_update_clip"]
+           "friction_covariance", "friction_update_clip", "joint_add_motion", "half_plane_moments",
+           "half_plane_apply"]
 
 
 @intrinsic
@@ -184,3 +185,102 @@ def friction_update_clip(k, P, H, residual, R, a, limit, ks_cap, max_shrinks):
     k_new[0] = kn0
     k_new[1] = kn1
     return k_new, P_new, S, R_used, shrinks, clipped
+
+
+# -- pulses and half-plane conditions --------------------------------------------------------
+
+
+@njit(cache=True)
+def joint_add_motion(z, P, h, d_mean, noise_var, max_correction, abs_dc):
+    """In place: d = h·z + d_mean − h·ẑ + n replaces z[4], then x1 ← x1 + d; returns VAR[d].
+
+    P[4, :] = P h, VAR[d] = h'P h + ``noise_var`` (raised to max|(P h)_k|·``abs_dc``/
+    ``max_correction`` when that is finite and > 0), then J P J' with J = I + e_0 e_4'
+    and (P + P')/2. (P h: one rounding per product and per sum, as numpy's gemv here;
+    h'(P h): a chain of fused multiply-adds, as its dot.)
+    """
+    n = z.shape[0]
+    D = n - 1
+    Ph = np.empty(n)
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += P[i, j] * h[j]
+        Ph[i] = acc
+    var = 0.0
+    for i in range(n):
+        var = fma(h[i], Ph[i], var)
+    z[D] = d_mean
+    for i in range(n):
+        P[D, i] = Ph[i]
+    for i in range(n):
+        P[i, D] = Ph[i]
+    var_d = var + noise_var
+    if math.isfinite(max_correction) and max_correction > 0:
+        big = 0.0
+        for i in range(2, D):
+            if abs(Ph[i]) > big:
+                big = abs(Ph[i])
+        need = big * abs_dc / max_correction
+        if need > var_d:
+            var_d = need
+    P[D, D] = var_d
+    z[0] += z[D]
+    for j in range(n):
+        P[0, j] += P[D, j]
+    for i in range(n):
+        P[i, 0] += P[i, D]
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+    return var_d
+
+
+@njit(cache=True)
+def half_plane_moments(mean, P, c):
+    """(c·mean, c'P c): the mean and variance of s = c·x.
+
+    Sums in index order (c'P c as c·(P c)); with c's entries in {0, ±1}, as in every
+    constraint here, every product is exact and the result equals numpy's whatever its order.
+    """
+    n = mean.shape[0]
+    m = 0.0
+    v = 0.0
+    for i in range(n):
+        m += c[i] * mean[i]
+        pc = 0.0
+        for j in range(n):
+            pc += P[i, j] * c[j]
+        v += c[i] * pc
+    return m, v
+
+
+@njit(cache=True)
+def half_plane_apply(mean, P, c, m, v, mean_s, var_s):
+    """New (mean, P) after s = c·x is given E[s] = ``mean_s``, VAR[s] = ``var_s``:
+    mean + P c (mean_s − m)/v and P − (P c)(P c)'(v − var_s)/v², symmetrised."""
+    n = mean.shape[0]
+    Pc = np.empty(n)
+    for i in range(n):
+        pc = 0.0
+        for j in range(n):
+            pc += P[i, j] * c[j]
+        Pc[i] = pc
+    dm = mean_s - m
+    shrink = v - var_s
+    vv = v * v
+    new_mean = np.empty(n)
+    for i in range(n):
+        new_mean[i] = mean[i] + Pc[i] * dm / v
+    new_P = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            new_P[i, j] = P[i, j] - Pc[i] * Pc[j] * shrink / vv
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.5 * (new_P[i, j] + new_P[j, i])
+            new_P[i, j] = s
+            new_P[j, i] = s
+    return new_mean, new_P

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from controllers.solnic.filter_kernels import joint_predict, joint_update
+from controllers.solnic.filter_kernels import joint_add_motion, joint_predict, joint_update
 from controllers.solnic.mode2_filter import mode2_transition
 from controllers.solnic.truncation import condition_half_plane
 
@@ -180,22 +180,11 @@ class JointFilter:
         self._since = []
         h = np.zeros(5)
         h[KC:KS + 1] = sign * np.asarray(H_b, dtype=float)
-        Ph = self.P @ h
-        self.z[D] = sign * delta_c
-        self.P[D, :] = Ph
-        self.P[:, D] = Ph
-        var_d = float(h @ Ph) + noise_var
-        if math.isfinite(max_correction) and max_correction > 0:
-            # |Δk_i| ≈ |P_kd,i|·|Δc| / VAR[d] ≤ max_correction
-            need = float(np.max(np.abs(Ph[KC:KS + 1]))) * abs(delta_c) / max_correction
-            var_d = max(var_d, need)
-        self.P[D, D] = var_d
-        self.motion_prior = (float(self.z[D]), float(self.P[D, D]))
-        # x1 ← x1 + d:  J = I + e_x1 e_d'
-        self.z[X1] += self.z[D]
-        self.P[X1, :] += self.P[D, :]               # J P
-        self.P[:, X1] += self.P[:, D]               # (J P) J'
-        self.P = 0.5 * (self.P + self.P.T)
+        # P[d, :] = P h, VAR[d] = h'P h + noise_var, limited as above; then x1 ← x1 + d:
+        # J P J' with J = I + e_x1 e_d'
+        var_d = joint_add_motion(self.z, self.P, h, float(sign * delta_c), float(noise_var),
+                                 float(max_correction), abs(float(delta_c)))
+        self.motion_prior = (self.z.item(D), var_d)
 
     @property
     def motion_mean(self) -> float:
