@@ -28,7 +28,8 @@ import math
 
 import numpy as np
 
-from controllers.solnic.filter_kernels import joint_add_motion, joint_predict, joint_update
+from controllers.solnic.filter_kernels import (joint_add_motion, joint_predict, joint_update,
+                                                quadratic_form2)
 from controllers.solnic.mode2_filter import mode2_transition
 from controllers.solnic.truncation import condition_half_plane
 
@@ -57,20 +58,18 @@ class FrictionView:
 
     def prob_no_motion(self, peak_torque: float) -> float:
         """Prob(k_s ≥ peak torque) under the marginal of k_s."""
-        sd = math.sqrt(max(self._j.P[KS, KS], 0.0))
+        sd = math.sqrt(max(self._j.P.item(KS, KS), 0.0))
         if sd == 0:
             return 1.0 if self.ks >= peak_torque else 0.0
         return 0.5 * math.erfc((peak_torque - self.ks) / (sd * math.sqrt(2.0)))
 
     def motion_variance(self, H_b: np.ndarray) -> float:
         """H_b P_kk H_b' [rad²] (5-1), (5-10)."""
-        H = np.asarray(H_b, dtype=float)
-        return float(H @ self._j.P[KC:KS + 1, KC:KS + 1] @ H)
+        return quadratic_form2(np.asarray(H_b, dtype=float), self._j.P[KC:KS + 1, KC:KS + 1])
 
     def time_variance(self, H_tb: np.ndarray) -> float:
         """H_tb P_kk H_tb' [s²] for t_max (5-11)."""
-        H = np.asarray(H_tb, dtype=float)
-        return float(H @ self._j.P[KC:KS + 1, KC:KS + 1] @ H)
+        return quadratic_form2(np.asarray(H_tb, dtype=float), self._j.P[KC:KS + 1, KC:KS + 1])
 
     def propagate(self, moving_time: float, sigma5_sq: float) -> None:
         """P_kk += σ5²·T_m·[[1, 1], [1, 1]]: the common x5 drift while moving (5-15)."""
