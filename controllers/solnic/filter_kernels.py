@@ -1,18 +1,22 @@
-"""Compiled per-sample steps of :class:`~controllers.solnic.joint_filter.JointFilter`.
+"""Compiled algebra of the solnic filters: the joint EKF's per-sample steps, the friction
+filter's update, the half-plane conditioning.
 
-The joint EKF runs a time update and a measurement update at every sample (10⁴ per 100 s);
-written with numpy on 5×5 arrays each cost ≈ 7–10 µs of dispatch, as one compiled call
-≈ 0.5 µs. Both work in place on the state z (n,) and the covariance P (n, n), n ≥ 2, with
-(x1, x4) in the first two places.
+The joint EKF (:class:`~controllers.solnic.joint_filter.JointFilter`) runs a time update and a
+measurement update at every sample (10⁴ per 100 s); written with numpy on 5×5 arrays each cost
+≈ 7–10 µs of dispatch, as one compiled call ≈ 0.5 µs. :func:`joint_predict`,
+:func:`joint_update` and :func:`joint_add_motion` work in place on the state z (n,) and the
+covariance P (n, n), with (x1, x4) first and d last. The faithful friction filter
+(:class:`~controllers.solnic.friction_filter.FrictionFilter`, (5-16)–(5-18)) and the
+moment-matched half-plane condition (:mod:`controllers.solnic.truncation`) return new arrays.
 
-Round-off. :func:`joint_predict` forms Φ·P and P·Φ' with Φ = [[1, φ12], [0, φ22]] as
-``fma(φ12, p_1j, p_0j)`` (one rounding) and ``φ22·p_1j``: these are the products numpy's
-``Phi @ P[:2, :]`` returns through OpenBLAS's FMA (Haswell/Zen) dgemm kernel, so on such a
-machine the kernel reproduces the numpy formulation bit for bit (checked over 10⁴ samples of
-closed loop); with a different BLAS kernel numpy itself would differ at round-off, the kernel
-does not (``llvm.fma`` is exact IEEE everywhere). Φ·x̂ (a gemv in numpy, no FMA) and the
-update's products are single multiplications and additions in numpy's order; numba does not
-contract them (no fastmath), so they are bit-identical too.
+Round-off: the kernels reproduce the numpy formulation they replace bit for bit on the machine
+this was written on (OpenBLAS 0.3.31, Haswell/Zen kernels; checked on every internal of
+60 closed-loop runs of 100 s): numpy's 2-term matrix products through that BLAS are one fused
+multiply-add (``Phi @ P``: ``fma(φ12, p_1j, p_0j)``; the 2×2 forms listed above the friction
+kernels), its dot products a chain of FMAs, its 5×5 gemv with the sparse h of a pulse and all
+elementwise numpy operations single roundings in numpy's order; numba does not contract
+``a*b + c`` by itself (no fastmath), and ``llvm.fma`` is exact IEEE everywhere. With another
+BLAS kernel numpy itself would differ at round-off; the kernels would not.
 """
 
 from __future__ import annotations

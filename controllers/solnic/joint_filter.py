@@ -179,8 +179,9 @@ class JointFilter:
         self._since = []
         h = np.zeros(5)
         h[KC:KS + 1] = sign * np.asarray(H_b, dtype=float)
-        # P[d, :] = P h, VAR[d] = h'P h + noise_var, limited as above; then x1 ← x1 + d:
-        # J P J' with J = I + e_x1 e_d'
+        # P[d, :] = P h, VAR[d] = h'P h + noise_var, at least max|P_kd,i|·|Δc|/max_correction
+        # (|Δk_i| ≈ |P_kd,i|·|Δc|/VAR[d] ≤ max_correction); then x1 ← x1 + d: J P J' with
+        # J = I + e_x1 e_d' (compiled, :func:`~controllers.solnic.filter_kernels.joint_add_motion`)
         var_d = joint_add_motion(self.z, self.P, h, float(sign * delta_c), float(noise_var),
                                  float(max_correction), abs(float(delta_c)))
         self.motion_prior = (self.z.item(D), var_d)
