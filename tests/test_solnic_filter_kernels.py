@@ -90,3 +90,58 @@ def test_friction_update_clip_shrinks_a_fallacious_raise_of_ks():
     assert k_new[1] == pytest.approx(2.0 + K1 * r, rel=1e-12)
     h1_prev = 2.0 * h1                       # one shrink fewer would still have passed the cap
     assert 2.0 + P[1, 1] * h1_prev / (P[1, 1] * h1_prev ** 2 + R) * r > cap
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_half_plane_kernels_match_the_regression_formulas(seed):
+    """General c (not only the ±1 constraints): moments c·μ, c'Pc and the regression of x on s."""
+    from controllers.solnic.filter_kernels import half_plane_apply, half_plane_moments
+
+    rng = np.random.default_rng(200 + seed)
+    P = _spd(rng, 5, 0.3)
+    mean, c = rng.standard_normal(5), rng.standard_normal(5)
+    m, v = half_plane_moments(mean, P, c)
+    assert m == pytest.approx(c @ mean, rel=1e-12, abs=1e-14)
+    assert v == pytest.approx(c @ P @ c, rel=1e-12)
+    mean_s, var_s = m - 0.3 * np.sqrt(v), 0.6 * v
+    new_mean, new_P = half_plane_apply(mean, P, c, m, v, mean_s, var_s)
+    Pc = P @ c
+    np.testing.assert_allclose(new_mean, mean + Pc * (mean_s - m) / v, rtol=1e-12, atol=1e-14)
+    ref = P - np.outer(Pc, Pc) * (v - var_s) / v**2
+    np.testing.assert_allclose(new_P, ref, rtol=1e-12, atol=1e-14)
+    # the conditioned s has the requested moments
+    assert c @ new_mean == pytest.approx(mean_s, rel=1e-10, abs=1e-12)
+    assert c @ new_P @ c == pytest.approx(var_s, rel=1e-10)
+
+
+@pytest.mark.parametrize("limit", [np.inf, 1e-3])
+def test_joint_add_motion_matches_the_augmented_matrix_formulas(limit):
+    """d = h·(z − ẑ) + d̂ + n replaces z[4] (P[4,:] = P h, VAR[d] = h'Ph + VAR[n], raised to
+    max|P_kd|·|Δc|/limit), then x1 ← x1 + d: J P J' with J = I + e_0 e_4'."""
+    from controllers.solnic.filter_kernels import joint_add_motion
+
+    rng = np.random.default_rng(7)
+    scale = np.array([1e-5, 1e-4, 0.5, 0.7, 1e-5])
+    P = _spd(rng, 5, 1.0) * np.outer(scale, scale)
+    z = rng.standard_normal(5) * scale
+    h = np.zeros(5)
+    h[2:4] = [3e-6, -2e-6]
+    d_mean, vn, dc = -4e-6, 1e-13, 4e-6
+    Ph = P @ h
+    var_d = h @ Ph + vn
+    if np.isfinite(limit):
+        var_d = max(var_d, np.abs(Ph[2:4]).max() * dc / limit)
+        assert var_d > 10 * (h @ Ph + vn)          # the limit is what sets VAR[d] here
+    P2 = P.copy()
+    P2[4, :] = P2[:, 4] = Ph
+    P2[4, 4] = var_d
+    J = np.eye(5)
+    J[0, 4] = 1.0
+    z_ref = z.copy()
+    z_ref[4] = d_mean
+    z_ref = J @ z_ref
+    P_ref = J @ P2 @ J.T
+    got = joint_add_motion(z, P, h, d_mean, vn, limit, dc)
+    assert got == pytest.approx(var_d, rel=1e-12)
+    np.testing.assert_allclose(z, z_ref, rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-12, atol=1e-12 * np.abs(P_ref).max())
