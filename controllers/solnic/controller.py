@@ -224,8 +224,7 @@ class SolnicController(Controller):
             self._samples_since_launch += 1
         else:
             self.counts["samples_rejected"] += 1
-        m = self.mode2
-        self._posterior = (m.x1, m.x4, m.p11, m.p14, m.p44)
+        self._posterior = self.mode2.moments()
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
@@ -386,8 +385,7 @@ class SolnicController(Controller):
 
     def _evaluate(self, t_b: float) -> None:
         c, self._pending = self._pending, None
-        x1_b, x4_b = (float(v) for v in self.mode2.x)
-        P = self.mode2.P
+        x1_b, x4_b = self.mode2.x1, self.mode2.x4
         dt = t_b - c.t_a
         dc_e = x1_b - c.x1_a + x4_b * dt                                            # (5-13)
         if self.joint is not None:
@@ -396,6 +394,7 @@ class SolnicController(Controller):
         elif self.options.dce_variance == "exact":
             var_e = self.mode2.motion_variance(t_b)                                 # (5-14)
         else:
+            P = self.mode2.P
             var_e = P[0, 0] + c.var_x1_a + 2.0 * P[0, 1] * dt + P[1, 1] * dt**2    # (5-14)
         var_meas = var_e
         dc_meas = dc_e
@@ -486,7 +485,7 @@ class SolnicController(Controller):
     def _reoptimise(self) -> None:
         """Costs of the three sizes with the current estimates (6-1)–(6-5); (6-10), (6-9)."""
         sch, o, p = self.schedule, self.options, self.params
-        x4 = float(self.mode2.x[1])
+        x4 = self.mode2.x4
         costs, motions = [], []
         for size in (SMALL, MEDIUM, LARGE):
             dtu = sch.normal_dtu(size)
@@ -512,7 +511,7 @@ class SolnicController(Controller):
             var_dc = var_x1 = 0.0
             if o.cost_variances:
                 var_dc = noise_var + (self.friction.motion_variance(pred.H_b) if gp is None else 0.0)
-                var_x1 = float(self.mode2.P[0, 0])
+                var_x1 = self.mode2.p11
             costs.append(cycle_cost(dtu, dc, x4, o.a_c, p, var_dc, var_x1).total)
             motions.append(dc)
         ratio = motions[2] / motions[0] if motions[0] > 0 else math.inf

@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.solnic.filter_kernels import (friction_covariance, friction_gain,
+                                                friction_update_clip, quadratic_form2)
 from controllers.solnic.truncation import condition_half_plane
 
 __all__ = ["FrictionFilter", "FrictionUpdate"]
@@ -94,33 +96,31 @@ class FrictionFilter:
 
     @property
     def kc(self) -> float:
-        return float(self.k[0])
+        return self.k.item(0)
 
     @property
     def ks(self) -> float:
-        return float(self.k[1])
+        return self.k.item(1)
 
     def propagate(self, moving_time: float, sigma5_sq: float) -> None:
         """P = Φ P Φ' + COV[N] with Φ = I and the common x5 drift over ``moving_time``  (5-15)."""
         if moving_time > 0 and sigma5_sq > 0:
-            self.P = self.P + sigma5_sq * moving_time * np.ones((2, 2))
+            self.P = self.P + sigma5_sq * moving_time
 
     def prob_no_motion(self, peak_torque: float) -> float:
         """Prob(Δc = 0) = Prob(ks ≥ peak torque) under k̂s ~ N(k̂s, P_ss)  (used in (5-9))."""
-        sd = math.sqrt(max(self.P[1, 1], 0.0))
+        sd = math.sqrt(max(self.P.item(1, 1), 0.0))
         if sd == 0:
             return 1.0 if self.ks >= peak_torque else 0.0
         return 0.5 * math.erfc((peak_torque - self.ks) / (sd * math.sqrt(2.0)))
 
     def motion_variance(self, H_b: np.ndarray) -> float:
         """H_b P_b H_b', the conditional variance of Δc_p (5-1), (5-10) [rad²]."""
-        H = np.asarray(H_b, dtype=float)
-        return float(H @ self.P @ H)
+        return quadratic_form2(np.asarray(H_b, dtype=float), self.P)
 
     def time_variance(self, H_tb: np.ndarray) -> float:
         """H_tb P_b H_tb' [s²], for t_max (5-11)."""
-        H = np.asarray(H_tb, dtype=float)
-        return float(H @ self.P @ H)
+        return quadratic_form2(np.asarray(H_tb, dtype=float), self.P)
 
     def condition(self, c: np.ndarray, bound: float, always: bool = True) -> None:
         """Condition N(k̂, P_b) on c·k ≤ ``bound``: moment-matched truncated Gaussian.
@@ -148,21 +148,6 @@ class FrictionFilter:
         kc = min(max(self.k[0], 0.0), ks_cap)
         self.k = np.array([kc, min(max(self.k[1], kc), ks_cap)])
 
-    def _gain(self, H: np.ndarray, residual: float, R: float) -> tuple[np.ndarray, float, float]:
-        """K (5-16) with R possibly raised to a fictitious variance to cap the correction."""
-        PH = self.P @ H
-        S0 = float(H @ PH)
-        R_used = R
-        limit = self.max_correction_fraction * max(self.ks, 1e-12)
-        if math.isfinite(limit):
-            # |Δk_i| = |PH_i·r|/(S0 + R) ≤ limit  ⇔  R ≥ |PH_i·r|/limit − S0
-            need = float(np.max(np.abs(PH * residual))) / limit - S0
-            R_used = max(R, need)
-        S = S0 + R_used
-        if not S > 0:
-            return np.zeros(2), S0 + R, R_used
-        return PH / S, S, R_used
-
     def update(self, H_b, residual: float, meas_var: float, peak_torque: float) -> FrictionUpdate:
         """One modified-Kalman correction (5-16)–(5-18) with the section-5.3 constraints.
 
@@ -178,49 +163,30 @@ class FrictionFilter:
         peak_torque : float
             The largest torque applied in the cycle; k̂s must not end above it.
         """
-        H = np.array(H_b, dtype=float)
-        if not (np.all(np.isfinite(H)) and math.isfinite(residual) and meas_var >= 0):
+        H = np.array(H_b, dtype=float).reshape(2)
+        h0, h1 = H.item(0), H.item(1)
+        residual, meas_var = float(residual), float(meas_var)
+        if not (math.isfinite(h0) and math.isfinite(h1) and math.isfinite(residual) and meas_var >= 0):
             raise ValueError("H_b, residual and meas_var must be finite, meas_var >= 0")
         ks_cap = min(peak_torque * (1.0 - 1e-6), self.u_max * (1.0 - 1e-9))
+        limit = self.max_correction_fraction * max(self.ks, 1e-12)
         if self.constraints == "distribution":
-            K, S, R_used = self._gain(H, residual, meas_var)
+            K0, K1, S, R_used = friction_gain(self.P, h0, h1, residual, meas_var, limit)
             before = self.k.copy()
-            self.k = self.k + K * residual                                  # (5-17)
-            self.P = (np.eye(2) - self.a * np.outer(K, H)) @ self.P         # (5-18)
-            self.P = 0.5 * (self.P + self.P.T)
+            self.k = self.k + np.array([K0, K1]) * residual                 # (5-17)
+            self.P = friction_covariance(self.P, K0, K1, h0, h1, self.a)    # (5-18)
             self._apply_distribution_constraints(peak_torque)
             self.n_updates += 1
             delta = (float(self.k[0] - before[0]), float(self.k[1] - before[1]))
-            return FrictionUpdate(residual=float(residual), innovation_var=float(S),
+            return FrictionUpdate(residual=residual, innovation_var=float(S),
                                   fictitious_var=float(R_used), shrinks=0, clipped=False, delta=delta)
-        shrinks = 0
-        while True:
-            K, S, R_used = self._gain(H, residual, meas_var)
-            k_new = self.k + K * residual                                   # (5-17)
-            raising = K[1] * residual > 0.0         # only a raise of k̂s can be fallacious
-            if k_new[1] <= ks_cap or not raising or shrinks >= self.max_shrinks or H[1] == 0.0:
-                break
-            H[1] *= 0.5                                                     # shrink ∂Δc/∂k̂s
-            shrinks += 1
-        P_new = (np.eye(2) - self.a * np.outer(K, H)) @ self.P              # (5-18)
-        P_new = 0.5 * (P_new + P_new.T)
-        clipped = False
-        if k_new[1] > ks_cap:
-            k_new[1] = ks_cap
-            clipped = True
-        if k_new[0] < 0.0:
-            k_new[0] = 0.0
-            clipped = True
-        if k_new[1] < k_new[0]:                     # k̂s is not reduced below k̂c
-            k_new[1] = k_new[0]
-            clipped = True
-        if k_new[0] > ks_cap:                       # keep a valid plant model
-            k_new[0] = k_new[1] = ks_cap
-            clipped = True
+        # shrink ∂Δc/∂k̂s while the raise of k̂s is fallacious, then (5-18) and the clips
+        k_new, P_new, S, R_used, shrinks, clipped = friction_update_clip(
+            self.k, self.P, H, residual, meas_var, self.a, limit, ks_cap, self.max_shrinks)
         delta = (float(k_new[0] - self.k[0]), float(k_new[1] - self.k[1]))
         self.k = k_new
         self.P = P_new
         self.n_updates += 1
-        return FrictionUpdate(residual=float(residual), innovation_var=float(S),
-                              fictitious_var=float(R_used), shrinks=shrinks, clipped=clipped,
+        return FrictionUpdate(residual=residual, innovation_var=float(S),
+                              fictitious_var=float(R_used), shrinks=int(shrinks), clipped=bool(clipped),
                               delta=delta)

@@ -28,6 +28,8 @@ import math
 
 import numpy as np
 
+from controllers.solnic.filter_kernels import (joint_add_motion, joint_predict, joint_update,
+                                                quadratic_form2)
 from controllers.solnic.mode2_filter import mode2_transition
 from controllers.solnic.truncation import condition_half_plane
 
@@ -44,11 +46,11 @@ class FrictionView:
 
     @property
     def kc(self) -> float:
-        return float(self._j.z[KC])
+        return self._j.z.item(KC)
 
     @property
     def ks(self) -> float:
-        return float(self._j.z[KS])
+        return self._j.z.item(KS)
 
     @property
     def P(self) -> np.ndarray:
@@ -56,20 +58,18 @@ class FrictionView:
 
     def prob_no_motion(self, peak_torque: float) -> float:
         """Prob(k_s ≥ peak torque) under the marginal of k_s."""
-        sd = math.sqrt(max(self._j.P[KS, KS], 0.0))
+        sd = math.sqrt(max(self._j.P.item(KS, KS), 0.0))
         if sd == 0:
             return 1.0 if self.ks >= peak_torque else 0.0
         return 0.5 * math.erfc((peak_torque - self.ks) / (sd * math.sqrt(2.0)))
 
     def motion_variance(self, H_b: np.ndarray) -> float:
         """H_b P_kk H_b' [rad²] (5-1), (5-10)."""
-        H = np.asarray(H_b, dtype=float)
-        return float(H @ self._j.P[KC:KS + 1, KC:KS + 1] @ H)
+        return quadratic_form2(np.asarray(H_b, dtype=float), self._j.P[KC:KS + 1, KC:KS + 1])
 
     def time_variance(self, H_tb: np.ndarray) -> float:
         """H_tb P_kk H_tb' [s²] for t_max (5-11)."""
-        H = np.asarray(H_tb, dtype=float)
-        return float(H @ self._j.P[KC:KS + 1, KC:KS + 1] @ H)
+        return quadratic_form2(np.asarray(H_tb, dtype=float), self._j.P[KC:KS + 1, KC:KS + 1])
 
     def propagate(self, moving_time: float, sigma5_sq: float) -> None:
         """P_kk += σ5²·T_m·[[1, 1], [1, 1]]: the common x5 drift while moving (5-15)."""
@@ -107,7 +107,7 @@ class JointFilter:
         self.P[KC:KS + 1, KC:KS + 1] = np.asarray(Pk0, dtype=float).reshape(2, 2)
         self.u_max = float(u_max)
         self.t = float(t0)
-        self._cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._cache: dict[float, tuple[float, float, float, float, float]] = {}
         self.friction = FrictionView(self)
         self.n_motion_updates = 0
         self.motion_prior = (math.nan, math.nan)
@@ -115,11 +115,11 @@ class JointFilter:
         self._since: list[tuple[float, float]] = []      # samples since the last pulse
 
     # -- the mode-2 filter's API --------------------------------------------------------
-    x1 = property(lambda self: float(self.z[X1]))
-    x4 = property(lambda self: float(self.z[X4]))
-    p11 = property(lambda self: float(self.P[X1, X1]))
-    p14 = property(lambda self: float(self.P[X1, X4]))
-    p44 = property(lambda self: float(self.P[X4, X4]))
+    x1 = property(lambda self: self.z.item(X1))
+    x4 = property(lambda self: self.z.item(X4))
+    p11 = property(lambda self: self.P.item(X1, X1))
+    p14 = property(lambda self: self.P.item(X1, X4))
+    p44 = property(lambda self: self.P.item(X4, X4))
 
     @property
     def x(self) -> np.ndarray:
@@ -130,43 +130,41 @@ class JointFilter:
         return self.P[:2, :2].copy()
 
     def drift_std(self) -> float:
-        return math.sqrt(max(self.P[X4, X4], 0.0))
+        return math.sqrt(max(self.P.item(X4, X4), 0.0))
 
     def predict(self, t: float) -> None:
         """(x1, x4) over t − self.t with Φ (3-22) and COV[N] (4-11); k and d constant."""
         h = t - self.t
-        if h < -1e-12:
-            raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
         if h <= 0:
+            if h < -1e-12:
+                raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
             return
         hit = self._cache.get(h)
         if hit is None:
-            hit = mode2_transition(h, self.tau4, self.sigma4_sq)
+            Phi, Q = mode2_transition(h, self.tau4, self.sigma4_sq)
+            hit = (float(Phi[0, 1]), float(Phi[1, 1]), float(Q[0, 0]), float(Q[0, 1]), float(Q[1, 1]))
             if len(self._cache) >= 256:
                 self._cache.clear()
             self._cache[h] = hit
-        Phi, Q = hit
-        self.z[:2] = Phi @ self.z[:2]
-        self.P[:2, :] = Phi @ self.P[:2, :]
-        self.P[:, :2] = self.P[:, :2] @ Phi.T
-        self.P[:2, :2] += Q
+        joint_predict(self.z, self.P, *hit)
         self.t = float(t)
 
     def update(self, y: float) -> float:
         """y = x1 + w1: the whole state is corrected (k through its correlation with x1)."""
+        y = float(y)
         if self._snapshot is not None:
-            self._since.append((self.t, float(y)))
-        innovation = float(y) - self.z[X1]
-        col = self.P[:, X1].copy()
-        S = col[X1] + self.R
-        K = col / S
-        self.z += K * innovation
-        self.P -= np.outer(K, col)
-        self.P = 0.5 * (self.P + self.P.T)
+            self._since.append((self.t, y))
         z = self.z
-        if not 0.0 <= z[KC] <= z[KS] < self.u_max:     # the sample pushed k out of the valid set
+        innovation = joint_update(z, self.P, self.R, y)
+        kc = z.item(KC)
+        if not 0.0 <= kc <= z.item(KS) < self.u_max:  # the sample pushed k out of the valid set
             self._valid()
         return innovation
+
+    def moments(self) -> tuple[float, float, float, float, float]:
+        """(x̂1, x̂4, P11, P14, P44) as floats."""
+        z, P = self.z, self.P
+        return z.item(X1), z.item(X4), P.item(X1, X1), P.item(X1, X4), P.item(X4, X4)
 
     # -- pulses --------------------------------------------------------------------------
     def add_motion(self, sign: int, delta_c: float, H_b: np.ndarray, noise_var: float,
@@ -181,22 +179,12 @@ class JointFilter:
         self._since = []
         h = np.zeros(5)
         h[KC:KS + 1] = sign * np.asarray(H_b, dtype=float)
-        Ph = self.P @ h
-        self.z[D] = sign * delta_c
-        self.P[D, :] = Ph
-        self.P[:, D] = Ph
-        var_d = float(h @ Ph) + noise_var
-        if math.isfinite(max_correction) and max_correction > 0:
-            # |Δk_i| ≈ |P_kd,i|·|Δc| / VAR[d] ≤ max_correction
-            need = float(np.max(np.abs(Ph[KC:KS + 1]))) * abs(delta_c) / max_correction
-            var_d = max(var_d, need)
-        self.P[D, D] = var_d
-        self.motion_prior = (float(self.z[D]), float(self.P[D, D]))
-        # x1 ← x1 + d:  J = I + e_x1 e_d'
-        self.z[X1] += self.z[D]
-        self.P[X1, :] += self.P[D, :]               # J P
-        self.P[:, X1] += self.P[:, D]               # (J P) J'
-        self.P = 0.5 * (self.P + self.P.T)
+        # P[d, :] = P h, VAR[d] = h'P h + noise_var, at least max|P_kd,i|·|Δc|/max_correction
+        # (|Δk_i| ≈ |P_kd,i|·|Δc|/VAR[d] ≤ max_correction); then x1 ← x1 + d: J P J' with
+        # J = I + e_x1 e_d' (compiled, :func:`~controllers.solnic.filter_kernels.joint_add_motion`)
+        var_d = joint_add_motion(self.z, self.P, h, float(sign * delta_c), float(noise_var),
+                                 float(max_correction), abs(float(delta_c)))
+        self.motion_prior = (self.z.item(D), var_d)
 
     @property
     def motion_mean(self) -> float:

@@ -173,14 +173,23 @@ class Mode2Filter:
             raise ValueError(f"cannot predict backwards: t={t!r} < filter time {self.t!r}")
         if h <= 0:
             return
-        f12, f22 = self._transition(h)[:2]
+        hit = self._cache.get(h)
+        f12, f22, q11, q14, q44, _ = hit if hit is not None else self._transition(h)
         if self._anchor is not None:
             c0, c1 = self._anchor
             self._anchor = (c0 + f12 * c1, f22 * c1)
         if self._motion is not None:
             m0, m1 = self._motion
             self._motion = (m0 + f12 * m1, f22 * m1)
-        self.x1, self.x4, self.p11, self.p14, self.p44 = self._propagated(h)
+        # :meth:`_propagated` written out (this runs at every sample)
+        x4, p14, p44 = self.x4, self.p14, self.p44
+        self.x1 += f12 * x4
+        self.x4 = f22 * x4
+        a11 = self.p11 + f12 * p14
+        a12 = p14 + f12 * p44
+        self.p11 = a11 + f12 * a12 + q11
+        self.p14 = f22 * a12 + q14
+        self.p44 = f22 * f22 * p44 + q44
         self.t = float(t)
 
     def set_anchor(self) -> None:
@@ -256,6 +265,10 @@ class Mode2Filter:
             return math.nan, math.inf
         R = 1.0 / info
         return R * (self.motion_mean / self.motion_var - prior_mean / prior_var), R
+
+    def moments(self) -> tuple[float, float, float, float, float]:
+        """(x̂1, x̂4, P11, P14, P44) as floats."""
+        return self.x1, self.x4, self.p11, self.p14, self.p44
 
     def drift_std(self) -> float:
         """√P44, the std of x̂4 [rad/s]."""

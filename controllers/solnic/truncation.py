@@ -2,7 +2,8 @@
 
 For x ~ N(μ, P) and the constraint c·x ≤ b: with s = c·x ~ N(m, v), m = c·μ, v = c'Pc,
 α = (b − m)/√v and λ = φ(α)/Φ(α), the truncated s has E[s] = m − √v·λ and
-VAR[s] = v(1 − αλ − λ²); μ and P follow by the linear regression of x on s.
+VAR[s] = v(1 − αλ − λ²); μ and P follow by the linear regression of x on s. The matrix
+algebra is compiled (:mod:`controllers.solnic.filter_kernels`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import math
 
 import numpy as np
 from scipy.special import log_ndtr
+
+from controllers.solnic.filter_kernels import half_plane_apply, half_plane_moments
 
 __all__ = ["condition_half_plane"]
 
@@ -23,11 +26,9 @@ def condition_half_plane(mean: np.ndarray, P: np.ndarray, c: np.ndarray, bound: 
     ``always=False`` — a mean already inside the half-plane.
     """
     c = np.asarray(c, dtype=float)
-    Pc = P @ c
-    v = float(c @ Pc)
+    m, v = half_plane_moments(mean, P, c)
     if not v > 0:
         return None
-    m = float(c @ mean)
     sd = math.sqrt(v)
     alpha = (bound - m) / sd
     if alpha > 8.0 or (alpha >= 0.0 and not always):     # no information, or mean inside
@@ -35,6 +36,4 @@ def condition_half_plane(mean: np.ndarray, P: np.ndarray, c: np.ndarray, bound: 
     lam = math.exp(-0.5 * alpha * alpha - 0.5 * math.log(2 * math.pi) - float(log_ndtr(alpha)))
     mean_s = m - sd * lam
     var_s = v * max(1.0 - alpha * lam - lam * lam, 1e-6)
-    new_mean = mean + Pc * (mean_s - m) / v
-    new_P = P - np.outer(Pc, Pc) * (v - var_s) / (v * v)
-    return new_mean, 0.5 * (new_P + new_P.T)
+    return half_plane_apply(mean, P, c, m, v, mean_s, var_s)
