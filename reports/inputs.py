@@ -311,6 +311,38 @@ def _read_json(path: Path) -> Any:
         raise ValueError(f"{path.name} is not valid JSON: {exc}") from exc
 
 
+def _series_read(files: Mapping[str, Path], results: pd.DataFrame, config: Any) -> set[str]:
+    """The series cells the report reads, out of ``files`` (cell → path).
+
+    The claims read the series of the selection's identification controller itself on the
+    thesis scenario (:func:`reports.claims.evaluate_claims`), the typical run is the configured
+    cell or the first in :func:`reports.build._typical_run`'s order, and a series without a
+    results row is attributed by name. Only those are read: a frontier run stores thousands of
+    series (3.8 GB for the full frontier) that no part of the report shows. Without usable
+    results or with a malformed selection every file is read (the report then says what it can).
+    """
+    if results is None or results.empty or "cell" not in results.columns or not isinstance(config, dict):
+        return set(files)
+    from reports.claims import Selection, _plain        # claims imports this module
+
+    try:
+        sel = Selection.from_config(config)
+    except (TypeError, ValueError):
+        return set(files)
+    known = set(results["cell"].astype(str))
+    keep = {c for c in files if c not in known}
+    used = results.loc[_plain(results, sel.solnic) & (results["scenario"] == sel.thesis_scenario), "cell"]
+    keep |= set(used.astype(str)) & set(files)
+    if sel.typical_cell in files:
+        keep.add(sel.typical_cell)
+    stored = results[results["cell"].astype(str).isin(files)]
+    if not stored.empty:
+        first = min(zip(stored["controller"] != sel.solnic, stored["scenario"] != sel.thesis_scenario,
+                        stored["seed"].astype(int), stored["cell"].astype(str)))
+        keep.add(first[3])
+    return keep
+
+
 def load_inputs(out_dir: Path | str) -> ReportInputs:
     """Read whatever exists in ``out_dir`` (see the module docstring) into :class:`ReportInputs`.
 
@@ -334,17 +366,18 @@ def load_inputs(out_dir: Path | str) -> ReportInputs:
         notes.append("No results.parquet or results.csv: the benchmark matrix was not run.")
     results = normalise_results(results)
 
+    config = _read_json(out_dir / "config.json") if (out_dir / "config.json").exists() else {}
     series: dict[str, pd.DataFrame] = {}
     sdir = out_dir / "series"
     if sdir.is_dir():
-        for p in sorted(sdir.glob("*.parquet")):
-            series[p.stem] = pd.read_parquet(p)
+        files = {p.stem: p for p in sorted(sdir.glob("*.parquet"))}
+        for cell in sorted(_series_read(files, results, config)):
+            series[cell] = pd.read_parquet(files[cell])
 
     bound = pd.read_csv(out_dir / "bound.csv") if (out_dir / "bound.csv").exists() else None
     hunting = (pd.read_csv(out_dir / "hunting.csv") if (out_dir / "hunting.csv").exists()
                else None)
     speed = _read_json(out_dir / "speed.json") if (out_dir / "speed.json").exists() else None
-    config = _read_json(out_dir / "config.json") if (out_dir / "config.json").exists() else {}
     meta = _read_json(out_dir / "meta.json") if (out_dir / "meta.json").exists() else {}
     if not (out_dir / "config.json").exists():
         notes.append("No config.json: the configuration of this run is unknown.")

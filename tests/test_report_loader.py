@@ -212,3 +212,36 @@ def test_write_series_round_trip_and_validation(tmp_path):
         write_series(tmp_path, "c", frame.iloc[::-1])
     with pytest.raises(ValueError, match="plain file name"):
         write_series(tmp_path, "../c", frame)
+
+
+def test_only_the_series_the_report_reads_are_loaded(tmp_path):
+    """A frontier run stores thousands of series; the loader reads the identification
+    controller's own thesis series (the claims), the typical run and unattributed files only,
+    and the claims come out the same as with every series in memory."""
+    from reports.claims import Selection, evaluate_claims
+    from reports.inputs import attribute_series
+    from reports.limits import limits_from_config
+
+    write_synthetic_run(tmp_path, series_seeds=(0, 1))
+    frame = pd.read_parquet(tmp_path / "series" / f"{cell_id('solnic', 'thesis', 0)}.parquet")
+    unused = [cell_id("solnic", "quiet-friction", 0), cell_id("solnic-high-cost", "thesis", 0),
+              cell_id("linear", "thesis", 1)]
+    for cell in [*unused, "orphan__thesis__s9"]:
+        frame.to_parquet(tmp_path / "series" / f"{cell}.parquet", index=False)
+    inputs = load_inputs(tmp_path)
+    assert set(inputs.series) == {cell_id("solnic", "thesis", 0), cell_id("solnic", "thesis", 1),
+                                  "orphan__thesis__s9"}
+    every = attribute_series({p.stem: pd.read_parquet(p) for p in (tmp_path / "series").glob("*.parquet")},
+                             inputs.results)
+    assert len(every) == 6
+    limits, sel = limits_from_config(inputs.config), Selection.from_config(inputs.config)
+    claims = [evaluate_claims(results=inputs.results, limits=limits, series=s, bound=inputs.bound,
+                              hunting=inputs.hunting, speed=inputs.speed, selection=sel, warmup_s=20.0)
+              for s in (inputs.series, every)]
+    assert [(r.key, r.measured, r.verdict, r.basis) for r in claims[0]] == \
+        [(r.key, r.measured, r.verdict, r.basis) for r in claims[1]]
+    # a configured typical cell is read even when no claim uses it
+    config = json.loads((tmp_path / "config.json").read_text())
+    config["report"] = {"typical_cell": unused[2]}
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    assert unused[2] in load_inputs(tmp_path).series
