@@ -24,6 +24,8 @@ from controllers.base import Controller
 from plant import PlantParams
 from plant.reference import event_driven, schedule_from_commands
 
+pytestmark = pytest.mark.slow
+
 DURATION_S, WARMUP_S = 20.0, 5.0
 SHORT = {"dithered": (6.0, 2.0)}                    # (duration, warm-up) [s]
 PLANTS = {"table-2-1": PlantParams(),

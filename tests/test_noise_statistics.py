@@ -16,6 +16,8 @@ from plant.randomness import NoiseStream
 from plant.reference import fixed_step_pulses
 from plant.state import X1, X4, SimOptions, initial_state
 
+pytestmark = pytest.mark.slow
+
 P0 = PlantParams()
 N_SEEDS = 2000
 DT_U = 1.2e-3

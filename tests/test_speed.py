@@ -10,6 +10,8 @@ from typer.testing import CliRunner
 from bench.speed import SpeedConfig, _fixed_step_at, _lower_bound, _tolerance_at, speed_command
 from reports.inputs import normalise_speed
 
+pytestmark = pytest.mark.slow
+
 
 def _speed_app() -> typer.Typer:
     """The lead's CLI if it registers ``speed``, otherwise a one-command app around speed_command."""
