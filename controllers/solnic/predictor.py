@@ -190,6 +190,14 @@ def _conditional_kernel(ks, kc, dt_u, U, t3, a, h, brake, margin, s2, cap, min_r
     return r, ks, kc, 0
 
 
+def _check(sign: int, dt_u: float) -> None:
+    """The arguments every prediction checks (ValueError naming the argument)."""
+    if sign not in (1, -1):
+        raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+    if not (dt_u >= 0 and math.isfinite(dt_u)):
+        raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
+
+
 class Predictor:
     """Pulse predictions from the estimated plant, with per-(k̂s, k̂c, Δt_u) caching.
 
@@ -300,10 +308,7 @@ class Predictor:
 
     def predict(self, ks: float, kc: float, dt_u: float, sign: int = 1) -> PulsePrediction:
         """Δc_p, t_nominal and the quasipartials H_b (5-2), H_tb (5-12) for one pulse."""
-        if sign not in (1, -1):
-            raise ValueError(f"sign must be +1 or -1, got {sign!r}")
-        if not (dt_u >= 0 and math.isfinite(dt_u)):
-            raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
+        _check(sign, dt_u)
         if self._compiled:
             r = _predict_kernel(float(ks), float(kc), float(dt_u), *self._constants, *self._brake_args())
             return self._prediction(r, ks, kc, dt_u, sign)
@@ -351,10 +356,7 @@ class Predictor:
         if hit is not None:
             return hit
         if self._compiled:
-            if sign not in (1, -1):
-                raise ValueError(f"sign must be +1 or -1, got {sign!r}")
-            if not (dt_u >= 0 and math.isfinite(dt_u)):
-                raise ValueError(f"dt_u must be a finite number >= 0, got {dt_u!r}")
+            _check(sign, dt_u)
             r, ks_u, kc_u, runs = _conditional_kernel(float(ks), float(kc), float(dt_u), *self._constants,
                                                       *self._brake_args(), float(shrink))
             self.n_model_runs += runs
