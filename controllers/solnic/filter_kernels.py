@@ -72,6 +72,17 @@ def joint_predict(z, P, f12, f22, q11, q14, q44):
 
 
 @njit(cache=True)
+def _symmetrize(P):
+    """P ← (P + P')/2 in place, element by element (numpy's ``0.5 * (P + P.T)``)."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+
+
+@njit(cache=True)
 def joint_update(z, P, R, y):
     """In place: the Kalman update with y = x1 + w1, VAR[w1] = R [rad²]; returns y − x̂1.
 
@@ -88,11 +99,7 @@ def joint_update(z, P, R, y):
         z[i] += k * innovation
         for j in range(n):
             P[i, j] -= k * col[j]
-    for i in range(n):
-        for j in range(i, n):
-            s = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = s
-            P[j, i] = s
+    _symmetrize(P)
     return innovation
 
 
@@ -234,11 +241,7 @@ def joint_add_motion(z, P, h, d_mean, noise_var, max_correction, abs_dc):
         P[0, j] += P[D, j]
     for i in range(n):
         P[i, 0] += P[i, D]
-    for i in range(n):
-        for j in range(i, n):
-            s = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = s
-            P[j, i] = s
+    _symmetrize(P)
     return var_d
 
 
