@@ -24,23 +24,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
-__all__ = ["fma", "joint_predict", "joint_update", "quadratic_form2", "friction_gain",
+from controllers._fma import fma          # a·b + c with one rounding (llvm.fma.f64)
+
+__all__ = ["joint_predict", "joint_update", "quadratic_form2", "friction_gain",
            "friction_covariance", "friction_update_clip", "joint_add_motion", "half_plane_moments",
            "half_plane_apply"]
-
-
-@intrinsic
-def fma(typingctx, a, b, c):
-    """a·b + c with one rounding (``llvm.fma.f64``), float64 only."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-
-    return sig, codegen
 
 
 @njit(cache=True)
