@@ -179,8 +179,7 @@ class Cell:
         """What the user asked for: controller, scenario, seed, run length, plugins (no code)."""
         return {
             "controller": {"name": self.controller.name, **self.controller.to_json()},
-            "scenario": {"name": self.scenario.name, "base": self.scenario.base,
-                         "plant": dataclasses.asdict(self.scenario.params)},
+            "scenario": self.scenario.definition(),
             "seed": self.seed, "duration_s": self.duration_s, "warmup_s": self.warmup_s,
             "plugins": list(self.plugins),
         }
@@ -243,6 +242,9 @@ def _base_row(cell: Cell) -> dict[str, Any]:
         "controller_family": cell.controller.family,
         "scenario_base": cell.scenario.base, "duration_s": cell.duration_s, "warmup_s": cell.warmup_s,
     }
+    if not cell.scenario.default_plant:     # Acker's plant, told exactly: the columns it always had
+        row["plant_family"] = cell.scenario.family
+        row["model_exact"] = cell.scenario.model is None and not cell.scenario.mismatch
     for col in (*METRIC_COLUMNS, "n_corrections", "runtime_s", "realtime_factor", "simulated_s",
                 *SIZE_PEAK_COLUMNS):
         row[col] = math.nan
@@ -287,9 +289,11 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         if traces:
             trace = TraceRecorder(out / "traces" / f"{cell.cell_id}.rrd", recording_id=cell.cell_id)
         recorder = TeeRecorder(trace, memory) if (trace or memory) else None
-        result = run_closed_loop(cell.scenario.params, controller, duration_s=cell.duration_s,
-                                 warmup_s=cell.warmup_s, seed=cell.seed, recorder=recorder,
-                                 time_limit_s=cell.time_limit_s)
+        truth, factors = cell.scenario.realise(cell.seed)
+        row.update({f"mismatch_{k}": v for k, v in factors.items()})
+        result = run_closed_loop(truth, controller, family=cell.scenario.family, model=cell.scenario.model_params(),
+                                 duration_s=cell.duration_s, warmup_s=cell.warmup_s, seed=cell.seed,
+                                 recorder=recorder, time_limit_s=cell.time_limit_s)
         row["status"], row["message"] = result.status, result.message
         if result.status == "error":
             row["error_kind"] = "time_limit" if result.message.startswith("time limit") else "run"

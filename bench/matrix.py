@@ -224,7 +224,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     if not isinstance(description, str):
         raise _fail(source, "matrix.description", f"must be a string, got {description!r}")
 
-    scenarios = _scenarios(source, data.get("scenarios", {}))
+    scenarios = _scenarios(source, data.get("scenarios", {}), text)
     variants = _variants(source, data.get("controllers", {}))
 
     from controllers.base import available_controllers
@@ -293,7 +293,7 @@ def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: lis
     for cs in controllers:
         for scenario in scenarios:
             try:
-                cs.build().reset(scenario.params, np.random.default_rng(0))
+                cs.build().reset(scenario.model_params(), np.random.default_rng(0))
             except Exception as exc:   # the controller's own validation message
                 msg = str(exc)
                 named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
@@ -304,7 +304,7 @@ def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: lis
                                          f"{type(exc).__name__}: {msg}") from None
 
 
-def _scenarios(source: str, table: Any) -> dict[str, Scenario]:
+def _scenarios(source: str, table: Any, text: str | None = None) -> dict[str, Scenario]:
     if not isinstance(table, dict):
         raise _fail(source, "scenarios", "must be a table of [scenarios.NAME] tables")
     known = builtin_scenarios()
@@ -330,25 +330,74 @@ def _scenarios(source: str, table: Any) -> dict[str, Scenario]:
             raise _fail(source, f"{key}.base", f"is required and must name a scenario, got {base!r}")
         if base not in known and base not in pending:
             raise _fail(source, f"{key}.base", f"unknown scenario {base!r}; known: {sorted(set(known) | set(pending))}")
-        unknown = sorted(set(spec) - set(SCENARIO_KEYS) - _PLANT_FIELDS)
-        if unknown:
-            raise _fail(source, f"{key}.{unknown[0]}", f"unknown key; expected one of {list(SCENARIO_KEYS)} "
-                                                       f"or a PlantParams field {sorted(_PLANT_FIELDS)}")
         resolving.append(name)
         base_scenario = resolve(base)
         resolving.pop()
+        _check_plant_keys(source, text, name, spec, base_scenario)
         try:
             scenario = derive_scenario(name, base_scenario, spec)
         except ValueError as exc:
-            msg = str(exc)
-            fld = _field_of(msg, "PlantParams") or _field_of(msg, "Scenario")
-            raise _fail(source, f"{key}.{fld}" if fld else key, msg) from None
+            raise _scenario_error(source, text, name, spec, str(exc)) from None
         known[name] = scenario
         return scenario
 
     for name in list(pending):
         resolve(name)
     return known
+
+
+def _at(source: str, text: str | None, parts: tuple[str, ...], key: str | None) -> str:
+    """``source`` with the line of ``key`` in the table ``[parts]`` when the text shows it."""
+    from bench.sweep import locate_key
+
+    line = locate_key(text, parts, key) if text else None
+    return f"{source}:{line}" if line else source
+
+
+def _check_plant_keys(source: str, text: str | None, name: str, spec: dict[str, Any], base: Scenario) -> None:
+    """The truth's family and keys, the ``model`` and ``mismatch`` tables: every key known, before
+    any value is used (each error names the file, the line and the key)."""
+    from plant.protocol import available_families, get_family
+
+    table = ("scenarios", name)
+    family_name = spec.get("plant", base.family)
+    if not isinstance(family_name, str) or family_name not in available_families():
+        raise _fail(_at(source, text, table, "plant"), f"scenarios.{name}.plant",
+                    f"unknown plant family {family_name!r}; known: {available_families()}")
+    fields = {f.name for f in dataclasses.fields(get_family(family_name).Params)}
+    unknown = sorted(set(spec) - set(SCENARIO_KEYS) - fields)
+    if unknown:
+        raise _fail(_at(source, text, table, unknown[0]), f"scenarios.{name}.{unknown[0]}",
+                    f"unknown key; expected one of {list(SCENARIO_KEYS)} or a field of plant family "
+                    f"{family_name!r}: {sorted(fields)}")
+    for sub, allowed, what in (("model", _PLANT_FIELDS, "a PlantParams field (what controllers are told)"),
+                               ("mismatch", fields, f"a field of plant family {family_name!r}")):
+        if sub not in spec:
+            continue
+        values = spec[sub]
+        if not isinstance(values, dict):
+            raise _fail(_at(source, text, table, sub), f"scenarios.{name}.{sub}",
+                        f"must be a table [scenarios.{name}.{sub}] of field = value, got {values!r}")
+        bad = sorted(set(values) - allowed)
+        if bad:
+            raise _fail(_at(source, text, (*table, sub), bad[0]), f"scenarios.{name}.{sub}.{bad[0]}",
+                        f"unknown key; expected {what}: {sorted(allowed)}")
+
+
+def _scenario_error(source: str, text: str | None, name: str, spec: dict[str, Any], message: str) -> MatrixError:
+    """A scenario's ValueError as a MatrixError naming the table, key and line it comes from."""
+    table = ("scenarios", name)
+    m = re.match(r"Scenario\.(model|mismatch)\.(\w+)", message)
+    if m:
+        return _fail(_at(source, text, (*table, m.group(1)), m.group(2)), f"scenarios.{name}.{m.group(1)}.{m.group(2)}",
+                     message)
+    fld = re.search(r"\b\w*Params\.(\w+)", message)
+    if fld and isinstance(spec.get("model"), dict) and fld.group(1) in spec["model"] \
+            and fld.group(1) not in spec:
+        return _fail(_at(source, text, (*table, "model"), fld.group(1)), f"scenarios.{name}.model.{fld.group(1)}",
+                     message)
+    key = fld.group(1) if fld else _field_of(message, "Scenario")
+    return _fail(_at(source, text, table, key), f"scenarios.{name}.{key}" if key else f"scenarios.{name}", message)
 
 
 def _variants(source: str, table: Any) -> dict[str, ControllerSpec]:

@@ -1,13 +1,18 @@
-"""The closed loop: sensor → controller → exact plant, one sample interval at a time.
+"""The closed loop: sensor → controller → plant, one sample interval at a time.
 
-At every sample instant n·τs the sensor returns y(n) = x1(n·τs) + w1(n); the controller
-returns the drive command for [n·τs, (n+1)·τs); the plant's pure step
-(:func:`plant.advance`) returns the state at the next instant with the interval's exact
-integrals, which the scoring window sums (:class:`bench.metrics.WindowTotals`).
+The plant is reached only through its family's protocol (:mod:`plant.protocol`): at every
+sample instant n·τs the family's sensor returns y(n) (``observe``: x1(n·τs) + w1(n) for an
+ideal sensor); the controller returns the drive command for [n·τs, (n+1)·τs); the family's
+pure step returns the state at the next instant with the interval's exact integrals, which the
+scoring window sums (:class:`bench.metrics.WindowTotals`).
 
-A controller that describes its step as a fixed linear law (the ``linear_law`` hook: the
-linear and dithered controllers) runs, when nothing is recorded, in one compiled loop
-(:mod:`bench.compiled_loop`) with bit-identical results; every other run calls ``step`` here.
+Truth and model: the plant runs with the true parameters; the controller's ``reset`` gets the
+model (a :class:`~plant.params.PlantParams`, by default the truth's own fields). Only a
+``privileged`` bound sees the truth, through ``observe_truth(state, plant)`` before each step.
+
+A controller that describes its step as a fixed linear law (the ``linear_law`` hook) runs, when
+nothing is recorded and the family offers one, in the family's compiled loop
+(``PlantFamily.linear_law_loop``) with bit-identical results; every other run calls ``step`` here.
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
 plant noise, sensor noise, controller, and the initial draw of x5 from N(0, VAR(x5)).
@@ -31,17 +36,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bench.compiled_loop import run_law
 from bench.metrics import WindowTotals, run_metrics
 from controllers.base import Controller
-from plant.interval import advance
 from plant.params import PlantParams
+from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
 from plant.randomness import NoiseStream
-from plant.state import EVENT_FIELDS, SimOptions, Status, X1, X2, X3, X4, X5, U, initial_state
+from plant.state import EVENT_FIELDS, SimOptions, Status, X1
 
 __all__ = ["RunResult", "run_closed_loop", "spawn_streams", "Recorder", "MemoryRecorder", "SAMPLE_FIELDS"]
 
-SAMPLE_FIELDS = ("t", "y", "x1", "x2", "x3", "x4", "x5", "mode", "u", "ks_true", "kc_true")
+SAMPLE_FIELDS = ("t", "y", *TRUTH_FIELDS)
 
 
 @dataclass
@@ -49,7 +53,8 @@ class RunResult:
     """Outcome of one closed-loop run.
 
     ``samples`` (with ``record=True``): arrays at the sample instants — :data:`SAMPLE_FIELDS`
-    (u is the level in force just before the instant; ks_true, kc_true the effective friction).
+    (u is the level in force just before the instant; ks_true, kc_true the effective friction)
+    and any further truth the family reports.
     ``events``: :data:`plant.state.EVENT_FIELDS` at every plant event. ``internals``: the
     controller's ``internals()`` after each step, as arrays.
     """
@@ -85,7 +90,10 @@ class MemoryRecorder:
 
     def sample(self, row: dict[str, float]) -> None:
         for k, v in row.items():
-            self.s[k].append(v)
+            lst = self.s.get(k)
+            if lst is None:          # a family's own truth (SAMPLE_FIELDS are always there)
+                lst = self.s[k] = []
+            lst.append(v)
 
     def events(self, ev: dict[str, np.ndarray]) -> None:
         if len(ev["t"]):
@@ -126,11 +134,18 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                     warmup_s: float = 0.0, seed: int = 0, noise: bool = True, record: bool = False,
                     options: SimOptions | None = None, x5_initial: float | None = None,
                     time_limit_s: float | None = None, recorder: Recorder | None = None,
-                    compiled: bool = True) -> RunResult:
+                    compiled: bool = True, family: str | PlantFamily = DEFAULT_FAMILY,
+                    model: PlantParams | None = None) -> RunResult:
     """Run ``controller`` on the plant for ``duration_s`` seconds and score from ``warmup_s``.
 
     Parameters
     ----------
+    params : PlantParams
+        The true plant's parameters (the family's ``Params``).
+    family : str or PlantFamily
+        The true plant's family (default: Acker's plant).
+    model : PlantParams, optional
+        What the controller's ``reset`` is told; default the truth's :class:`PlantParams` fields.
     noise : bool
         False switches off every noise source: process noise, sensor noise and the random
         initial x5 (then 0).
@@ -155,6 +170,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     RunResult
         Never raises for a failing run: a controller or plant exception gives status ``error``.
     """
+    fam = get_family(family) if isinstance(family, str) else family
+    if not isinstance(params, fam.Params):
+        raise ValueError(f"params must be {fam.Params.__name__} for plant family {fam.name!r}, "
+                         f"got {type(params).__name__}")
+    model = model_of(params) if model is None else model
     tau = params.sample_period
     if not math.isfinite(duration_s):
         raise ValueError(f"duration_s must be finite, got {duration_s!r}")
@@ -175,7 +195,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     streams = spawn_streams(seed)
     if x5_initial is None:
         x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
-    state = initial_state(params, x5=x5_initial)
+    state = fam.initial_state(params, x5_initial)
     plant_noise = NoiseStream(streams["plant"]) if noise else None
     sensor = streams["sensor"].standard_normal(n_samples) * params.measurement_noise_std if noise \
         else np.zeros(n_samples)
@@ -187,31 +207,32 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     status, message = Status.OK, ""
     wall0 = time.perf_counter()
     privileged = controller.privileged
+    truth = TruePlant(fam, params) if privileged else None
     try:
-        controller.reset(params, streams["controller"])
-        law = controller.linear_law() if (rec is None and not privileged and compiled) else None
+        controller.reset(model, streams["controller"])
+        fast = fam.linear_law_loop
+        law = controller.linear_law() if (rec is None and not privileged and compiled and fast) else None
         if law is not None:
-            state, totals, window, status, message = run_law(law, params, opts, state, sensor, n_warm,
-                                                              plant_noise, deadline)
+            state, sums, window, status, message = fast(law, params, opts, state, sensor, n_warm, plant_noise,
+                                                        deadline)
+            totals = WindowTotals(**sums)
             n_window = window.shape[0]
             x1_window[:n_window] = window
             if status is Status.ERROR:
                 message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
         for n in range(n_samples if law is None else 0):
-            x = state.x
-            x1 = x[X1]
-            y = float(x1 + sensor[n])
+            y = fam.observe(params, state, sensor[n])
             if n >= n_warm:
-                x1_window[n_window] = x1
+                x1_window[n_window] = state.x[X1]
                 n_window += 1
             if rec is not None:
-                rec.sample(_sample_row(state.t, y, x, state.mode, params))
+                rec.sample({"t": state.t, "y": y, **fam.truth(params, state)})
             if privileged:
-                controller.observe_truth(state)
+                controller.observe_truth(state, truth)
             command = controller.step(y)
             if rec is not None:
                 rec.internals(controller.internals())
-            step = advance(state, command, params, plant_noise, opts, record=rec is not None)
+            step = fam.step(state, command, params, plant_noise, opts, record=rec is not None)
             if rec is not None:
                 rec.events(step.events)
             if n >= n_warm:
@@ -252,8 +273,3 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         samples, events, internals = memory.arrays()
     return RunResult(str(status), message, metrics, summary, samples, events, internals, wall, state.t)
 
-
-def _sample_row(t: float, y: float, x: np.ndarray, mode: int, p: PlantParams) -> dict[str, float]:
-    return {"t": t, "y": y, "x1": float(x[X1]), "x2": float(x[X2]), "x3": float(x[X3]), "x4": float(x[X4]),
-            "x5": float(x[X5]), "mode": float(mode), "u": float(x[U]),
-            "ks_true": max(p.stiction + float(x[X5]), 0.0), "kc_true": max(p.coulomb + float(x[X5]), 0.0)}

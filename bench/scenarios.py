@@ -1,4 +1,14 @@
-"""Benchmark scenarios: a plant configuration with a run length and a scoring warm-up (SPEC §5).
+"""Benchmark scenarios: a true plant, the model controllers are told, a run length and a warm-up.
+
+A scenario's **truth** is a plant family (:mod:`plant.protocol`) with its parameters; its
+**model** is the :class:`~plant.params.PlantParams` that every controller receives in
+``reset`` (default: the truth's own PlantParams fields, so a controller knows the plant
+exactly, as in the dissertation); an optional **mismatch** gives per-seed lognormal errors of
+the truth around its nominal values: for each listed field with relative standard deviation
+s, the truth's value is multiplied by f = exp(σ·z − σ²/2), σ² = ln(1 + s²) (so E f = 1 and
+sd f = s), z ~ N(0, 1) drawn from the run seed's own stream (child 4 of
+``SeedSequence(seed)``, fields in name order) — the same factors for every controller and on
+every executor. A stiction that a draw puts below the Coulomb level is raised to it (ks ≥ kc).
 
 Built in:
 
@@ -6,8 +16,8 @@ Built in:
 * ``quiet-friction`` — the same with no white friction noise, σ2² = 0;
 * ``ratio-2`` — k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in).
 
-A custom scenario is a base scenario plus :class:`PlantParams` overrides (see
-:func:`derive_scenario`).
+A custom scenario is a base scenario plus overrides of the truth (``plant = "family"`` and the
+family's fields), of the model and of the mismatch (see :func:`derive_scenario`).
 """
 
 from __future__ import annotations
@@ -17,24 +27,42 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from plant.params import PlantParams
+from plant.protocol import DEFAULT_FAMILY, get_family, model_of
 
-__all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS"]
+__all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", "mismatch_factors"]
 
-# Keys of a custom scenario that are not PlantParams fields.
-SCENARIO_KEYS = ("base", "description", "duration_s", "warmup_s")
+# Keys of a custom scenario that are not plant fields (``model`` and ``mismatch`` are sub-tables).
+SCENARIO_KEYS = ("base", "description", "duration_s", "warmup_s", "plant", "model", "mismatch")
+_MISMATCH_STREAM = 4      # SeedSequence(seed).spawn(5)[4]; children 0-3 are the runner's
+_MAX_MISMATCH = 2.0       # relative standard deviation
+
+
+def mismatch_factors(seed: int, mismatch: tuple[tuple[str, float], ...]) -> dict[str, float]:
+    """Lognormal factors (mean 1, relative sd s) for ``mismatch`` = ((field, s), ...) at ``seed``."""
+    if not mismatch:
+        return {}
+    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(_MISMATCH_STREAM + 1)[_MISMATCH_STREAM])
+    z = rng.standard_normal(len(mismatch))
+    out = {}
+    for (name, rel), zi in zip(mismatch, z):
+        var = math.log1p(rel * rel)
+        out[name] = math.exp(math.sqrt(var) * float(zi) - 0.5 * var)
+    return out
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A plant and how long to run it.
+    """A true plant, its model, and how long to run it.
 
     Attributes
     ----------
     name : str
         Scenario name (part of the cell id).
     params : PlantParams
-        The plant.
+        The true plant's parameters (an instance of its family's ``Params``).
     duration_s : float
         Simulated length of a run [s].
     warmup_s : float
@@ -43,6 +71,12 @@ class Scenario:
         One line for ``solnic-bench list``.
     base : str
         The built-in scenario this one derives from (its own name for a built-in).
+    family : str
+        The true plant's family (registered in :mod:`plant.protocol`).
+    model : PlantParams or None
+        What controllers are told; None means the truth's own PlantParams fields.
+    mismatch : tuple of (field, relative sd)
+        Per-seed lognormal errors of the truth (module docstring), sorted by field.
     """
 
     name: str
@@ -51,6 +85,9 @@ class Scenario:
     warmup_s: float
     description: str = ""
     base: str = ""
+    family: str = DEFAULT_FAMILY
+    model: PlantParams | None = None
+    mismatch: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         for field in ("duration_s", "warmup_s"):
@@ -66,6 +103,45 @@ class Scenario:
                              f"got {self.warmup_s!r}")
         if not self.base:
             object.__setattr__(self, "base", self.name)
+        family = get_family(self.family)
+        if not isinstance(self.params, family.Params):
+            raise ValueError(f"Scenario.params must be {family.Params.__name__} for plant family "
+                             f"{self.family!r}, got {type(self.params).__name__}")
+        if self.model is not None:
+            if type(self.model) is not PlantParams:
+                raise ValueError(f"Scenario.model must be a PlantParams, got {type(self.model).__name__}")
+            if self.model == model_of(self.params):
+                object.__setattr__(self, "model", None)    # one spelling of "the model is the truth"
+        fields = {f.name for f in dataclasses.fields(self.params)}
+        for name, rel in self.mismatch:
+            if name not in fields or not isinstance(getattr(self.params, name), (int, float)) \
+                    or isinstance(getattr(self.params, name), bool):
+                raise ValueError(f"Scenario.mismatch.{name}: not a numeric field of {type(self.params).__name__}")
+            if isinstance(rel, bool) or not isinstance(rel, (int, float)) or not 0 <= rel <= _MAX_MISMATCH:
+                raise ValueError(f"Scenario.mismatch.{name}: relative standard deviation must be in "
+                                 f"[0, {_MAX_MISMATCH}], got {rel!r}")
+        object.__setattr__(self, "mismatch", tuple(sorted((n, float(r)) for n, r in self.mismatch)))
+
+    @property
+    def default_plant(self) -> bool:
+        """True when the truth is Acker's plant, the model is the truth and nothing is mismatched."""
+        return self.family == DEFAULT_FAMILY and self.model is None and not self.mismatch
+
+    def model_params(self) -> PlantParams:
+        """What controllers are told."""
+        return model_of(self.params) if self.model is None else self.model
+
+    def realise(self, seed: int) -> tuple[PlantParams, dict[str, float]]:
+        """(the truth of the run with ``seed``, its mismatch factors by field)."""
+        factors = mismatch_factors(seed, self.mismatch)
+        if not factors:
+            return self.params, {}
+        p = self.params
+        changes = {name: getattr(p, name) * f for name, f in factors.items()}
+        kc = changes.get("coulomb", p.coulomb)
+        if changes.get("stiction", p.stiction) < kc:
+            changes["stiction"] = kc                    # ks ≥ kc (module docstring)
+        return dataclasses.replace(p, **changes), factors
 
     def with_durations(self, duration_s: float | None = None, warmup_s: float | None = None) -> "Scenario":
         """A copy with the run length and/or warm-up replaced (validated)."""
@@ -76,9 +152,24 @@ class Scenario:
             changes["warmup_s"] = warmup_s
         return dataclasses.replace(self, **changes) if changes else self
 
+    def definition(self) -> dict[str, Any]:
+        """What determines a run of this scenario, as plain JSON data. The family, model and
+        mismatch appear only when they differ from the default plant, so that a scenario of
+        Acker's plant keeps the definition (and the cell hashes) it always had."""
+        out: dict[str, Any] = {"name": self.name, "base": self.base, "plant": dataclasses.asdict(self.params)}
+        if self.family != DEFAULT_FAMILY:
+            out["family"] = self.family
+        if self.model is not None:
+            out["model"] = dataclasses.asdict(self.model)
+        if self.mismatch:
+            out["mismatch"] = dict(self.mismatch)
+        return out
+
     def to_json(self) -> dict[str, Any]:
-        return {"base": self.base, "description": self.description, "duration_s": self.duration_s,
-                "warmup_s": self.warmup_s, "plant": dataclasses.asdict(self.params)}
+        out = {"base": self.base, "description": self.description, "duration_s": self.duration_s,
+               "warmup_s": self.warmup_s, **self.definition()}
+        del out["name"]
+        return out
 
 
 def builtin_scenarios() -> dict[str, Scenario]:
@@ -95,16 +186,41 @@ def builtin_scenarios() -> dict[str, Scenario]:
 
 
 def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Scenario:
-    """``base`` with PlantParams overrides and optionally ``duration_s``/``warmup_s``/``description``.
+    """``base`` with overrides: ``plant`` (a family name), the truth's fields, ``model`` (a dict of
+    PlantParams fields, applied to the base's model), ``mismatch`` (field → relative sd,
+    replacing the base's), and ``duration_s``/``warmup_s``/``description``.
+
+    A new family keeps the base's PlantParams fields and takes its own fields' defaults.
 
     Raises
     ------
     ValueError
-        Naming the field (``PlantParams.<field> ...`` or ``Scenario.<field> ...``) or the
-        unknown key.
+        Naming the field (``PlantParams.<field> ...``, ``<Family>Params.<field> ...`` or
+        ``Scenario.<field> ...``) or the unknown key.
     """
     plant = {k: v for k, v in overrides.items() if k not in SCENARIO_KEYS}
-    params = base.params.replace(**plant) if plant else base.params
+    family_name = overrides.get("plant", base.family)
+    if not isinstance(family_name, str):
+        raise ValueError(f"Scenario.plant must name a plant family, got {family_name!r}")
+    family = get_family(family_name)
+    if family_name != base.family:
+        shared = {f.name: getattr(base.params, f.name) for f in dataclasses.fields(PlantParams)}
+        params = family.Params(**shared).replace(**plant)
+    else:
+        params = base.params.replace(**plant) if plant else base.params
+    model = base.model
+    if "model" in overrides:
+        changes = overrides["model"]
+        if not isinstance(changes, dict):
+            raise ValueError(f"Scenario.model must be a table of PlantParams fields, got {changes!r}")
+        start = model_of(params) if base.model is None else base.model   # the truth's fields by default
+        model = start.replace(**changes)
+    mismatch = base.mismatch
+    if "mismatch" in overrides:
+        table = overrides["mismatch"]
+        if not isinstance(table, dict):
+            raise ValueError(f"Scenario.mismatch must be a table of field = relative sd, got {table!r}")
+        mismatch = tuple(table.items())
     if "description" in overrides:
         description = overrides["description"]
     elif plant:
@@ -114,4 +230,4 @@ def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Sce
     if not isinstance(description, str):
         raise ValueError(f"Scenario.description must be a string, got {description!r}")
     return Scenario(name, params, overrides.get("duration_s", base.duration_s),
-                    overrides.get("warmup_s", base.warmup_s), description, base.base)
+                    overrides.get("warmup_s", base.warmup_s), description, base.base, family_name, model, mismatch)

@@ -13,9 +13,9 @@ measures that claim:
    which). The full run also replays the ``linear`` controller's held levels.
 2. **Contestants, noise-free, on that sequence:** the exact simulator
    (:func:`plant.advance`, one compiled call per sample interval); fixed-step Euler
-   (:func:`plant.reference.fixed_step`, same mode logic, steps 1e-4 … 1e-7 s, every step size
+   (:func:`plant.multimode.reference.fixed_step`, same mode logic, steps 1e-4 … 1e-7 s, every step size
    run over the whole window — nothing is scaled); ``solve_ivp`` (DOP853) with terminal events
-   (:func:`plant.reference.event_driven`) at rtol 1e-3 … 1e-12.
+   (:func:`plant.multimode.reference.event_driven`) at rtol 1e-3 … 1e-12.
 3. **Error** against the exact simulator (closed forms, event times exact to ≤ 1e-12 s; the
    window's clock is restarted at 0 — the plant is time-invariant — so the rounding of
    absolute time does not blur anyone's event times):
@@ -96,10 +96,10 @@ from controllers import roles
 from plant.drive import DriveCommand, DriveType
 from bench.metrics import WindowTotals
 from bench.weak_error import FULL_WEAK, QUICK_WEAK, WeakErrorConfig, weak_error_comparison
-from plant.interval import advance
+from plant.multimode.interval import advance
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
-from plant.reference import Schedule, event_driven, fixed_step, schedule_from_commands
+from plant.multimode.reference import Schedule, event_driven, fixed_step, schedule_from_commands
 from plant.state import X1, X2, X3, X4, X5, PlantState, SimOptions, Status, initial_state
 
 __all__ = ["TARGET_ERROR", "SpeedConfig", "QUICK", "FULL", "speed_comparison", "speed_command",
@@ -706,9 +706,9 @@ def _describe(seq: _Sequence, ref_x1: np.ndarray) -> dict[str, Any]:
 
 def _technology() -> dict[str, str]:
     return {
-        "multimode": ("numba-compiled: one compiled call per sample interval (plant.interval.interval_kernel) "
+        "multimode": ("numba-compiled: one compiled call per sample interval (plant.multimode.interval.interval_kernel) "
                       "over the closed forms (3-20)–(3-22); Python calls it once per interval"),
-        "fixed_step": "numba-compiled Euler loop (plant.reference.fixed_step)",
+        "fixed_step": "numba-compiled Euler loop (plant.multimode.reference.fixed_step)",
         "fixed_step_python": "the same Euler kernel uncompiled (NUMBA_DISABLE_JIT=1), CPython",
         "solve_ivp": "SciPy DOP853 with a Python right-hand side and terminal events",
         "caveat": ("Like for like: the exact simulator and fixed-step Euler are both numba-compiled machine code "

@@ -63,10 +63,13 @@ def point_name(parent: str, point: dict[str, Any]) -> str:
     return f"{parent}[{','.join(f'{k}={format_value(v)}' for k, v in point.items())}]"
 
 
-def locate_key(text: str, table: str, key: str | None = None) -> int | None:
+def locate_key(text: str, table: str | tuple[str, ...], key: str | None = None) -> int | None:
     """1-based line of ``key`` inside ``[table]`` of TOML ``text`` (of the header if ``key`` is
-    None or not found); None if the table is not written as a header (e.g. inline)."""
-    header = re.compile(r"^\s*\[\s*" + r"\s*\.\s*".join(re.escape(p) for p in _split_dotted(table))
+    None or not found); None if the table is not written as a header (e.g. inline). ``table``
+    is ``"kind.name"`` (split at the first dot: names may hold dots) or the header's parts."""
+    parts = list(table) if isinstance(table, tuple) else _split_dotted(table)
+    header = re.compile(r"^\s*\[\s*" + r"\s*\.\s*".join(r'(?:' + re.escape(p) + r'|"' + re.escape(p) + r'")'
+                                                      for p in parts)
                         + r"\s*\]\s*(#.*)?$")
     any_header = re.compile(r"^\s*\[")
     key_re = re.compile(r"^\s*(" + re.escape(key) + r'|"' + re.escape(key) + r'")\s*=') if key else None
@@ -182,11 +185,13 @@ def _expand_scenarios(table: dict[str, Any], plan: SweepPlan, fail: Callable[[st
     combine = table.pop("combine", "product")
     if combine not in ("product", "separate"):
         raise fail(f"{key}.combine", f"must be \"product\" or \"separate\", got {combine!r}")
-    plant_fields = {f.name for f in dataclasses.fields(PlantParams)}
+    parents_all = [s for s in plan.scenarios if base is None or s.name == base]
+    plant_fields = set.intersection(*({f.name for f in dataclasses.fields(s.params)} for s in parents_all)) \
+        if parents_all else {f.name for f in dataclasses.fields(PlantParams)}
     unknown = sorted(set(table) - plant_fields)
     if unknown:
         raise fail(f"{key}.{unknown[0]}", f"unknown key; expected {list(_SCENARIO_RESERVED)} or a "
-                                          f"PlantParams field {sorted(plant_fields)}")
+                                          f"field of the swept scenarios' plant {sorted(plant_fields)}")
     if combine == "product" and len(table) > MAX_FIELDS:
         raise fail(key, f"sweeps {len(table)} fields as a product; at most {MAX_FIELDS} "
                         f"(or combine = \"separate\")")
@@ -206,7 +211,7 @@ def _expand_scenarios(table: dict[str, Any], plan: SweepPlan, fail: Callable[[st
                 msg = str(exc)
                 named = [f for f in point if f in msg]
                 raise fail(f"{key}.{named[0] if named else next(iter(point))}", f"{name}: {msg}") from None
-            same = next((s for s in plan.scenarios if s.params == scenario.params
+            same = next((s for s in plan.scenarios if s.definition() | {"name": ""} == scenario.definition() | {"name": ""}
                          and (s.duration_s, s.warmup_s) == (scenario.duration_s, scenario.warmup_s)), None)
             info = {"parent": parent.name, "params": point}
             if same is not None:

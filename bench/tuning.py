@@ -47,7 +47,9 @@ def _cell(args: tuple) -> dict[str, Any]:
     row: dict[str, Any] = dict(setting)
     row["seed"] = seed
     controller = make_controller(name, **fixed, **setting)
-    res = run_closed_loop(scenario.params, controller, duration_s=scenario.duration_s,
+    truth, _ = scenario.realise(seed)
+    res = run_closed_loop(truth, controller, family=scenario.family, model=scenario.model_params(),
+                          duration_s=scenario.duration_s,
                           warmup_s=scenario.warmup_s, seed=seed, noise=noise)
     row["status"] = res.status
     row.update({k: res.metrics.get(k, math.nan) for k in SWEEP_COLUMNS})

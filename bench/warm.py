@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.interval import advance
+from plant.multimode.interval import advance
 from plant.params import PlantParams
-from plant.pulse import pulse_response
+from plant.multimode.pulse import pulse_response
 from plant.randomness import NoiseStream
 from plant.state import SimOptions, initial_state
 

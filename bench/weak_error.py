@@ -6,7 +6,7 @@ statistics of what a controller cares about: the motion Δc of one switched-brid
 (Δt_u = 1.2 ms, Table 2-1 noise, from rest with x4 = 0).
 
 * **Exact**: ``n_paths`` noisy :func:`plant.pulse_response` draws (seeds 0 … n−1).
-* **Euler–Maruyama** (:func:`plant.reference.fixed_step_pulses`, compiled, same mode logic) at
+* **Euler–Maruyama** (:func:`plant.multimode.reference.fixed_step_pulses`, compiled, same mode logic) at
   several step sizes h, ``n_paths`` paths each.
 
 For each statistic — the mean of Δc and its 95th percentile — the weak error of EM at h is
@@ -33,7 +33,7 @@ import numpy as np
 from scipy import stats
 
 from plant import PlantParams, pulse_response
-from plant.reference import fixed_step_pulses
+from plant.multimode.reference import fixed_step_pulses
 
 __all__ = ["WeakErrorConfig", "weak_error_comparison", "QUICK_WEAK", "FULL_WEAK"]
 

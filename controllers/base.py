@@ -24,7 +24,9 @@ Optional hooks (class attributes and methods with neutral defaults) replace ever
     Labelled event instants and extra per-sample series for traces and the report.
 ``privileged`` / ``observe_truth``
     Only for bounds (e.g. an oracle) that are not real controllers: the runner hands them the
-    true plant state before every ``step``. Real controllers never see it.
+    true plant state and the true plant before every ``step``. Real controllers never see
+    either: ``reset(params, rng)`` gives every controller the scenario's *model*, the nominal
+    :class:`~plant.params.PlantParams` it is told, which need not be the truth.
 ``linear_law``
     A controller whose step is a fixed linear law (plus square-wave dither) may describe it
     (:class:`controllers.law.LinearLaw`); the runner then compiles the whole loop.
@@ -70,7 +72,8 @@ class Controller(abc.ABC):
 
     @abc.abstractmethod
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
-        """Start a new run on a plant with ``params``; ``rng`` is the controller's own stream."""
+        """Start a new run on a plant whose model is ``params`` (what the controller is told,
+        not necessarily the truth); ``rng`` is the controller's own stream."""
         raise NotImplementedError
 
     @abc.abstractmethod
@@ -99,10 +102,13 @@ class Controller(abc.ABC):
         that law (then the runner may run it compiled, without calling ``step``), else None."""
         return None
 
-    def observe_truth(self, state: Any) -> None:
-        """Privileged hook: the true :class:`~plant.state.PlantState` before each ``step``.
+    def observe_truth(self, state: Any, plant: Any) -> None:
+        """Privileged hook: the true :class:`~plant.state.PlantState` before each ``step``, and
+        the true plant (:class:`plant.protocol.TruePlant`: its family and parameters, with the
+        family's own noise-free ``pulse_motion``).
 
-        Called by the runner only when ``privileged`` is True (bounds, never real controllers).
+        Called by the runner only when ``privileged`` is True (bounds, never real controllers);
+        ``reset`` receives the model like every controller's.
         """
         raise NotImplementedError(f"controller {self.name!r} is not privileged")
 

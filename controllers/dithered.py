@@ -23,6 +23,7 @@ import numpy as np
 
 from controllers.base import register
 from controllers.law import LinearLaw
+from plant.linear_drive import square_wave_segments as _segments_into
 from controllers.linear import LinearController, LinearOptions
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -36,7 +37,6 @@ __all__ = ["DitheredController", "DitheredOptions", "square_wave_segments", "DEF
 DEFAULT_DITHER_AMPLITUDE = 18.0  # ozf·in
 DEFAULT_DITHER_FREQUENCY_HZ = 250.0  # Hz
 
-_EDGE_TOL_S = 1e-12  # switches closer than this to an interval edge are merged into it
 
 
 def square_wave_segments(t0: float, duration: float, base: float, amplitude: float,
@@ -53,33 +53,15 @@ def square_wave_segments(t0: float, duration: float, base: float, amplitude: flo
         A [ozf·in], f [Hz] and φ [cycles] of the square wave.
     limit : float
         Clip bound u_max [ozf·in].
+
+    The compiled :func:`plant.linear_drive.square_wave_segments` (the code the compiled closed
+    loop runs), as a tuple.
     """
-    if amplitude == 0.0:
-        return ((0.0, min(max(base, -limit), limit)),)
-    high = min(max(base + amplitude, -limit), limit)
-    low = min(max(base - amplitude, -limit), limit)
-    floor = math.floor
-    cycles0 = frequency_hz * t0 + phase
-    k = floor(2.0 * cycles0) + 1  # next half-cycle index after t0
-    bounds = [0.0]
-    off = (0.5 * k - cycles0) / frequency_hz
-    while off < duration - _EDGE_TOL_S:
-        if off > _EDGE_TOL_S:
-            bounds.append(off)
-        k += 1
-        off = (0.5 * k - cycles0) / frequency_hz
-    bounds.append(duration)
-    segments = []
-    last = None
-    a = 0.0
-    for b in bounds[1:]:
-        theta = cycles0 + frequency_hz * 0.5 * (a + b)  # midpoint: immune to edge round-off
-        level = high if theta - floor(theta) < 0.5 else low
-        if level != last:
-            segments.append((a, level))
-            last = level
-        a = b
-    return tuple(segments)
+    n_max = int(2.0 * frequency_hz * duration) + 4 if amplitude != 0.0 else 1
+    offs, levs = np.empty(n_max), np.empty(n_max)
+    k = _segments_into(float(t0), float(duration), float(base), float(amplitude), float(frequency_hz),
+                       float(phase), float(limit), offs, levs)
+    return tuple(zip(offs[:k].tolist(), levs[:k].tolist()))
 
 
 @dataclass(frozen=True)

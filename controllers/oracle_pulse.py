@@ -1,10 +1,12 @@
 """``oracle-pulse``: a BOUND, not a real controller — the floor of pulse control.
 
-It reads what no real controller can: the true plant state through the privileged
-:meth:`~controllers.base.Controller.observe_truth` hook (the runner calls it only for classes
-with ``privileged = True``), and the true pulse law — :func:`plant.pulse.pulse_response` on the
-true parameters with the true effective friction kc = k̄c + x5, ks = k̄s + x5 (section 5.3).
-It pulses on the same switched bridge (±u_max for Δt_u, then flyback) as solnic.
+It reads what no real controller can: the true plant state and the true plant through the
+privileged :meth:`~controllers.base.Controller.observe_truth` hook (the runner calls it only for
+classes with ``privileged = True``), and the true pulse law — the true family's own noise-free
+response to a pulse from the present state (``PlantFamily.pulse_motion``: on Acker's plant the
+closed form with the true effective friction kc = k̄c + x5, ks = k̄s + x5, section 5.3; on any
+other family its own law). It pulses on the same switched bridge (±u_max for Δt_u, then
+flyback) as solnic.
 
 Policy (band ``b`` [rad], the knob). While the shaft is stuck the error drifts as
 ẋ1 = −x4. The oracle lets x1 drift across the whole band [−b, +b] and, at the exact instant
@@ -25,18 +27,18 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.pulse import closed_form_kernel, max_on_time
-from plant.state import X1, X3, X4, X5
+from controllers.models.acker import max_on_time
+from plant.state import X1, X3, X4
 
 __all__ = ["OraclePulse", "OraclePulseOptions"]
 
-_BISECTIONS = 48
+_TOL_S = 1e-10        # on-time resolution [s]: |Δc| moves < 1e-11 rad
+_MAX_ITERATIONS = 200
 _FIT = 1.0 - 1e-9     # a segment must start strictly inside the interval
 _OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command
 
@@ -65,28 +67,38 @@ class OraclePulseOptions:
 
 
 
-@numba.njit(cache=True)
-def _bisect_on_time(motion, lo, hi, u_max, tau3, alpha, ks, kc, iterations):
-    """(Δt_u, Δc, t_stop, coasts) — the bisection of :meth:`OraclePulse._dtu_for` on the
-    noise-free closed form (``plant.pulse.closed_form_kernel``, what ``pulse_response``
-    evaluates; Δc = t_stop = 0 when the pulse does not break away). ``coasts`` flags a pulse
-    that never stops (k̄c = 0), where ``pulse_response`` raises."""
-    dc, _, _, t_stop = closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
-    if t_stop == math.inf:
-        return hi, dc, t_stop, True
-    if dc <= motion:
-        return hi, dc, t_stop, False
-    for _ in range(iterations):               # Δc(Δt_u) increases past breakaway
-        mid = 0.5 * (lo + hi)
-        dc, _, _, t_stop = closed_form_kernel(mid, u_max, tau3, alpha, ks, kc)
-        if t_stop == math.inf:
-            return mid, dc, t_stop, True
-        if dc < motion:
-            lo = mid
+def _on_time_for(motion: float, dtu_max: float, response) -> tuple[float, float, float]:
+    """(Δt_u, |Δc|, t_stop) of the shortest pulse with |Δc| ≥ ``motion`` (``dtu_max`` if none).
+
+    |Δc|(Δt_u) is 0 up to breakaway and increases after it; ``response(Δt_u)`` gives
+    (|Δc|, t_stop). The root of |Δc| − motion by the Illinois regula falsi (a bracketing
+    secant), stopped when the bracket is narrower than :data:`_TOL_S`; the upper end returned.
+    """
+    hi = dtu_max
+    dc_hi, stop_hi = response(hi)
+    if dc_hi <= motion:
+        return hi, dc_hi, stop_hi
+    lo, f_lo, f_hi = 0.0, -motion, dc_hi - motion
+    side = 0
+    for _ in range(_MAX_ITERATIONS):
+        if hi - lo <= _TOL_S:
+            break
+        mid = hi - f_hi * (hi - lo) / (f_hi - f_lo)
+        if not lo < mid < hi:
+            mid = 0.5 * (lo + hi)
+        dc, stop = response(mid)
+        f = dc - motion
+        if f >= 0.0:
+            hi, f_hi, dc_hi, stop_hi = mid, f, dc, stop
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
         else:
-            hi = mid
-    dc, _, _, t_stop = closed_form_kernel(hi, u_max, tau3, alpha, ks, kc)
-    return hi, dc, t_stop, t_stop == math.inf
+            lo, f_lo = mid, f
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+    return hi, dc_hi, stop_hi
 
 
 @register("oracle-pulse")
@@ -102,40 +114,30 @@ class OraclePulse(Controller):
     privileged = True
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
-        self.params = params
-        self.dtu_max = max_on_time(params)
+        self.params = params            # the model; the truth arrives with observe_truth
         self._truth = None
-        self._law: tuple[float, PlantParams] | None = None
+        self._plant = None
+        self.dtu_max = max_on_time(params)
         self._t_stop_guess = 0.0
         self.pulses = 0
         self._last_dtu = 0.0
 
-    def observe_truth(self, state: Any) -> None:
+    def observe_truth(self, state: Any, plant: Any) -> None:
+        if plant is not self._plant:
+            self._plant = plant
+            self.params = plant.params
+            self.dtu_max = max_on_time(plant.params)
         self._truth = state
 
-    def _true_law(self, x5: float) -> PlantParams:
-        """Table parameters with the effective friction of this moment (x5 frozen while stuck)."""
-        if self._law is None or self._law[0] != x5:
-            p = self.params
-            kc = max(p.coulomb + x5, 0.0)
-            ks = max(p.stiction + x5, kc)
-            self._law = (x5, p.replace(coulomb=kc, stiction=ks))
-        return self._law[1]
+    def _dtu_for(self, state: Any, motion: float, sign: int) -> tuple[float, float, float]:
+        """(Δt_u, |Δc|, t_stop) of the shortest true noise-free pulse from ``state`` with |Δc| ≥ ``motion``."""
+        plant = self._plant
 
-    def _dtu_for(self, law: PlantParams, motion: float) -> tuple[float, float, float]:
-        """(Δt_u, |Δc|, t_stop) of the noise-free pulse whose |Δc| is closest to ``motion``.
+        def response(dtu: float) -> tuple[float, float]:
+            dc, t_stop = plant.pulse_motion(state, dtu, sign)
+            return abs(dc), t_stop
 
-        Bisection on Δt_u over [t_b, Δt_u,max] of ``pulse_response(law, Δt_u)`` (Δc increases
-        past breakaway), run by :func:`_bisect_on_time` inside compiled code on the kernel that
-        ``pulse_response`` itself calls, so the numbers are the same.
-        """
-        t_b = -law.motor_time_constant * math.log1p(-law.stiction / law.u_max)
-        dtu, dc, t_stop, coasts = _bisect_on_time(motion, t_b, self.dtu_max, law.u_max,
-                                                  law.motor_time_constant, law.alpha, law.stiction,
-                                                  law.coulomb, _BISECTIONS)
-        if coasts:
-            raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
-        return dtu, dc, t_stop
+        return _on_time_for(motion, self.dtu_max, response)
 
     def step(self, y: float) -> DriveCommand:
         s = self._truth
@@ -161,13 +163,12 @@ class OraclePulse(Controller):
                 return off
         else:
             return off
-        law = self._true_law(float(x[X5]))
         target = lead * self.options.landing_fraction * b
         t_stop = self._t_stop_guess
         for _ in range(2):                      # the drift during the pulse depends on Δt_u
             x1_fire = x1 - x4 * offset
             need = target - x1_fire + x4 * t_stop
-            dtu, dc, t_stop = self._dtu_for(law, abs(need))
+            dtu, dc, t_stop = self._dtu_for(s, abs(need), 1 if need >= 0 else -1)
             if offset + dtu > _FIT * ts:
                 offset = max(0.0, _FIT * ts - dtu)   # fire earlier so the on-time ends inside the interval
         if dc > 2.0 * abs(need) and abs(x1) <= b:

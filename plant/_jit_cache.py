@@ -1,10 +1,10 @@
 """Keep numba's on-disk cache of the compiled plant consistent with the plant's source.
 
 numba's ``cache=True`` checks only the file that defines a compiled function, not the modules
-it calls: edit ``plant/zero_velocity.py`` and ``plant.interval.interval_kernel`` would still
+it calls: edit ``plant/zero_velocity.py`` and ``plant.multimode.interval.interval_kernel`` would still
 load its cached machine code with the *old* callee inlined. Before any kernel is imported, this
-compares a digest of every ``plant/*.py`` with the one stored beside the cache and drops the
-cached kernels when they differ. A fresh checkout has no cache; this only matters to someone
+compares a digest of every ``plant/**/*.py`` with the one stored in ``plant/__pycache__`` and
+drops the cached kernels of every plant folder (the families' too) when they differ. A fresh checkout has no cache; this only matters to someone
 editing the plant.
 """
 
@@ -18,8 +18,8 @@ def refresh() -> None:
     here = Path(__file__).resolve().parent
     cache = here / "__pycache__"
     digest = hashlib.sha256()
-    for src in sorted(here.glob("*.py")):
-        digest.update(src.name.encode())
+    for src in sorted(here.rglob("*.py")):
+        digest.update(src.relative_to(here).as_posix().encode())
         digest.update(src.read_bytes())
     stamp = cache / "numba-source.sha256"
     value = digest.hexdigest()
@@ -30,7 +30,7 @@ def refresh() -> None:
         pass
     try:
         cache.mkdir(exist_ok=True)
-        for stale in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+        for stale in list(here.rglob("__pycache__/*.nbi")) + list(here.rglob("__pycache__/*.nbc")):
             stale.unlink(missing_ok=True)
         stamp.write_text(value)
     except OSError:          # a read-only install: numba falls back to compiling in memory

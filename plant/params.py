@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["PlantParams", "KERNEL_RECORD"]
 
-# The one parameter record the compiled kernels read (plant.interval, plant.reference): a
+# The one parameter record the compiled kernels read (plant.multimode.interval, plant.multimode.reference): a
 # numpy structured dtype, so a kernel reads ``prm[0].alpha`` by name and numba dispatches on it
 # as fast as on any array. Built once per PlantParams by :meth:`PlantParams.kernel_record`.
 KERNEL_RECORD = np.dtype([

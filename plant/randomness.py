@@ -30,7 +30,7 @@ class NoiseExhausted(Exception):
     """The kernel ran past the end of the normal buffer (the caller extends it and retries)."""
 
 
-# Position of the read cursor inside the kernels' work sheet (see plant.interval).
+# Position of the read cursor inside the kernels' work sheet (see plant.multimode.interval).
 ZPOS = 0
 
 

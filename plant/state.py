@@ -95,7 +95,7 @@ class SimOptions:
         fixed and Newton on the velocity.
     substep : float
         Gaussian sub-step inside noisy moving segments near a velocity zero [s]; the first
-        rung of the step ladder h·2^k (plant.zero_velocity): longer rungs are used only when
+        rung of the step ladder h·2^k (plant.multimode.zero_velocity): longer rungs are used only when
         the mean velocity stays 8.5σ of the step's noise away from 0 (crossing probability
         ≤ 6e-17 per step).
     reflect_substep : float
@@ -135,7 +135,7 @@ class SimOptions:
             raise ValueError(f"SimOptions.diverge_error must be a finite positive angle, got {self.diverge_error!r}")
 
     def kernel_vector(self) -> np.ndarray:
-        """The options as the compiled interval reads them (see plant.interval)."""
+        """The options as the compiled interval reads them (see plant.multimode.interval)."""
         vec = self.__dict__.get("_vector")
         if vec is None:
             vec = np.array([1.0 if self.noise else 0.0, 1.0 if self.zero_velocity == "newton" else 0.0,
@@ -150,7 +150,7 @@ EventRecords = dict  # field name (EVENT_FIELDS) → ndarray, one entry per even
 
 
 class IntervalResult(NamedTuple):
-    """What :func:`plant.interval.advance` returns for one interval.
+    """What :func:`plant.multimode.interval.advance` returns for one interval.
 
     Attributes
     ----------

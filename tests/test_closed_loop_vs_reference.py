@@ -3,7 +3,7 @@
 Each controller runs 20 s (the dithered one 6 s: its 250 Hz square wave alone gives ~9000
 solve_ivp segments, against ~2500 for the others' 20 s) on the exact plant (default parameters, and a second plant with
 other inertia, motor lag and friction), its commands are recorded, and the
-same command sequence is replayed by ``plant.reference.event_driven`` (DOP853, rtol 1e-13,
+same command sequence is replayed by ``plant.multimode.reference.event_driven`` (DOP853, rtol 1e-13,
 terminal events at every mode change, interior x1 extrema as non-terminal events). The exact
 simulator must agree to 1e-9 relative (to the run's largest |x1|) at every sample instant and in
 the peak error over the scoring window.
@@ -22,7 +22,7 @@ from bench.runner import run_closed_loop
 from controllers import available_controllers, make_controller
 from controllers.base import Controller
 from plant import PlantParams
-from plant.reference import event_driven, schedule_from_commands
+from plant.multimode.reference import event_driven, schedule_from_commands
 
 pytestmark = pytest.mark.slow
 

@@ -36,7 +36,7 @@ def _both(name, scenario, seed, noise=True, duration=12.0, **options):
     ("dithered", "thesis", 4, False, {"dither_amplitude": 0.0}),
 ])
 def test_compiled_law_is_bit_identical_to_the_python_loop(name, scenario, seed, noise, options):
-    from plant.interval import interval_kernel
+    from plant.multimode.interval import interval_kernel
     python, compiled = _both(name, scenario, seed, noise, **options)
     assert len(interval_kernel.signatures) == 1      # the compiled loop adds no specialization
     assert python[1] == compiled[1] == "ok"

@@ -6,8 +6,8 @@ from hypothesis import strategies as st
 
 from plant import PlantParams
 from plant.drive import DriveCommand, DriveType
-from plant.interval import advance
-from plant.reference import event_driven, schedule_from_commands
+from plant.multimode.interval import advance
+from plant.multimode.reference import event_driven, schedule_from_commands
 from plant.state import X1, SimOptions, initial_state
 
 P = PlantParams(correlated_friction_std=0.0)

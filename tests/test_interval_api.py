@@ -6,7 +6,7 @@ import numpy as np
 
 from plant import PlantParams
 from plant.drive import DriveCommand, DriveType
-from plant.interval import advance, interval_kernel
+from plant.multimode.interval import advance, interval_kernel
 from plant.state import PlantState, SimOptions, initial_state
 
 

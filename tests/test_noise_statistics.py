@@ -11,9 +11,9 @@ from scipy import stats
 
 from plant import PlantParams, pulse_response
 from plant.drive import DriveCommand
-from plant.interval import advance
+from plant.multimode.interval import advance
 from plant.randomness import NoiseStream
-from plant.reference import fixed_step_pulses
+from plant.multimode.reference import fixed_step_pulses
 from plant.state import X1, X4, SimOptions, initial_state
 
 pytestmark = pytest.mark.slow

@@ -24,7 +24,7 @@ def test_noise_free_friction_peak_is_the_band_and_pulse_rate_is_the_drift_over_t
     # σ2 = 0 and the true pulse law: every pulse lands exactly at +b, so the error sweeps
     # [−b, +b] at the drift rate |x4| ≈ 30 µrad/s and pulses come every 2b/|x4| seconds. While
     # the shaft decelerates (ẋ1 = x2 − x4 < 0 before it sticks) x1 can top the landing point by
-    # at most the drift over one pulse's motion, x4·t_stop with t_stop < 5 ms (plant.pulse).
+    # at most the drift over one pulse's motion, x4·t_stop with t_stop < 5 ms (plant.multimode.pulse).
     r = _run("oracle-pulse", band=band, duration=15.0, warmup=5.0)
     assert r.status == "ok", r.message
     x4 = PlantParams().command_velocity_initial

@@ -19,7 +19,7 @@ from controllers.oracle_pulse import OraclePulse
 from controllers.pid import PidRealisation, SlopeEstimator
 from controllers.pulse_width import PulseModelRls
 from plant import PlantParams
-from plant.pulse import pulse_response
+from plant.multimode.pulse import pulse_response
 
 P = PlantParams()
 

@@ -18,7 +18,7 @@ from controllers.base import make_controller
 from controllers.observer_pid import DisturbanceObserver
 from controllers.pulse_width import PulseModelRls
 from plant import PlantParams
-from plant.pulse import pulse_response
+from plant.multimode.pulse import pulse_response
 
 P = PlantParams()
 

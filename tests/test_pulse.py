@@ -7,7 +7,7 @@ import pytest
 
 from plant import PlantParams, pulse_response
 from plant.drive import DriveType
-from plant.reference import Schedule, event_driven
+from plant.multimode.reference import Schedule, event_driven
 from plant.state import SimOptions
 
 P0 = PlantParams()
@@ -70,7 +70,7 @@ def test_bad_arguments():
 def test_closed_form_path_equals_event_loop(params):
     """The public noise-free fast path and the general event-driven simulator are two
     independent exact computations; they must agree to round-off, event times included."""
-    from plant.pulse import _closed_form, _simulate
+    from plant.multimode.pulse import _closed_form, _simulate
 
     for frac in np.linspace(1.0001, 8.0, 40):
         dt_u = frac * params.breakaway_time
@@ -83,7 +83,7 @@ def test_closed_form_path_equals_event_loop(params):
 
 def test_hermite_peak_matches_dense_evaluation():
     """Interior extremum of the cubic Hermite interpolant vs a dense evaluation of the cubic."""
-    from plant.segments import hermite_peak
+    from plant.multimode.segments import hermite_peak
 
     rng = np.random.default_rng(2)
     s = np.linspace(0, 1, 200001)
@@ -103,7 +103,7 @@ def test_hermite_peak_matches_dense_evaluation():
 @pytest.mark.parametrize("params", [PlantParams(), PlantParams(motor_time_constant=5e-3)])
 def test_max_on_time_brings_the_current_back_to_zero_at_the_next_sample(params):
     # independent truth: the event-driven simulator's flyback-end time for that on-time
-    from plant.pulse import max_on_time
+    from plant.multimode.pulse import max_on_time
     dt = max_on_time(params)
     assert 0 < dt < params.sample_period
     r = pulse_response(params, dt, options=SimOptions(noise=False))

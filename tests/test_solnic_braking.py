@@ -1,6 +1,6 @@
 """The braking pulse pair against the exact plant (controllers/solnic/braking.py).
 
-Independent truth: the plant's event-driven simulator (:func:`plant.interval.advance`) under the
+Independent truth: the plant's event-driven simulator (:func:`plant.multimode.interval.advance`) under the
 bridge command +u_max for Δt_u, −u_max to t_off, then off — noise-free for the landing point,
 noisy (Monte-Carlo) for the scatter. x4 ≡ 0 and x5's diffusion off, so x1 is the shaft angle
 and w2 the only noise.
@@ -27,7 +27,7 @@ from controllers.solnic.noise_model import braked_pulse_noise, pulse_noise
 from controllers.solnic.predictor import Predictor
 from plant import PlantParams, pulse_response
 from plant.drive import DriveCommand, DriveType
-from plant.interval import advance
+from plant.multimode.interval import advance
 from plant.randomness import NoiseStream
 from plant.state import X1, X2, EventKind, SimOptions, initial_state
 

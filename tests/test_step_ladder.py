@@ -1,11 +1,11 @@
-"""The noisy moving mode's step ladder (plant.zero_velocity) against independent truth.
+"""The noisy moving mode's step ladder (plant.multimode.zero_velocity) against independent truth.
 
 The ladder lengthens a Gaussian sub-step when the state is far from a velocity zero (crossing
 probability ≤ 6Φ(−8.5) per step) and, while reflecting, up to the regular sub-step when the
 expected x1 error rate of the Skorokhod push stays within that of the fixed reflect sub-step at
 zero velocity. Where that matters most — dither around the breakaway level, and a long
 reflection regime from breakaway — the exact simulator's distributions must match
-Euler–Maruyama with the same mode logic (plant.reference.fixed_step) at a step 50–500× finer
+Euler–Maruyama with the same mode logic (plant.multimode.reference.fixed_step) at a step 50–500× finer
 than the ladder's shortest rung.
 
 Tolerances: two-sample KS p > 0.01 per statistic; means within 4 standard errors of the
@@ -25,11 +25,11 @@ from scipy import stats
 
 from plant import PlantParams
 from plant.drive import DriveCommand, DriveType
-from plant.interval import advance
+from plant.multimode.interval import advance
 from plant.randomness import NoiseStream
-from plant.reference import Schedule, fixed_step
+from plant.multimode.reference import Schedule, fixed_step
 from plant.state import PlantState, SimOptions
-from plant.zero_velocity import FAR_SIGMAS, LADDER, _push_bound, ladder_thresholds
+from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, _push_bound, ladder_thresholds
 
 P0 = PlantParams()
 N_EXACT = 2000
@@ -160,8 +160,8 @@ def test_bridge_law_matches_gaussian_conditioning(params):
     """The bisection's midpoint law (Matheron gain G, conditional factor C) against numpy:
     G = Q(w/2)·Φ_hᵀ·pinv(Q(w)) on the noisy block, Σ = Q(w/2) − G·Φ_h·Q(w/2); with σ4 = 0 (the
     pulse plant) x4 has no noise, and scratch memory full of NaN must not leak into the law."""
-    from plant.moving import NOISY_BLOCK, phi_moving, q_moving
-    from plant.zero_velocity import _bridge_law
+    from plant.multimode.moving import NOISY_BLOCK, phi_moving, q_moving
+    from plant.multimode.zero_velocity import _bridge_law
 
     prm = params.kernel_record()[0]
     for mode in (1, 3):

@@ -5,7 +5,7 @@ fires an 8 ms bridge pulse against the sign of the measured error. Each pulse mo
 about 3.8 mrad, so |x1| swings to a few mrad; every swing peaks at an *interior* extremum of a
 moving segment (x2 = x4 while the shaft coasts to a stop), not at a sample or an event.
 
-Reference: the commands the controller issued, replayed by ``plant.reference.event_driven``
+Reference: the commands the controller issued, replayed by ``plant.multimode.reference.event_driven``
 (``solve_ivp``, DOP853, rtol 1e-12, terminal events) and sampled on a 1 µs grid.
 
 Comparison. Let P be the runner's peak and D the largest |x1| on the grid. The grid can only miss
@@ -27,7 +27,7 @@ from bench.runner import run_closed_loop
 from controllers.base import Controller
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.reference import event_driven, schedule_from_commands
+from plant.multimode.reference import event_driven, schedule_from_commands
 
 GRID = 1e-6
 

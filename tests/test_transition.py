@@ -6,8 +6,8 @@ import pytest
 from scipy.linalg import expm
 
 from plant import PlantParams
-from plant.noise import noise_factor
-from plant.transition import X1, X2, X4, X5, drift_matrix, noise_intensity, phi, process_noise
+from plant.multimode.noise import noise_factor
+from plant.multimode.transition import X1, X2, X4, X5, drift_matrix, noise_intensity, phi, process_noise
 
 PARAMS = [PlantParams(), PlantParams(inertia=2.0, motor_time_constant=3e-3, correlated_friction_tau=5.0,
                                      command_velocity_tau=20.0, stiction=3.0, coulomb=1.0)]
@@ -175,9 +175,9 @@ def test_stuck_closed_form_matches_general_factor_statistics():
 @pytest.mark.parametrize("params", PARAMS)
 @pytest.mark.parametrize("mode", [1, 3])
 def test_compiled_closed_forms_equal_the_python_ones(params, mode):
-    """plant.moving restates Φ and Q in scalar form for numba; both must agree, and the
+    """plant.multimode.moving restates Φ and Q in scalar form for numba; both must agree, and the
     scalar mean path must equal Φ(h)·X."""
-    from plant.moving import chol_psd, mean_path, phi_moving, q_moving
+    from plant.multimode.moving import chol_psd, mean_path, phi_moving, q_moving
 
     pv = params.kernel_record()[0]
     idx = np.array(_NOISY)

@@ -62,7 +62,7 @@ import numpy as np
 from controllers.base import Controller, register
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
-from plant.pulse import max_on_time
+from controllers.models.acker import max_on_time
 
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter

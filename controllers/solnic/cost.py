@@ -91,7 +91,7 @@ def cost_curve(motion: Callable[[float], float], params: PlantParams, x4: float,
 
 def _true_motion(params: PlantParams, response_fn=None) -> Callable[[float], float]:
     if response_fn is None:
-        from plant import pulse_response as response_fn
+        from controllers.models.acker import pulse_response as response_fn
     cache: dict[float, float] = {}
 
     def motion(dt_u: float) -> float:

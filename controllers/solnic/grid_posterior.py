@@ -59,7 +59,7 @@ import numpy as np
 from numba import njit
 
 from plant.params import PlantParams
-from plant.pulse import closed_form_kernel
+from controllers.models.acker import closed_form_kernel
 
 __all__ = ["FrictionGrid", "Predictive", "pulse_table"]
 

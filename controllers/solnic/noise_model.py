@@ -81,7 +81,7 @@ import numpy as np
 from numba import njit
 
 from plant.params import PlantParams
-from plant.pulse import closed_form_kernel
+from controllers.models.acker import closed_form_kernel
 
 __all__ = ["PulseNoise", "pulse_noise", "braked_pulse_noise", "velocity_std_after"]
 

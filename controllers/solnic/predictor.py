@@ -40,7 +40,7 @@ from numba import njit
 
 from controllers.solnic.braking import _pair, _timing
 from plant.params import PlantParams
-from plant.pulse import closed_form_kernel
+from controllers.models.acker import closed_form_kernel
 
 __all__ = ["PulsePrediction", "Predictor", "peak_torque"]
 
@@ -228,7 +228,7 @@ class Predictor:
             raise ValueError(f"fd_step must be a finite positive number, got {fd_step!r}")
         self._compiled = response_fn is None       # the plant's own model: the compiled path
         if response_fn is None:
-            from plant import pulse_response as response_fn  # the plant's exact model
+            from controllers.models.acker import pulse_response as response_fn  # the model it assumes
         self.params = params
         self.fd_step = float(fd_step)
         self._response = response_fn

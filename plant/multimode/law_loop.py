@@ -1,14 +1,14 @@
-"""The closed loop of a fixed linear law, compiled whole (the runner's fast path).
+"""The multimode family's fast path: the closed loop of a fixed linear law, compiled whole.
 
-For a controller that describes its step as a :class:`controllers.law.LinearLaw`, the loop of
-:func:`bench.runner.run_closed_loop` — sensor, compensator, dither segments, the plant's
-interval kernel, the scoring window — runs inside one numba function over chunks of
-:data:`CHUNK` samples. Every floating-point operation is the one the Python loop performs, in
-the same order (the compensator as :func:`controllers.linear.compensator_step`, the dither as
-:func:`controllers.dithered.square_wave_segments`, the window sums as
-:class:`bench.metrics.WindowTotals`), and the plant noise is read from the same stream at the
-same positions, so the results are bit-identical to the Python loop (tests/test_compiled_loop.py).
-Between chunks Python checks the wall-clock limit and extends the noise buffer.
+For a controller that describes its step as a fixed linear law (``controllers.law.LinearLaw``,
+read here by its attributes), the loop of the runner — sensor, compensator, dither segments,
+the interval kernel, the scoring window's sums — runs inside one numba function over chunks of
+:data:`CHUNK` samples. The compensator and the dither are :mod:`plant.linear_drive`'s compiled
+functions, the very code the controllers' ``step`` calls; the window sums are the runner's
+(``bench.metrics.WindowTotals.add``) in the same order; the plant noise is read from the same
+stream at the same positions. So the results are bit-identical to the Python loop
+(tests/test_compiled_loop.py). Between chunks Python checks the wall-clock limit and extends
+the noise buffer.
 """
 
 from __future__ import annotations
@@ -19,65 +19,24 @@ import time
 import numpy as np
 from numba import njit
 
-from bench.metrics import WindowTotals
-from controllers.law import LinearLaw
-from plant.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
+from plant.linear_drive import compensator_step, square_wave_segments
+from plant.multimode.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
                             SHEET_FLYBACK, SHEET_MODE, SHEET_PEAK, SHEET_SIZE, SHEET_SQ, SHEET_STATUS,
                             SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel, interval_status, kernel_inputs)
 from plant.params import PlantParams
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import N_STATE, PlantState, SimOptions, Status
 
-__all__ = ["run_law", "CHUNK"]
+__all__ = ["run_law", "CHUNK", "TOTAL_FIELDS"]
 
 CHUNK = 1000            # samples per compiled call (the wall-clock limit is checked between them)
 NOISE_MARGIN = 1 << 15  # unread normals guaranteed before each interval (else back to Python)
-_EDGE_TOL_S = 1e-12     # as controllers.dithered
 _NEED_NOISE = -1
 
-# totals vector: as WindowTotals' fields
+# totals vector: the scoring window's sums, named as IntervalResult's fields
+TOTAL_FIELDS = ("duration", "peak_abs_error", "int_abs_current", "int_sq_current", "supply_charge", "n_events",
+                "n_breakaways", "n_substeps")
 _DUR, _PEAK, _IABS, _ISQ, _CHG, _NEV, _NBRK, _NSUB = range(8)
-
-
-@njit(cache=True)
-def _segments(t0, duration, base, amplitude, frequency_hz, phase, limit, offs, levs):
-    """controllers.dithered.square_wave_segments into (offs, levs); returns their number."""
-    if amplitude == 0.0:
-        offs[0] = 0.0
-        levs[0] = min(max(base, -limit), limit)
-        return 1
-    high = min(max(base + amplitude, -limit), limit)
-    low = min(max(base - amplitude, -limit), limit)
-    cycles0 = frequency_hz * t0 + phase
-    k = math.floor(2.0 * cycles0) + 1
-    n_seg = 0
-    a = 0.0
-    last = math.nan
-    have_last = False
-    off = (0.5 * k - cycles0) / frequency_hz
-    done = False
-    while not done:
-        if off < duration - _EDGE_TOL_S:
-            if not (off > _EDGE_TOL_S):
-                k += 1
-                off = (0.5 * k - cycles0) / frequency_hz
-                continue
-            b = off
-            k += 1
-            off = (0.5 * k - cycles0) / frequency_hz
-        else:
-            b = duration
-            done = True
-        theta = cycles0 + frequency_hz * 0.5 * (a + b)
-        level = high if theta - math.floor(theta) < 0.5 else low
-        if not have_last or level != last:
-            offs[n_seg] = a
-            levs[n_seg] = level
-            n_seg += 1
-            last = level
-            have_last = True
-        a = b
-    return n_seg
 
 
 @njit(cache=True)
@@ -97,17 +56,9 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
             return _NEED_NOISE
         x1 = x[0]
         y = x1 + sensor[n]
-        # compensator (controllers.linear.compensator_step), then the clip
-        v = D[0, 0] * y
-        for j in range(n_c):
-            v += C[0, j] * cx[j]
-        for i in range(n_c):
-            acc = A[i, 0] * cx[0]
-            for j in range(1, n_c):
-                acc += A[i, j] * cx[j]
-            cxn[i] = B[i, 0] * y + acc
+        v = compensator_step(A, B, C, D, cx, cxn, y)
         level = min(max(-v, -u_max), u_max)
-        k = _segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
+        k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
         pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
                               levs[:k].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
         S = out[N_STATE:]
@@ -134,12 +85,14 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
     return STATUS_OK
 
 
-def run_law(law: LinearLaw, params: PlantParams, options: SimOptions, state: PlantState, sensor: np.ndarray,
+def run_law(law, params: PlantParams, options: SimOptions, state: PlantState, sensor: np.ndarray,
             n_warm: int, noise: NoiseStream | None, deadline: float
-            ) -> tuple[PlantState, WindowTotals, np.ndarray, Status, str]:
+            ) -> tuple[PlantState, dict[str, float], np.ndarray, Status, str]:
     """Run ``len(sensor)`` samples of ``law`` from ``state``; what the runner's Python loop computes.
 
-    Returns the final state, the scoring window's totals, x1 at the window's sample instants
+    ``law`` has the attributes of ``controllers.law.LinearLaw`` (A, B, C, D, u_max,
+    dither_amplitude, dither_frequency, dither_phase); ``sensor`` holds w1(n) [rad].
+    Returns the final state, the scoring window's sums (:data:`TOTAL_FIELDS`), x1 at the window's sample instants
     (with the final one when the run completes), the status and its message. The run stops with
     status ``error`` when ``time.perf_counter()`` passes ``deadline`` (checked every
     :data:`CHUNK` samples).
@@ -197,8 +150,5 @@ def run_law(law: LinearLaw, params: PlantParams, options: SimOptions, state: Pla
         status, message = Status.OK, ""
         x1_window[n_window] = final.x[0]
         n_window += 1
-    t = WindowTotals(duration=float(totals[_DUR]), peak_abs_error=float(totals[_PEAK]),
-                     int_abs_current=float(totals[_IABS]), int_sq_current=float(totals[_ISQ]),
-                     supply_charge=float(totals[_CHG]), n_events=int(totals[_NEV]),
-                     n_breakaways=int(totals[_NBRK]), n_substeps=int(totals[_NSUB]))
-    return final, t, x1_window[:n_window], status, message
+    sums = {name: (float(v) if i < _NEV else int(v)) for i, (name, v) in enumerate(zip(TOTAL_FIELDS, totals))}
+    return final, sums, x1_window[:n_window], status, message

@@ -13,7 +13,7 @@ mode 1 (moving, x2 < 0) has ẋ2 = α(x3 + x5 + x6), mode 3 (x2 > 0) has
 ẋ2 = α(x3 − x5 − x6), mode 2 (stuck) has x2 ≡ 0 and x5 frozen.
 
 x6 = k̄c is the constant coordinate that makes the affine drift linear; the simulator keeps
-k̄c as a parameter and builds this vector only inside its kernels (plant.moving).
+k̄c as a parameter and builds this vector only inside its kernels (plant.multimode.moving).
 
 ``phi`` evaluates the closed forms (3-20)–(3-22) with cancellation-free helpers, so every
 entry is accurate to a few ulp for any h. ``process_noise`` evaluates (4-8),

@@ -9,7 +9,7 @@ commanded velocity, ẋ1 = −x4, and x4 is an Ornstein–Uhlenbeck process (rat
 
 the exact integral of (4-8) for mode 2 (e4 from plant.expfun). The pair is drawn with its
 2 × 2 Cholesky factor and two unit normals, as the minimal factor (4-20) does. Breakaway,
-|x3| = ks, is a closed-form time (plant.segments) because x3 is deterministic.
+|x3| = ks, is a closed-form time (plant.multimode.segments) because x3 is deterministic.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from plant.randomness import normal
 
 __all__ = ["stuck_propagate"]
 
-# Augmented-vector slots used by every kernel (see plant.moving): x1, x2, x3, x4, x5, kc, u.
+# Augmented-vector slots used by every kernel (see plant.multimode.moving): x1, x2, x3, x4, x5, kc, u.
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
 

@@ -14,15 +14,15 @@ and 4), so the state jumps from event to event with X⁺ = Φ(h)·X + N. The eve
 * the end of the reflection regime, when the torque in the direction of motion falls to ks
   (closed form);
 * velocity zero in a moving mode: noise-free (or σ2 = 0) the first root of the closed-form
-  mean velocity, to ~1e-15 s (plant.moving); noisy, the bridge or Newton locator
-  (plant.zero_velocity). At a velocity zero the switching table of SPEC §2 applies: reflect
+  mean velocity, to ~1e-15 s (plant.multimode.moving); noisy, the bridge or Newton locator
+  (plant.multimode.zero_velocity). At a velocity zero the switching table of SPEC §2 applies: reflect
   while the torque still breaks stiction forward, reverse when it breaks it backward, stick
   otherwise (x2 set to exactly 0).
 
 The Coulomb and stiction levels are kc = k̄c + x5 and ks = k̄s + x5, clamped at 0.
 
-Layout: plant.stuck (mode 2), plant.moving (modes 1 and 3), plant.zero_velocity (locators),
-plant.segments (torque events and integrals); this module drives them over one interval.
+Layout: plant.multimode.stuck (mode 2), plant.multimode.moving (modes 1 and 3), plant.multimode.zero_velocity (locators),
+plant.multimode.segments (torque events and integrals); this module drives them over one interval.
 """
 
 from __future__ import annotations
@@ -35,13 +35,13 @@ import numpy as np
 from numba import njit
 
 from plant.drive import DriveCommand, DriveType
-from plant.moving import deterministic_move, first_mean_zero
+from plant.multimode.moving import deterministic_move, first_mean_zero
 from plant.params import PlantParams
 from plant.randomness import NoiseExhausted, NoiseStream
-from plant.segments import torque_crossing_time, torque_integrals
+from plant.multimode.segments import torque_crossing_time, torque_integrals
 from plant.state import EVENT_FIELDS, N_STATE, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
-from plant.stuck import stuck_propagate
-from plant.zero_velocity import LADDER, bisection_tables, bridge_segment, ladder_thresholds, newton_segment, substep_tables
+from plant.multimode.stuck import stuck_propagate
+from plant.multimode.zero_velocity import LADDER, bisection_tables, bridge_segment, ladder_thresholds, newton_segment, substep_tables
 
 __all__ = ["advance"]
 
@@ -51,7 +51,7 @@ A1, A2, A3, A4, A5, AKC, AU = range(7)
 _T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC = range(15)
 _SHEET = 15
 # Plan vector: SimOptions.kernel_vector, then the step-ladder thresholds TH (2 × LADDER) of
-# plant.zero_velocity.ladder_thresholds.
+# plant.multimode.zero_velocity.ladder_thresholds.
 _O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
 _O_LADDER = 7
 # Scratch floats of bridge_segment, allocated once per interval.
@@ -440,7 +440,7 @@ def _plan(params: PlantParams, options: SimOptions, noisy: bool) -> tuple[np.nda
 def _tables(params: PlantParams, options: SimOptions) -> tuple[np.ndarray, ...]:
     """Ladder thresholds, Φ and noise factors of the step ladder, bridge laws of the bisection.
 
-    The ladder (plant.zero_velocity): widths h_j·2^k, k < LADDER, from h_0 = ``substep`` and
+    The ladder (plant.multimode.zero_velocity): widths h_j·2^k, k < LADDER, from h_0 = ``substep`` and
     h_1 = ``reflect_substep``, for both moving modes, with the thresholds TH[j, k] that decide
     when a rung may be used. A memo of a pure function of (params, options): it saves
     recomputing them at every segment and bisection level and cannot change a result (the

@@ -20,7 +20,7 @@ With y3 = β3·τ, y5 = β5·τ and s = +1 in mode 1, −1 in mode 3, the mean p
 The noise enters through the x2, x4 and x5 columns only, so its covariance lives on the block
 (x1, x2, x4, x5); the w2 share is closed form and the w4, w5 shares are integrated by 4-node
 Gauss–Legendre on panels with β·Δ ≤ 1e-3, exact to round-off because those columns are
-polynomials in v times e^(−β4 v), e^(−β5 v) (:func:`q_moving`; plant.transition uses an 8-node
+polynomials in v times e^(−β4 v), e^(−β5 v) (:func:`q_moving`; plant.multimode.transition uses an 8-node
 rule for the same integrals; Van Loan is the test oracle).
 """
 
@@ -33,7 +33,7 @@ from numba import njit
 
 from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
-from plant.segments import hermite_peak, torque_crossing_time
+from plant.multimode.segments import hermite_peak, torque_crossing_time
 
 __all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "deterministic_move",
            "NOISY_BLOCK"]
@@ -137,7 +137,7 @@ def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
     """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
 
     w2: q2·[h³/3, h²/2; ·, h] on (x1, x2);
-    w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.stuck);
+    w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.multimode.stuck);
     w5: x1x1 q5·α²·F2(y5)/β5⁵, x1x2 q5·α²·F1(y5)/β5⁴, x1x5 q5·s·α·F0(y5)/β5³,
         x2x2 q5·α²·e4(y5)/β5³, x2x5 q5·s·α·e1(y5)²/(2β5²), x5x5 q5·e1(2y5)/(2β5),
     with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`).

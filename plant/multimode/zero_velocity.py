@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
+from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
                           q_moving, substep_peak, velocity_extremum_time)
 from plant.randomness import normal, uniform, uniform_below
 
@@ -191,7 +191,7 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     left half with probability p_left/p_any.
 
     ``BPh, BPw, BG, BC`` tabulate the law for w = h/2^k (the regular sub-step, see
-    plant.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 274 floats.
+    plant.multimode.interval); levels beyond the table are computed here. ``V``: scratch, ≥ 274 floats.
     """
     m = 0 if mode == 1 else 1
     Xa = V[0:7]
@@ -389,7 +389,7 @@ def substep_tables(p, o_sub, o_rsub, TP, TL):
 def _step(X, P, L, z, cursor, out):
     """out = P·X + N with the sparsity of Φ_1/Φ_3 (3-20)/(3-21); N = L·ζ on the noisy block.
 
-    :func:`plant.moving.gaussian_step` without the structural zeros of Φ and of the lower
+    :func:`plant.multimode.moving.gaussian_step` without the structural zeros of Φ and of the lower
     triangular L.
     """
     x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
@@ -412,7 +412,7 @@ def _step(X, P, L, z, cursor, out):
 def _mean_min(mode, X, p, h, t_ext):
     """min over τ in [0, h] of s·x̄2(τ), the mean velocity in the direction of motion.
 
-    x̄2 has at most one extremum, at ``t_ext`` (:func:`plant.moving.velocity_extremum_time`).
+    x̄2 has at most one extremum, at ``t_ext`` (:func:`plant.multimode.moving.velocity_extremum_time`).
     """
     s = 1.0 if mode == 3 else -1.0
     v = min(s * X[A2], s * mean_velocity(mode, h, X, p))

@@ -1,0 +1,1 @@
+"""The plant models controllers carry (what a controller assumes, never the simulator)."""

@@ -1,0 +1,34 @@
+"""``multimode``: Acker's idealized plant, simulated exactly by multimode linearization (ch. 3-4).
+
+A rigid shaft of inertia J with Coulomb friction and stiction, a first-order motor lag, the
+commanded velocity x4 and the correlated friction x5 (SPEC §2). Between events the system is
+linear and time-invariant, so the state jumps from event to event with X⁺ = Φ(h)·X + N.
+
+Modules by idea: ``expfun`` is shared (:mod:`plant.expfun`); ``transition`` (Φ and the noise
+covariance as matrices: the test oracles' counterpart), ``noise`` (the minimal factor (4-20)),
+``segments`` (torque events and integrals), ``stuck`` (mode 2), ``moving`` (modes 1 and 3),
+``zero_velocity`` (the noisy velocity-zero locators), ``interval`` (the pure step, compiled
+whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
+response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators).
+"""
+
+from __future__ import annotations
+
+from plant.multimode import law_loop
+from plant.multimode.interval import advance
+from plant.params import PlantParams
+from plant.protocol import PlantFamily, register_family
+
+__all__ = ["Multimode"]
+
+
+@register_family("multimode")
+class Multimode(PlantFamily):
+    """The exact multimode plant; its step is :func:`plant.multimode.interval.advance`."""
+
+    Params = PlantParams
+    description = "Acker's shaft: Coulomb friction and stiction, exact multimode linearization (ch. 3-4)"
+    linear_law_loop = staticmethod(law_loop.run_law)
+
+    def step(self, state, command, params, noise, options, *, duration=None, record=False):
+        return advance(state, command, params, noise, options, duration=duration, record=record)

@@ -1,0 +1,117 @@
+"""The response of the shaft to one switched-bridge torque pulse (section 3.2, 6.1).
+
+Starting from rest (stuck, x3 = x4 = x5 = 0), the bridge applies sign·u_max for ``dt_u``
+seconds, then is switched off: the flyback diodes apply −sign·u_max until the current is
+zero, and u = 0 after that. The shaft breaks away when x3 passes k̄s and stops when its
+velocity returns to zero with |x3| ≤ ks. Computed by the exact event-driven simulator
+(:func:`plant.multimode.interval.advance`), noisy or not. The closed form that pulse
+controllers assume is theirs, not the plant's: :mod:`controllers.models.acker`.
+"""
+
+from __future__ import annotations
+
+import math
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from plant.drive import DriveCommand, DriveType
+from plant.multimode.interval import advance
+from plant.params import PlantParams
+from plant.randomness import NoiseStream
+from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
+
+__all__ = ["PulseResponse", "pulse_response"]
+
+
+@dataclass(frozen=True)
+class PulseResponse:
+    """Outcome of one pulse.
+
+    Attributes
+    ----------
+    delta_c : float
+        Net shaft motion [rad] (signed).
+    t_breakaway : float or None
+        First breakaway time [s]; None if the shaft never moves.
+    t_current_zero : float
+        Time the motor current returns to zero after switch-off [s].
+    t_stop : float
+        Time the shaft is stuck for good [s]; 0 if it never moved.
+    """
+
+    delta_c: float
+    t_breakaway: float | None
+    t_current_zero: float
+    t_stop: float
+
+
+_HORIZON_S = 1.0
+_BREAKAWAY, _STICK, _FLYBACK_END = int(EventKind.BREAKAWAY), int(EventKind.STICK), int(EventKind.FLYBACK_END)
+
+
+def pulse_response(params: PlantParams, dt_u: float, *, sign: int = 1, seed: int | None = None,
+                   options: SimOptions | None = None) -> PulseResponse:
+    """Simulate one pulse exactly; ``seed=None`` is noise-free.
+
+    With a seed, friction noise w2 and x5's diffusion act (x4 stays 0 so x1 is the shaft
+    angle); the pulse's random stream is ``numpy.random.default_rng(SeedSequence(seed))``.
+
+    Raises
+    ------
+    ValueError
+        If ``dt_u`` is negative, not finite, or ``sign`` is not ±1.
+    """
+    if not (type(dt_u) is float or isinstance(dt_u, (int, float))) or not (dt_u >= 0 and math.isfinite(dt_u)):
+        raise ValueError(f"dt_u must be a finite number of seconds >= 0, got {dt_u!r}")
+    if sign not in (1, -1):
+        raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+    dt_u = float(dt_u)
+    if dt_u == 0.0:
+        return PulseResponse(0.0, None, 0.0, 0.0)
+    return _simulate(params, dt_u, sign, seed, options)
+
+
+def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
+              options: SimOptions | None) -> PulseResponse:
+    """The pulse through the general event-driven simulator (noisy or not)."""
+    noisy = seed is not None
+    p = params.__dict__.get("_pulse_plant")
+    if p is None:                       # x4 ≡ 0 here, so x1 is the shaft angle
+        p = params.replace(command_velocity_std=0.0)
+        object.__setattr__(params, "_pulse_plant", p)
+    opts = options or SimOptions(noise=noisy)
+    if not noisy:
+        opts = dataclasses.replace(opts, noise=False)
+    noise = NoiseStream.from_seed(seed, block=512) if noisy else None
+    state = initial_state(p, x5=0.0, x4=0.0)
+    level = sign * p.u_max
+    times: dict[str, float] = {}
+
+    def note(events: dict[str, np.ndarray]) -> None:
+        for t, kind in zip(events["t"].tolist(), events["kind"].tolist()):
+            if kind == _BREAKAWAY:
+                times.setdefault("breakaway", t)
+            elif kind == _STICK:
+                times["stop"] = t
+            elif kind == _FLYBACK_END and t > dt_u:
+                times.setdefault("current_zero", t)
+
+    step = advance(state, DriveCommand.hold(level, DriveType.BRIDGE), p, noise, opts, duration=dt_u, record=True)
+    note(step.events)
+    state = step.state
+    off = DriveCommand.hold(0.0, DriveType.BRIDGE)
+    t_fly = p.motor_time_constant * math.log1p(abs(state.x[X3]) / p.u_max)
+    chunk = max(2.0 * t_fly, 1e-3)
+    while step.status == Status.OK and (state.mode != 2 or state.flyback) and state.t < _HORIZON_S:
+        step = advance(state, off, p, noise, opts, duration=chunk, record=True)
+        note(step.events)
+        state = step.state
+    if step.status != Status.OK:
+        raise RuntimeError(f"pulse simulation ended with status {step.status}: {step.message}")
+    if state.mode != 2:
+        raise RuntimeError(f"shaft still moving {_HORIZON_S} s after a {dt_u} s pulse")
+    t_cz = times.get("current_zero", dt_u + t_fly)
+    t_brk = times.get("breakaway")
+    return PulseResponse(float(state.x[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
