@@ -252,6 +252,7 @@ def list_(
 
     from bench.matrix import builtin_matrix_path, load_matrix
     from bench.scenarios import builtin_scenarios
+    from plant.protocol import available_families, get_family
 
     spec = load_matrix(matrix, check_resets=False) if matrix is not None else None
     table = Table(title="controllers", title_justify="left")
@@ -263,14 +264,25 @@ def list_(
         table.add_row(escape(name), _drive(cs.base), escape(f"variant of {cs.base}: {cs.options}"))
     out_console.print(table)
 
+    table = Table(title="plant families", title_justify="left")
+    for col in ("name", "description"):
+        table.add_column(escape(col))
+    for name in available_families():
+        family = get_family(name)
+        table.add_row(escape(name), escape(family.description or (type(family).__doc__ or "").split("\n")[0]))
+    out_console.print(table)
+
     table = Table(title="scenarios", title_justify="left")
-    for col in ("name", "duration [s]", "warm-up [s]", "description"):
+    for col in ("name", "plant", "duration [s]", "warm-up [s]", "description"):
         table.add_column(escape(col))
     scenarios = dict(builtin_scenarios())
     if spec:
         scenarios.update({s.name: s for s in spec.scenarios})
     for name, s in scenarios.items():
-        table.add_row(escape(name), f"{s.duration_s:g}", f"{s.warmup_s:g}", escape(s.description))
+        told = "" if s.model is None else "; model differs"
+        told += "".join(f"; {k} ±{v:.0%}" for k, v in s.mismatch)
+        table.add_row(escape(name), escape(s.family + told), f"{s.duration_s:g}", f"{s.warmup_s:g}",
+                      escape(s.description))
     out_console.print(table)
     for quick in (False, True):
         m = load_matrix(builtin_matrix_path(quick), check_resets=False)

@@ -43,8 +43,8 @@ class _Recording(Controller):
     def reset(self, params, rng):
         self.inner.reset(params, rng)
 
-    def observe_truth(self, state):
-        self.inner.observe_truth(state)
+    def observe_truth(self, state, plant):
+        self.inner.observe_truth(state, plant)
 
     def step(self, y):
         cmd = self.inner.step(y)

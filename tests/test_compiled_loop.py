@@ -1,4 +1,4 @@
-"""The compiled closed loop of a linear law (bench.compiled_loop) against the Python loop.
+"""The compiled closed loop of a linear law (the multimode family's fast path) against the Python loop.
 
 The Python loop — ``step`` then ``advance`` at every sample — is the reference; the compiled
 path must give bit-identical metrics for the linear and dithered controllers, with and without
@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from bench import compiled_loop
+from plant.multimode import law_loop as compiled_loop
 from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
 from controllers import make_controller
@@ -80,18 +80,25 @@ def test_time_limit_stops_the_compiled_loop():
     assert math.isnan(r.metrics["peak_error_rad"])
 
 
-def test_compiled_dither_segments_equal_the_python_ones():
-    """bench.compiled_loop._segments against controllers.dithered.square_wave_segments on random
-    intervals, levels, amplitudes (some clipping), frequencies and phases."""
+def test_compiled_dither_segments_are_the_square_wave():
+    """plant.linear_drive.square_wave_segments (what both the compiled loop and the dithered
+    controller run) against the wave's definition, sq(θ) = sign(sin 2πθ), on random intervals,
+    levels, amplitudes (some clipping), frequencies and phases."""
     import numpy as np
 
-    from controllers.dithered import square_wave_segments
+    from plant.linear_drive import square_wave_segments
     rng = np.random.default_rng(3)
     offs, levs = np.empty(64), np.empty(64)
     for _ in range(3000):
         t0 = int(rng.integers(0, 100000)) * 0.01
         base, amp = rng.uniform(-30, 30), float(rng.choice([0.0, 2.0, 18.0, 40.0, rng.uniform(0, 30)]))
         freq, phase = float(rng.choice([25.0, 125.0, 250.0, 500.0, rng.uniform(1, 1000)])), rng.random()
-        k = compiled_loop._segments(t0, 0.01, base, amp, freq, phase, 26.0, offs, levs)
-        assert tuple(zip(offs[:k].tolist(), levs[:k].tolist())) == \
-            square_wave_segments(t0, 0.01, base, amp, freq, phase, 26.0)
+        k = square_wave_segments(t0, 0.01, base, amp, freq, phase, 26.0, offs, levs)
+        o, lv = offs[:k], levs[:k]
+        assert o[0] == 0.0 and np.all(np.diff(o) > 0) and o[-1] < 0.01 and np.all(np.diff(lv) != 0)
+        for off in rng.uniform(0.0, 0.01, 20):
+            s = math.sin(2 * math.pi * (freq * (t0 + off) + phase))
+            if abs(s) < 1e-6 or np.min(np.abs(o[1:] - off), initial=1.0) < 1e-9:
+                continue
+            want = min(max(base + (amp if s > 0 else -amp if amp else 0.0), -26.0), 26.0)
+            assert lv[np.searchsorted(o, off, side="right") - 1] == want

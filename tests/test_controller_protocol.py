@@ -45,8 +45,9 @@ def test_hooks_have_their_documented_types(name):
     c.reset(p, np.random.default_rng(0))
     for _ in range(3):
         if cls.privileged:
+            from plant.protocol import TruePlant, get_family
             from plant.state import initial_state
-            c.observe_truth(initial_state(p, x5=0.0))
+            c.observe_truth(initial_state(p, x5=0.0), TruePlant(get_family("multimode"), p))
         c.step(0.0)
     if cls.counter:
         assert isinstance(c.summary()[cls.counter], int)
@@ -130,7 +131,7 @@ def test_options_object_and_preset_exclude_each_other():
 
 def test_privileged_hook_is_refused_by_real_controllers():
     with pytest.raises(NotImplementedError, match="not privileged"):
-        get_controller("linear")().observe_truth(None)
+        get_controller("linear")().observe_truth(None, None)
 
 
 def test_bench_and_reports_name_no_controller():

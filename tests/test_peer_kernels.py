@@ -102,15 +102,24 @@ def test_rls_cubic_predict_and_invert():
 
 
 @pytest.mark.parametrize("motion", [0.5e-6, 3e-6, 20e-6, 1.0])
-def test_oracle_on_time_bisection_matches_pulse_response(motion):
+def test_oracle_on_time_root_brackets_the_true_pulse_law(motion):
+    """The oracle's on-time search on the true family's noise-free response (x5 = 0.3 while
+    stuck) against the plant's own pulse response with the effective friction (section 5.3)."""
+    from plant.protocol import TruePlant, get_family
+    from plant.state import initial_state
     oracle = OraclePulse()
     oracle.reset(P, np.random.default_rng(0))
-    law = oracle._true_law(0.3)
-    dtu, dc, t_stop = oracle._dtu_for(law, motion)
+    state = initial_state(P, x5=0.3)
+    oracle.observe_truth(state, TruePlant(get_family("multimode"), P))
+    dtu, dc, t_stop = oracle._dtu_for(state, motion, 1)
+    law = P.replace(stiction=P.stiction + 0.3, coulomb=P.coulomb + 0.3, correlated_friction_std=0.0)
     r = pulse_response(law, dtu)
-    assert (dc, t_stop) == (r.delta_c, r.t_stop)
-    if dtu < oracle.dtu_max:                       # Δc(Δt_u) brackets the motion at 2⁻⁴⁸ resolution
-        assert pulse_response(law, dtu * (1 - 1e-9)).delta_c < motion <= dc
+    # x5 decays as e^(−t/τ5) while the shaft moves (τ5 = 1000 s): ~1e-6 relative over a pulse
+    assert dc == pytest.approx(r.delta_c, rel=5e-6)
+    assert t_stop == pytest.approx(r.t_stop, rel=5e-6)
+    if dtu < oracle.dtu_max:                       # the root's bracket is 1e-10 s wide
+        below, _ = get_family("multimode").pulse_motion(P, state, dtu - 2e-10, 1)
+        assert below < motion <= dc
     else:
         assert dc <= motion
 

@@ -66,21 +66,6 @@ def test_bad_arguments():
         pulse_response(P0, 1e-3, sign=2)
 
 
-@pytest.mark.parametrize("params", PARAM_SETS)
-def test_closed_form_path_equals_event_loop(params):
-    """The public noise-free fast path and the general event-driven simulator are two
-    independent exact computations; they must agree to round-off, event times included."""
-    from plant.multimode.pulse import _closed_form, _simulate
-
-    for frac in np.linspace(1.0001, 8.0, 40):
-        dt_u = frac * params.breakaway_time
-        a, b = _closed_form(params, dt_u, 1), _simulate(params, dt_u, 1, None, None)
-        assert a.delta_c == pytest.approx(b.delta_c, rel=1e-11)
-        assert a.t_stop == pytest.approx(b.t_stop, abs=1e-12)
-        assert a.t_current_zero == pytest.approx(b.t_current_zero, abs=1e-12)
-        assert a.t_breakaway == pytest.approx(b.t_breakaway, abs=1e-12)
-
-
 def test_hermite_peak_matches_dense_evaluation():
     """Interior extremum of the cubic Hermite interpolant vs a dense evaluation of the cubic."""
     from plant.multimode.segments import hermite_peak
@@ -103,7 +88,7 @@ def test_hermite_peak_matches_dense_evaluation():
 @pytest.mark.parametrize("params", [PlantParams(), PlantParams(motor_time_constant=5e-3)])
 def test_max_on_time_brings_the_current_back_to_zero_at_the_next_sample(params):
     # independent truth: the event-driven simulator's flyback-end time for that on-time
-    from plant.multimode.pulse import max_on_time
+    from controllers.models.acker import max_on_time
     dt = max_on_time(params)
     assert 0 < dt < params.sample_period
     r = pulse_response(params, dt, options=SimOptions(noise=False))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from controllers.solnic.predictor import Predictor, peak_torque
-from plant import PlantParams, pulse_response
+from controllers.models.acker import pulse_response  # the model the predictor assumes (checked against the plant in test_acker_model.py)
+from plant import PlantParams
 
 P = PlantParams()
 
