@@ -157,12 +157,12 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     x5_initial : float, optional
         Override the initial correlated friction x5(0) [ozf·in].
     time_limit_s : float, optional
-        Wall-clock budget [s]; checked at every sample (every :data:`bench.compiled_loop.CHUNK`
+        Wall-clock budget [s]; checked at every sample (every ``CHUNK`` (1000)
         samples on the compiled path), a run over budget stops with status ``error``. None
         (default) means no limit.
     compiled : bool
         Run a controller that describes its step as a linear law (``linear_law`` hook) in one
-        compiled loop (:mod:`bench.compiled_loop`, bit-identical) when nothing is recorded.
+        compiled loop (the family's ``linear_law_loop``, bit-identical) when nothing is recorded.
         False always calls ``step`` from Python.
 
     Returns

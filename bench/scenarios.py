@@ -38,6 +38,11 @@ __all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", 
 SCENARIO_KEYS = ("base", "description", "duration_s", "warmup_s", "plant", "model", "mismatch")
 _MISMATCH_STREAM = 4      # SeedSequence(seed).spawn(5)[4]; children 0-3 are the runner's
 _MAX_MISMATCH = 2.0       # relative standard deviation
+# PlantParams fields a controller cannot be wrong about, and why.
+_SHARED_EXACTLY = {
+    "sample_period": "the controller runs at the plant's sample rate",
+    "u_max": "the switched bridge applies the plant's own supply (controllers command ±u_max)",
+}
 
 
 def mismatch_factors(seed: int, mismatch: tuple[tuple[str, float], ...]) -> dict[str, float]:
@@ -110,10 +115,16 @@ class Scenario:
         if self.model is not None:
             if type(self.model) is not PlantParams:
                 raise ValueError(f"Scenario.model must be a PlantParams, got {type(self.model).__name__}")
+            for name in _SHARED_EXACTLY:
+                if getattr(self.model, name) != getattr(self.params, name):
+                    raise ValueError(f"Scenario.model.{name} must equal the truth's ({getattr(self.params, name)!r}), "
+                                     f"got {getattr(self.model, name)!r}: {_SHARED_EXACTLY[name]}")
             if self.model == model_of(self.params):
                 object.__setattr__(self, "model", None)    # one spelling of "the model is the truth"
         fields = {f.name for f in dataclasses.fields(self.params)}
         for name, rel in self.mismatch:
+            if name in _SHARED_EXACTLY:
+                raise ValueError(f"Scenario.mismatch.{name}: cannot differ from the model: {_SHARED_EXACTLY[name]}")
             if name not in fields or not isinstance(getattr(self.params, name), (int, float)) \
                     or isinstance(getattr(self.params, name), bool):
                 raise ValueError(f"Scenario.mismatch.{name}: not a numeric field of {type(self.params).__name__}")

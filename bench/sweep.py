@@ -176,6 +176,11 @@ def expand_sweeps(sweep: Any, controllers: list[ControllerSpec], scenarios: list
     return plan
 
 
+def _plant_of(scenario) -> dict[str, Any]:
+    """What a scenario runs: its definition without its names."""
+    return {k: v for k, v in scenario.definition().items() if k not in ("name", "base")}
+
+
 def _expand_scenarios(table: dict[str, Any], plan: SweepPlan, fail: Callable[[str, str], Exception]) -> None:
     from plant.params import PlantParams
 
@@ -211,7 +216,8 @@ def _expand_scenarios(table: dict[str, Any], plan: SweepPlan, fail: Callable[[st
                 msg = str(exc)
                 named = [f for f in point if f in msg]
                 raise fail(f"{key}.{named[0] if named else next(iter(point))}", f"{name}: {msg}") from None
-            same = next((s for s in plan.scenarios if s.definition() | {"name": ""} == scenario.definition() | {"name": ""}
+            plant = _plant_of(scenario)
+            same = next((s for s in plan.scenarios if _plant_of(s) == plant
                          and (s.duration_s, s.warmup_s) == (scenario.duration_s, scenario.warmup_s)), None)
             info = {"parent": parent.name, "params": point}
             if same is not None:

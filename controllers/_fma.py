@@ -99,7 +99,8 @@ def _dot4(a, b):
 @numba.njit(cache=True)
 def rls_update(P, theta, phi, target, lam):
     """One step of :class:`controllers.pulse_width.PulseModelRls` on 4 × 4 ``P``; returns
-    (P', θ') as new arrays, with numpy's operations and rounding here:
+    (P', θ') as new arrays, in this order of operations (numpy's rounding on the machine it was
+    written for; numpy 2.4's ``P @ φ`` rounds differently, so tests check this order, not numpy):
 
     ``Pφ = P @ φ`` (4 × 4 product rows summed (P_i0·φ0 + P_i2·φ2) + (P_i1·φ1 + P_i3·φ3), unfused),
     ``K = Pφ / (λ + φ @ Pφ)``, ``θ' = θ + K·(target − φ @ θ)``, ``P₁ = (P − K Pφᵀ)/λ``,

@@ -7,9 +7,9 @@ A :class:`LinearLaw` says: at every sample instant n·τs, with y(n) the measure
 
 with sq(θ) = +1 for frac(θ) < ½ and −1 otherwise (no dither when A_d = 0). A controller that
 returns one from :meth:`Controller.linear_law` promises that its ``step`` computes exactly
-this, in this order of floating-point operations (:func:`controllers.linear.compensator_step`,
-:func:`controllers.dithered.square_wave_segments`). The runner then runs the closed loop in
-one compiled call (:mod:`bench.compiled_loop`) instead of calling ``step`` at every sample,
+this, in this order of floating-point operations (:func:`plant.linear_drive.compensator_step`,
+:func:`plant.linear_drive.square_wave_segments`: the same compiled code). The runner then runs the closed loop in
+one compiled call (the plant family's ``linear_law_loop``, e.g. :mod:`plant.multimode.law_loop`) instead of calling ``step`` at every sample,
 with bit-identical results (tested); the controller's own state is not advanced then, only
 its ``summary`` is read afterwards.
 """

@@ -1,7 +1,7 @@
 """Keep numba's on-disk cache of the compiled plant consistent with the plant's source.
 
 numba's ``cache=True`` checks only the file that defines a compiled function, not the modules
-it calls: edit ``plant/zero_velocity.py`` and ``plant.multimode.interval.interval_kernel`` would still
+it calls: edit ``plant/multimode/zero_velocity.py`` and ``plant.multimode.interval.interval_kernel`` would still
 load its cached machine code with the *old* callee inlined. Before any kernel is imported, this
 compares a digest of every ``plant/**/*.py`` with the one stored in ``plant/__pycache__`` and
 drops the cached kernels of every plant folder (the families' too) when they differ. A fresh checkout has no cache; this only matters to someone

@@ -166,7 +166,7 @@ USER_ERRORS = {
                          (), ["bad.toml: matrix.scenarios[0]: unknown scenario 'moon'", "ratio-2"]),
     "bad-plant-parameter": ("[matrix]\ncontrollers = [\"linear\"]\nscenarios = [\"heavy-load\"]\nseeds = [0]\n"
                             "[scenarios.heavy-load]\nbase = \"thesis\"\ninertia = -1.0\n", (),
-                            ["bad.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0"]),
+                            ["bad.toml:7: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0"]),
     "bad-controller-option": ("[matrix]\ncontrollers = [\"solnic-x\"]\nscenarios = [\"thesis\"]\nseeds = [0]\n"
                               "[controllers.solnic-x]\nbase = \"solnic\"\npreset = \"nope\"\n", (),
                               ["bad.toml: controllers.solnic-x.preset: unknown preset 'nope'"]),

@@ -22,10 +22,6 @@ README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]
 MAX_README_LINES = 250
 
-# docs/plant-family.md is written by the lead together with the README section that carries
-# this marker; until then (and only while the marker is there) the README may link it unwritten.
-PENDING_MARKER = "<!-- plant-family-section: filled by the lead -->"
-PENDING = {ROOT / "docs" / "plant-family.md"}
 
 _FENCE = re.compile(r"^ {0,3}(`{3,}|~{3,})")
 _CODE_SPAN = re.compile(r"(`+)(?:.+?)\1", re.S)
@@ -116,7 +112,6 @@ def test_checker_finds_links_and_skips_code(tmp_path):
 # --- the real pages -----------------------------------------------------------------------------
 
 def _broken(page: Path) -> list[str]:
-    readme_pending = PENDING_MARKER in README.read_text(encoding="utf-8")
     problems = []
     for number, target in links(page):
         if not _local(target):
@@ -125,8 +120,7 @@ def _broken(page: Path) -> list[str]:
         dest = (page.parent / file_part).resolve() if file_part else page
         where = f"{page.relative_to(ROOT)}:{number}: {target}"
         if not dest.exists():
-            if not (readme_pending and page == README and dest in PENDING):
-                problems.append(f"{where}: no such file")
+            problems.append(f"{where}: no such file")
             continue
         if fragment:
             if dest.suffix != ".md":
@@ -151,14 +145,3 @@ def test_every_docs_page_is_linked_from_the_readme():
     linked = {(README.parent / t.partition("#")[0]).resolve() for _, t in links(README) if _local(t)}
     orphans = [p.name for p in PAGES[1:] if p.resolve() not in linked]
     assert orphans == [], f"docs pages the README does not link: {orphans}"
-
-
-def test_pending_link_only_while_marker_is_there():
-    """The exemption for docs/plant-family.md covers only the README, only while it is unwritten."""
-    readme = README.read_text(encoding="utf-8")
-    for dest in PENDING:
-        if dest.exists():
-            continue
-        assert PENDING_MARKER in readme, f"{dest.name} is linked but missing and the marker is gone"
-        assert all(dest not in {(p.parent / t.partition('#')[0]).resolve() for _, t in links(p)}
-                   for p in PAGES[1:]), f"a docs page links the unwritten {dest.name}"

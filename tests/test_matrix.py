@@ -105,11 +105,11 @@ def test_config_hash_is_stable_and_follows_what_determines_the_numbers(tmp_path)
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\nseeds = [0]\nwarmup_s = 200\n',
      r"matrix\.toml: matrix\.warmup_s: scenario 'thesis': Scenario\.warmup_s must be in \[0, duration_s"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["h"]\nseeds = [0]\n[scenarios.h]\nbase = "thesis"\n'
-     'inertia = -1.0\n', r"matrix\.toml: scenarios\.h\.inertia: PlantParams\.inertia must be > 0, got -1\.0"),
+     'inertia = -1.0\n', r"matrix\.toml:7: scenarios\.h\.inertia: PlantParams\.inertia must be > 0, got -1\.0"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["h"]\nseeds = [0]\n[scenarios.h]\nbase = "thesis"\n'
-     'coulomb = 3.0\n', r"matrix\.toml: scenarios\.h\.stiction: PlantParams\.stiction must be >= coulomb"),
+     'coulomb = 3.0\n', r"matrix\.toml:5: scenarios\.h\.stiction: PlantParams\.stiction must be >= coulomb"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["h"]\nseeds = [0]\n[scenarios.h]\nbase = "thesis"\n'
-     'inertai = 1.0\n', r"matrix\.toml: scenarios\.h\.inertai: unknown key"),
+     'inertai = 1.0\n', r"matrix\.toml:7: scenarios\.h\.inertai: unknown key"),
     ('[matrix]\ncontrollers = ["linear"]\nscenarios = ["h"]\nseeds = [0]\n[scenarios.h]\nbase = "h2"\n'
      '[scenarios.h2]\nbase = "h"\n', r"matrix\.toml: scenarios\.h\d?: base chain loops"),
     ('[matrix]\ncontrollers = ["lin"]\nscenarios = ["thesis"]\nseeds = [0]\n[controllers.lin]\nbase = "linear"\n'

@@ -19,7 +19,7 @@ import pytest
 from bench.cells import Cell, ControllerSpec, run_cell
 from bench.matrix import MatrixError, load_matrix
 from bench.scenarios import mismatch_factors
-from controllers.base import Controller, register
+from controllers.base import _REGISTRY, Controller, register
 from plant import DriveCommand, DriveType, PlantParams
 from plant.state import EventKind
 from tests.cli_helpers import cli
@@ -27,7 +27,6 @@ from tests.cli_helpers import cli
 _SEEN: list[PlantParams] = []
 
 
-@register("seam-spy")
 class _Spy(Controller):
     """Holds a linear-amplifier torque of 2.5 ozf·in and remembers what ``reset`` was told."""
 
@@ -58,7 +57,14 @@ stiction = 2.8                 # ... the model says it never would
 """
 
 
-def test_the_controller_is_told_the_model_and_the_plant_runs_the_truth(tmp_path):
+@pytest.fixture
+def spy_registered():
+    register("seam-spy")(_Spy)
+    yield
+    _REGISTRY.pop("seam-spy")
+
+
+def test_the_controller_is_told_the_model_and_the_plant_runs_the_truth(tmp_path, spy_registered):
     (tmp_path / "m.toml").write_text(_SPY_MATRIX)
     matrix = load_matrix(tmp_path / "m.toml", check_resets=False)
     scenario = matrix.scenarios[0]

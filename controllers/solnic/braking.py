@@ -11,7 +11,7 @@ is the single pulse whose flyback voltage is held past the current zero: x3 goes
 the shaft decelerates at α(k_c − x3) > α·k_c.
 
 Noise-free response (sign +1; the plant's closed forms (3-20)/(3-21) through
-:func:`plant.multimode.pulse.move_closed_form`): stuck until x3 = k_s at t_b = −τ3·ln(1 − k_s/u_max); driven to
+:func:`controllers.models.acker.move_closed_form`): stuck until x3 = k_s at t_b = −τ3·ln(1 − k_s/u_max); driven to
 Δt_u; u = −u_max to t_off; u = +u_max to t_cz2 = t_off + τ3·ln((u_max − x3(t_off))/u_max);
 coasting at −α·k_c to the stop t_stop = t_cz2 + v(t_cz2)/(α·k_c), Δc = x1(t_cz2) +
 v(t_cz2)²/(2α·k_c). If the velocity reaches zero earlier, the stop is that zero (a safeguarded

@@ -478,7 +478,7 @@ def _message(code: int, state: PlantState, options: SimOptions) -> str:
 
 
 # --- for compiled callers ---------------------------------------------------------------------
-# A caller that runs many intervals in one compiled loop (bench.compiled_loop) calls
+# A caller that runs many intervals in one compiled loop (plant.multimode.law_loop) calls
 # interval_kernel itself with the inputs advance() would pass: kernel_inputs() gives the options
 # vector and tables, the work-sheet positions below read the kernel's results, and
 # interval_status() turns a status code into what advance() returns.
