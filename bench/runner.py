@@ -37,7 +37,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from bench.metrics import WindowTotals, run_metrics
-from controllers.base import Controller
+from controllers.base import Controller, ControllerDiverged
 from plant.params import PlantParams
 from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
 from plant.randomness import NoiseStream
@@ -249,6 +249,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             if law is None:
                 x1_window[n_window] = state.x[X1]
                 n_window += 1
+    except ControllerDiverged as exc:   # the controller's estimates left their range: a result
+        status = Status.DIVERGED
+        message = f"controller diverged: {exc}"
     except Exception as exc:  # a failing controller is a result, not a crash (STYLE §8)
         status = Status.ERROR
         message = f"{type(exc).__name__}: {exc}"
