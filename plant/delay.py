@@ -44,7 +44,9 @@ def delay_command(command: DriveCommand, pending: DriveCommand | None, delay: fl
     Raises
     ------
     ValueError
-        If ``command`` and ``pending`` use different drives (one interval has one power stage).
+        If ``command`` and ``pending`` use different drives (one interval has one power stage),
+        or a segment of ``command`` starts at or beyond ``period`` (as the plant rejects it
+        without a delay: a command covers one sample interval of the controller's time).
     """
     if pending is None:
         pending = DriveCommand.hold(0.0, command.drive)
@@ -57,6 +59,9 @@ def delay_command(command: DriveCommand, pending: DriveCommand | None, delay: fl
             _append(now, offset, level)
     carry: list[tuple[float, float]] = []
     for offset, level in command.segments:
+        if not offset < period:
+            raise ValueError(f"DriveCommand segment offset {offset!r} s is at or beyond the sample "
+                             f"interval's end ({period!r} s)")
         start = offset + delay
         if start < period:
             _append(now, start, level)
