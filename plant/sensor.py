@@ -26,6 +26,8 @@ def quantize(value: float, step: float) -> float:
     if step == 0.0:
         return value
     ratio = value / step
+    if not math.isfinite(ratio):        # a step far below the value's resolution: nothing to round
+        return value
     level = math.floor(ratio)
     if ratio - level >= 0.5:
         level += 1

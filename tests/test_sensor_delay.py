@@ -85,6 +85,7 @@ def test_quantize_is_shift_invariant_and_off_at_zero():
         assert quantize((k + 0.5) * q, q) == (k + 1) * q
     for v in (1.2345e-6, -3.3e-7, 0.0, -0.0, 1e300):
         assert quantize(v, 0.0) is v
+    assert quantize(1e-6, 5e-324) == 1e-6        # v/q overflows: a grid finer than v's resolution
 
 
 def test_the_closed_loop_sees_hand_quantized_measurements():
