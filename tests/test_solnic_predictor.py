@@ -116,5 +116,5 @@ def test_compiled_prediction_equals_the_step_by_step_path_to_the_bit(brake_margi
                                                                 and math.isnan(getattr(b, name))), name
             np.testing.assert_array_equal(a.H_b, b.H_b)
             np.testing.assert_array_equal(a.H_tb, b.H_tb)
-    assert {"ValueError", "moves", "none"} <= kinds
+    assert {"EstimateOutOfRange", "moves", "none"} <= kinds   # EstimateOutOfRange is a ValueError
     assert ("brake" in kinds) == (brake_margin is not None)

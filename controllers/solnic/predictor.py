@@ -264,7 +264,7 @@ class Predictor:
             hit = self._cache.get(key)
             if hit is None:
                 if not self.valid(ks, kc):
-                    raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
+                    raise EstimateOutOfRange(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
                 from controllers.solnic.braking import braked_response
                 hit = braked_response(self.params.with_friction(ks, kc), dt_u, t_off)
                 self.n_model_runs += 1
@@ -278,7 +278,7 @@ class Predictor:
             self._cache.move_to_end(key)
             return hit
         if not self.valid(ks, kc):
-            raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
+            raise EstimateOutOfRange(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
         est = self.params.with_friction(ks, kc)
         r = self._response(est, float(dt_u), sign=1, seed=None)
         self.n_model_runs += 1
@@ -326,7 +326,7 @@ class Predictor:
         if code == _INVALID:
             raise EstimateOutOfRange(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
         if code == _COASTS:
-            raise ControllerDiverged("the pulse model coasts for ever: estimated k̂c = 0")
+            raise ControllerDiverged("the pulse model coasts for ever after the pulse: k̄c = 0")
         return PulsePrediction(float(dt_u), sign, sign * dc, ts, None if tb < 0.0 else tb, tcz,
                                np.array((sign * d0, sign * d1)), np.array((t0, t1)),
                                peak_torque(self.params, dt_u), None if t_off < 0.0 else t_off)
