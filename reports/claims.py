@@ -473,9 +473,9 @@ def _m_order_of_magnitude(ctx: _Context) -> Measurement:
 
 
 def _paired(a: pd.DataFrame, b: pd.DataFrame, column: str):
-    """Paired ratio a/b over the seeds both frames hold (bench.stats.paired_ratio: geometric
+    """Paired ratio a/b over the seeds both frames hold (reports.stats.paired_ratio: geometric
     mean of the per-seed ratios, 95 % BCa bootstrap CI, P(a < b))."""
-    from bench.stats import paired_ratio
+    from reports.stats import paired_ratio
 
     ga = a.groupby("seed")[column].mean()
     gb = b.groupby("seed")[column].mean()

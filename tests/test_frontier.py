@@ -16,7 +16,7 @@ import pytest
 from bench.driver import run_config
 from bench.frontier import frontier_matrix_data, frontier_matrix_path, thin, to_toml
 from bench.matrix import MatrixError, load_matrix, parse_matrix
-from bench.stats import crossing_ci, crossing_level
+from reports.stats import crossing_ci, crossing_level
 from controllers.base import available_controllers
 
 ROOT = Path(__file__).resolve().parent.parent
