@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from controllers import roles
+from plant.params import lti_peak_bound
 from reports.inputs import cell_id
 from reports.limits import lag_ratio_limit
 
@@ -109,7 +110,7 @@ def _bound(rng: np.random.Generator) -> pd.DataFrame:
                 for lag in (1.0, 2.0, 4.0, lag_ratio_limit(ratio), 2 * lag_ratio_limit(ratio),
                             math.inf):
                     for noise in (False, True):
-                        theta_b = (ks - kc) / (2 * inertia * wc**2)
+                        theta_b = lti_peak_bound(ks, kc, inertia, wc)   # (2-6)
                         stable = lag <= lag_ratio_limit(ratio) * 1.05
                         theta = theta_b * rng.uniform(1.2, 6.0) if stable else math.nan
                         design = "integral" if math.isinf(lag) else f"lead-lag L={lag:.3g}"
