@@ -163,9 +163,13 @@ def _string_literals(path: Path) -> list[tuple[str, int]]:
 
 def test_bench_and_reports_never_name_a_registered_controller():
     """No string literal in bench/ or reports/ equals a registered controller name; the names
-    live in the registry (controllers/) and the built-in matrix TOML files (bench/matrices/,
-    not Python). Only whole-literal equality is checked: names such as "linear" are English
-    words and appear in prose (docstrings, messages), which is not naming a controller."""
+    live in the registry (controllers/, with the roles in controllers/roles.py) and the built-in
+    matrix TOML files (bench/matrices/, not Python).
+
+    Excluded, and why: only whole-literal equality counts, because names such as "linear" are
+    English words that prose uses (docstrings, messages, the Jinja templates); identifiers are not
+    checked for the same reason (``Selection.solnic`` and ``Selection.linear`` are the config keys
+    ``report.selection.solnic/linear``, whose values come from controllers.roles)."""
     from controllers.base import available_controllers
 
     names = set(available_controllers())
