@@ -10,9 +10,12 @@
   (death, hang, anything raised → an ``error`` row); the forkserver's kernel warm-up;
 * :mod:`bench.executors` — local per-cell processes, dask.distributed;
 * :mod:`bench.store`, :mod:`bench.driver` — atomic per-cell store, resume, rebuilt tables;
-* :mod:`bench.aggregate`, :mod:`bench.provenance`, :mod:`bench.cli` — the terminal table,
-  ``meta.json``, the ``solnic-bench`` command;
-* :mod:`bench.bound`, :mod:`bench.hunting`, :mod:`bench.speed` — the check of (2-6)/(2-1) and
-  the speed comparison;
+* :mod:`bench.aggregate`, :mod:`bench.provenance` — the terminal table, ``meta.json``;
+* :mod:`bench.cli`, :mod:`bench.run_command`, :mod:`bench.list_command`, :mod:`bench.frontier` —
+  bench's commands and what they share (the ``solnic-bench`` program that joins them with the
+  report is :mod:`reports.cli`: bench never imports reports);
+* :mod:`bench.bound` (a package: plan, cells, run, verdict, check, tables, command),
+  :mod:`bench.hunting`, :mod:`bench.speed` (a package: config, sequence, contestants, accuracy,
+  compare, comparison, tables, command) — the check of (2-6)/(2-1) and the speed comparison;
 * :mod:`bench.tuning` — honest knob sweeps behind the controllers' defaults (docs/tuning.md).
 """

@@ -35,7 +35,7 @@ def test_quick_matrix(benchmark, tmp_path):
         pytest.skip("a timing only (make benchmark); the quick run is tested in tests/test_cli_run.py")
     from typer.testing import CliRunner
 
-    from bench.cli import app
+    from reports.cli import app
 
     runner = CliRunner()
     counter = iter(range(1_000_000))

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PlantParams", "KERNEL_RECORD", "as_definition"]
+__all__ = ["PlantParams", "KERNEL_RECORD", "as_definition", "bohacek_tuteur_limit", "lti_peak_bound"]
 
 # The one parameter record the compiled kernels read (plant.multimode.interval, plant.multimode.reference): a
 # numpy structured dtype, so a kernel reads ``prm[0].alpha`` by name and numba dispatches on it
@@ -171,8 +171,7 @@ class PlantParams:
     @property
     def lag_ratio_limit(self) -> float:
         """Bohacek–Tuteur limit Lmax = 2k̄s/(k̄s − k̄c)  (2-1); inf when k̄s = k̄c."""
-        gap = self.stiction - self.coulomb
-        return math.inf if gap == 0 else 2.0 * self.stiction / gap
+        return bohacek_tuteur_limit(self.stiction, self.coulomb)
 
     def classical_bound(self, bandwidth: float | None = None) -> float:
         """Minimum LTI peak error θe ≥ (k̄s − k̄c)/(2·J·ωb²)  (2-6) [rad].
@@ -183,7 +182,7 @@ class PlantParams:
         omega = math.pi / self.sample_period if bandwidth is None else float(bandwidth)
         if not (omega > 0 and math.isfinite(omega)):
             raise ValueError(f"bandwidth must be a finite positive number, got {bandwidth!r}")
-        return (self.stiction - self.coulomb) / (2.0 * self.inertia * omega**2)
+        return lti_peak_bound(self.stiction, self.coulomb, self.inertia, omega)
 
     def kernel_record(self) -> np.ndarray:
         """The parameters as a one-element :data:`KERNEL_RECORD` array (read-only, cached)."""
@@ -246,3 +245,22 @@ def as_definition(params: Any) -> dict[str, Any]:
         if f.metadata.get("omit_default") and out[f.name] == f.default:
             del out[f.name]
     return out
+
+
+def bohacek_tuteur_limit(stiction: float, coulomb: float) -> float:
+    """Largest lag ratio without hunting, Lmax = 2k̄s/(k̄s − k̄c)  (2-1) [–]; inf when k̄s = k̄c.
+
+    ``stiction``, ``coulomb`` are k̄s, k̄c [ozf·in] (or any common scale: only k̄s/k̄c matters).
+    The single home of (2-1): :attr:`PlantParams.lag_ratio_limit` and the report call it.
+    """
+    gap = stiction - coulomb
+    return math.inf if gap == 0 else 2.0 * stiction / gap
+
+
+def lti_peak_bound(stiction: float, coulomb: float, inertia: float, bandwidth: float) -> float:
+    """Minimum peak error of an LTI loop, θe ≥ (k̄s − k̄c)/(2·J·ωb²)  (2-6) [rad].
+
+    k̄s, k̄c [ozf·in], J [ozf·in·s²], ωb = ``bandwidth`` [rad/s] (not checked here:
+    :meth:`PlantParams.classical_bound` checks it). The single home of (2-6).
+    """
+    return (stiction - coulomb) / (2.0 * inertia * bandwidth**2)

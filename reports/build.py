@@ -32,7 +32,7 @@ from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
 from reports.limits import PlantLimits, limits_from_config
-from bench.stats import METHOD_TEXT, median_ci
+from reports.stats import METHOD_TEXT, median_ci
 from bench.store import write_atomic
 
 __all__ = ["build_report", "build_report_from_dir", "render_html", "REPORT_NAME"]

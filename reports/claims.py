@@ -17,15 +17,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 
-from controllers import roles
 from reports.inputs import SIZE_PEAK_COLUMNS, SeriesRun
 from reports.limits import PlantLimits
+from reports.selection import Selection, family_of as _family, plain as _plain
 
 __all__ = [
     "REPRODUCED", "NOT_REPRODUCED", "NOT_MEASURED", "INCONCLUSIVE", "Criterion", "within_rel", "within_abs",
@@ -172,47 +172,6 @@ class ClaimRow:
     basis: str
 
 
-@dataclass(frozen=True)
-class Selection:
-    """Which cells the claims read.
-
-    Attributes
-    ----------
-    thesis_scenario : str
-        Scenario of the thesis run (Table 2-1, 100 s).
-    solnic, linear : str
-        *Families* (results column ``controller_family``; a variant has its base's family) of
-        the dissertation's controller and of the lag-compensated linear controller. A claim
-        about "solnic" reads the cells of the family's registered controller itself (its name
-        equals ``controller_base``), not its variants.
-    high_error_cost : str
-        Marker of the "high error cost" preset: a cell counts when it belongs to the ``solnic``
-        family and its controller or scenario name contains this marker.
-    typical_cell : str or None
-        The series shown as "the typical run" (default: solnic/thesis with the lowest seed).
-    """
-
-    thesis_scenario: str = "thesis"
-    solnic: str = roles.IDENTIFICATION
-    linear: str = roles.CLASSICAL
-    high_error_cost: str = "high"
-    typical_cell: str | None = None
-
-    @classmethod
-    def from_config(cls, config: Mapping[str, Any] | None) -> "Selection":
-        """Read ``config["report"]["selection"]`` and ``config["report"]["typical_cell"]``."""
-        report = (config or {}).get("report") or {}
-        sel = dict(report.get("selection") or {})
-        if report.get("typical_cell") is not None:
-            sel.setdefault("typical_cell", report["typical_cell"])
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(sel) - names)
-        if unknown:
-            raise ValueError(f"config.report.selection has unknown key(s) {unknown}; "
-                             f"known: {sorted(names)}")
-        return cls(**sel)
-
-
 def _g(x: float, digits: int = 3) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "—"
@@ -313,29 +272,12 @@ class _Context:
         return r[m & r[column].notna()]
 
 
-def _family(r: pd.DataFrame) -> pd.Series:
-    """Each row's family: ``controller_family``, else ``controller_base``, else ``controller``."""
-    out = r["controller"].astype(str)
-    for col in ("controller_base", "controller_family"):
-        if col in r.columns:
-            v = r[col].astype("string")
-            out = v.where(v.notna() & (v != ""), out).astype(str)
-    return out
-
-
 def _is_bound(name: str) -> bool:
     """Whether ``name`` is a registered privileged bound (e.g. the oracle), not a controller."""
     from controllers.base import available_controllers
 
     cls = available_controllers().get(str(name))
     return bool(cls is not None and cls.privileged)
-
-
-def _plain(r: pd.DataFrame, family: str) -> pd.Series:
-    """Rows of the registered controller that *is* ``family`` (its name is the family's): not a
-    matrix variant of it, nor a registered subclass that inherits the family (solnic-modern)."""
-    base = r["controller_base"].astype(str) if "controller_base" in r.columns else r["controller"]
-    return (_family(r) == family) & (r["controller"] == base) & (r["controller"] == family)
 
 
 def _not_measured(why: str) -> Measurement:
@@ -473,9 +415,9 @@ def _m_order_of_magnitude(ctx: _Context) -> Measurement:
 
 
 def _paired(a: pd.DataFrame, b: pd.DataFrame, column: str):
-    """Paired ratio a/b over the seeds both frames hold (bench.stats.paired_ratio: geometric
+    """Paired ratio a/b over the seeds both frames hold (reports.stats.paired_ratio: geometric
     mean of the per-seed ratios, 95 % BCa bootstrap CI, P(a < b))."""
-    from bench.stats import paired_ratio
+    from reports.stats import paired_ratio
 
     ga = a.groupby("seed")[column].mean()
     gb = b.groupby("seed")[column].mean()

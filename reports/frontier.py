@@ -4,7 +4,7 @@ Present only when the run's ``config.json`` records sweeps (``matrix.sweep``, wr
 :mod:`bench.sweep`), i.e. for ``solnic-bench frontier`` and any matrix with ``[sweep.*]`` tables.
 
 * **Points.** One per (controller point, scenario): the median over seeds of every metric with
-  its 95 % bootstrap CI (:mod:`bench.stats`), beside the mean and the worst seed.
+  its 95 % bootstrap CI (:mod:`reports.stats`), beside the mean and the worst seed.
 * **Groups.** A point belongs to the controller it was swept from (``parent``); a group's
   *family* and whether it is a privileged bound come from the controller registry via the
   point's registered base — nothing here knows a controller by name.
@@ -14,7 +14,7 @@ Present only when the run's ``config.json`` records sweeps (``matrix.sweep``, wr
   the best median peak error over its knob at each level, with that point's CI.
 * **Crossing claim.** For the family named by ``[frontier] crossing_family``: the σ2² at which its
   default point and its smallest-knob point stop beating the classical limit (2-6), with a
-  bootstrap CI over seeds (:func:`bench.stats.crossing_ci`).
+  bootstrap CI over seeds (:func:`reports.stats.crossing_ci`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from bench.stats import METHOD_TEXT, crossing_ci, median_ci, paired_ratio, pareto_front
+from reports.stats import METHOD_TEXT, crossing_ci, median_ci, paired_ratio, pareto_front
 from reports.figures import _hline_log
 from reports.limits import PlantLimits
 

@@ -71,7 +71,7 @@ shown in the report as "not measured in this run", never as a number):
     The run configuration. ``"plant"`` holds the thesis scenario's ``PlantParams`` fields
     (used for the classical limit); ``"warmup_s"`` the scoring window's warm-up (default 20);
     ``"report"`` optional report settings: ``{"typical_cell": str, "selection": {...}}``
-    (see :class:`reports.claims.Selection`).
+    (see :class:`reports.selection.Selection`).
 
 ``DIR/meta.json``
     Provenance: ``git_revision``, ``git_dirty``, ``created_utc``, ``command``, ``host``,
@@ -90,6 +90,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+
+from reports.selection import Selection, plain
 
 __all__ = [
     "RESULT_REQUIRED", "RESULT_METRICS", "SIZE_PEAK_COLUMNS", "SERIES_COLUMNS", "BOUND_COLUMNS", "HUNTING_COLUMNS",
@@ -323,15 +325,13 @@ def _series_read(files: Mapping[str, Path], results: pd.DataFrame, config: Any) 
     """
     if results is None or results.empty or "cell" not in results.columns or not isinstance(config, dict):
         return set(files)
-    from reports.claims import Selection, _plain        # claims imports this module
-
     try:
         sel = Selection.from_config(config)
     except (TypeError, ValueError):
         return set(files)
     known = set(results["cell"].astype(str))
     keep = {c for c in files if c not in known}
-    used = results.loc[_plain(results, sel.solnic) & (results["scenario"] == sel.thesis_scenario), "cell"]
+    used = results.loc[plain(results, sel.solnic) & (results["scenario"] == sel.thesis_scenario), "cell"]
     keep |= set(used.astype(str)) & set(files)
     if sel.typical_cell in files:
         keep.add(sel.typical_cell)

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from plant.params import bohacek_tuteur_limit, lti_peak_bound
+
 __all__ = ["PlantLimits", "limits_from_config", "lag_ratio_limit"]
 
 # Table 2-1 values, used only when a configuration carries no plant section.
@@ -63,11 +65,11 @@ class PlantLimits:
     @property
     def classical_limit_rad(self) -> float:
         """θe,min = (k̄s − k̄c)/(2·J·ωb²)  (2-6) [rad]."""
-        return (self.stiction - self.coulomb) / (2.0 * self.inertia * self.nyquist_bandwidth**2)
+        return lti_peak_bound(self.stiction, self.coulomb, self.inertia, self.nyquist_bandwidth)
 
     def bound_at(self, omega: float) -> float:
         """θb = (k̄s − k̄c)/(2·J·ω²)  (2-6) at bandwidth ``omega`` [rad]."""
-        return (self.stiction - self.coulomb) / (2.0 * self.inertia * omega**2)
+        return lti_peak_bound(self.stiction, self.coulomb, self.inertia, omega)
 
     @property
     def lmax(self) -> float:
@@ -76,11 +78,10 @@ class PlantLimits:
 
 
 def lag_ratio_limit(ks_over_kc: float) -> float:
-    """Lmax = 2k̄s/(k̄s − k̄c) = 2r/(r − 1) with r = k̄s/k̄c  (2-1); inf at r = 1."""
+    """Lmax = 2k̄s/(k̄s − k̄c) = 2r/(r − 1) with r = k̄s/k̄c  (2-1); inf at r = 1, 2 as r → ∞."""
     r = float(ks_over_kc)
-    if math.isinf(r):
-        return 2.0
-    return math.inf if r == 1.0 else 2.0 * r / (r - 1.0)
+    # (2-1) at k̄s = r, k̄c = 1 (k̄s = 1, k̄c = 0 when k̄c vanishes): the same operations as 2r/(r − 1)
+    return bohacek_tuteur_limit(1.0, 0.0) if math.isinf(r) else bohacek_tuteur_limit(r, 1.0)
 
 
 def limits_from_config(config: Mapping[str, Any] | None) -> PlantLimits:

@@ -15,10 +15,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from controllers import roles
+from plant.params import lti_peak_bound
 from reports.inputs import cell_id
 from reports.limits import lag_ratio_limit
 
 __all__ = ["synthetic_inputs", "write_synthetic_run"]
+
+# The made-up run's controllers: the two the claims are about (by role) and a made-up peer.
+_SUBJECT, _CLASSICAL, _PEER = roles.IDENTIFICATION, roles.CLASSICAL, "peer"
+_HIGH_COST = f"{_SUBJECT}-high-cost"
 
 _PLANT = {"inertia": 0.5, "motor_time_constant": 8e-3, "u_max": 20.0, "coulomb": 1.4,
           "stiction": 2.1, "sample_period": 0.01, "measurement_noise_std": 5e-6,
@@ -29,19 +35,19 @@ _PLANT = {"inertia": 0.5, "motor_time_constant": 8e-3, "u_max": 20.0, "coulomb":
 
 def _results(rng: np.random.Generator, seeds: list[int]) -> pd.DataFrame:
     base = {  # controller: (peak µrad, mean |i|, rms i, supply, events per s)
-        "linear": (9.5, 1.60, 1.75, 1.60, 100),
-        "dithered": (5.0, 4.0, 6.0, 4.0, 300),
-        "solnic": (2.0, 0.9, 2.5, 0.6, 60),
-        "solnic-high-cost": (0.6, 1.3, 3.5, 0.9, 120),
+        _CLASSICAL: (9.5, 1.60, 1.75, 1.60, 100),
+        _PEER: (5.0, 4.0, 6.0, 4.0, 300),
+        _SUBJECT: (2.0, 0.9, 2.5, 0.6, 60),
+        _HIGH_COST: (0.6, 1.3, 3.5, 0.9, 120),
     }
     rows = []
     for scenario, factor in (("thesis", 1.0), ("quiet-friction", 0.8), ("ratio-2", 1.6)):
         for ctrl, (peak, iabs, irms, supply, ev) in base.items():
-            if ctrl == "solnic-high-cost" and scenario != "thesis":
+            if ctrl == _HIGH_COST and scenario != "thesis":
                 continue
             for seed in seeds:
                 p = peak * factor * rng.uniform(0.85, 1.15) * 1e-6
-                family = ctrl.removesuffix("-high-cost")   # the variant's base and family
+                family = _SUBJECT if ctrl == _HIGH_COST else ctrl   # the variant's base and family
                 row = dict(controller=ctrl, controller_base=family, controller_family=family,
                            scenario=scenario, seed=seed, status="ok",
                            message="", peak_error_rad=p, rms_error_rad=p * 0.35,
@@ -51,12 +57,12 @@ def _results(rng: np.random.Generator, seeds: list[int]) -> pd.DataFrame:
                            runtime_s=rng.uniform(0.5, 3.0), n_events=int(ev * 100),
                            n_corrections=int(ev * 20))
                 row["realtime_factor"] = 100.0 / row["runtime_s"]
-                if ctrl == "solnic" and scenario == "thesis":
+                if ctrl == _SUBJECT and scenario == "thesis":
                     row.update(peak_error_small_rad=0.95e-6 * rng.uniform(0.9, 1.1),
                                peak_error_medium_rad=1.4e-6 * rng.uniform(0.9, 1.1),
                                peak_error_large_rad=p)
                 rows.append(row)
-    fail = dict(controller="dithered", controller_base="dithered", controller_family="dithered",
+    fail = dict(controller=_PEER, controller_base=_PEER, controller_family=_PEER,
                 scenario="ratio-2", seed=max(seeds) + 1,
                 status="chatter", message="event-count guard: 10000 events in 1e-6 s")
     rows.append(fail)
@@ -104,7 +110,7 @@ def _bound(rng: np.random.Generator) -> pd.DataFrame:
                 for lag in (1.0, 2.0, 4.0, lag_ratio_limit(ratio), 2 * lag_ratio_limit(ratio),
                             math.inf):
                     for noise in (False, True):
-                        theta_b = (ks - kc) / (2 * inertia * wc**2)
+                        theta_b = lti_peak_bound(ks, kc, inertia, wc)   # (2-6)
                         stable = lag <= lag_ratio_limit(ratio) * 1.05
                         theta = theta_b * rng.uniform(1.2, 6.0) if stable else math.nan
                         design = "integral" if math.isinf(lag) else f"lead-lag L={lag:.3g}"
@@ -142,7 +148,7 @@ def synthetic_inputs(seed: int = 0, *, seeds: tuple[int, ...] = (0, 1, 2),
     """Keyword arguments for :func:`reports.build_report`, all synthetic."""
     rng = np.random.default_rng(seed)
     results = _results(rng, list(seeds))
-    series = {cell_id("solnic", "thesis", s): _series(rng, s, duration) for s in series_seeds}
+    series = {cell_id(_SUBJECT, "thesis", s): _series(rng, s, duration) for s in series_seeds}
     config = {"plant": dict(_PLANT), "warmup_s": 20.0, "duration_s": duration,
               "matrix": {"controllers": sorted(results["controller"].unique()),
                          "scenarios": sorted(results["scenario"].unique()),

@@ -72,7 +72,7 @@ class KbInt(_Hostile):
 '''
 
 def cli(*args, cwd=ROOT, timeout: float = 240, env=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bench.cli", *map(str, args)], cwd=cwd, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "reports.cli", *map(str, args)], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout, env=env)
 
 

@@ -9,8 +9,9 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bench.bound import (BOUND_COLUMNS, BoundCell, SweepPlan, _durations, bound_verdict,
+from bench.bound import (BOUND_COLUMNS, BoundCell, SweepPlan, bound_verdict,
                          check_bound_command, hunting_onsets, run_bound_cell)
+from bench.bound.run import _durations
 from controllers.linear import design_linear
 from plant import PlantParams
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from bench.cli import app
+from reports.cli import app
 
 CASES = [
     (["run", "--matrix", "m.toml", "--quick"], None, "--matrix and --quick exclude each other"),

@@ -45,7 +45,7 @@ def test_raising_controller_gives_an_error_row_and_the_rest_complete(tmp_path):
         '[matrix]\nplugins = ["bench_test_plugin"]\ncontrollers = ["test-raises", "solnic"]\n'
         'scenarios = ["thesis"]\nseeds = [0, 1]\nduration_s = 3\nwarmup_s = 1\n')
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "bench.cli", "run", "--matrix", tmp_path / "m.toml",
+    proc = subprocess.run([sys.executable, "-m", "reports.cli", "run", "--matrix", tmp_path / "m.toml",
                            "--out", out, "--no-traces"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     df = pd.read_parquet(out / "results.parquet")

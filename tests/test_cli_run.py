@@ -24,7 +24,7 @@ pytestmark = pytest.mark.slow
 
 
 def cli(*args: str, timeout: float = 300, **kwargs) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bench.cli", *map(str, args)], cwd=ROOT,
+    return subprocess.run([sys.executable, "-m", "reports.cli", *map(str, args)], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout, **kwargs)
 
 
@@ -184,13 +184,13 @@ def test_user_errors_exit_2_with_one_line_and_leave_results_untouched(quick, tmp
             (tmp_path / name).mkdir()
             (tmp_path / name / "bad.toml").write_text(text)
             args = ["--matrix", "bad.toml", *args]
-        procs[name] = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", *args, "--out", str(out)],
+        procs[name] = subprocess.Popen([sys.executable, "-m", "reports.cli", "run", *args, "--out", str(out)],
                                        cwd=tmp_path / name if text is not None else ROOT, env=_env(),
                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     # an unwritable --out: below a regular file
     (tmp_path / "a-file").write_text("x")
     procs["unwritable-out"] = subprocess.Popen(
-        [sys.executable, "-m", "bench.cli", "run", "--quick", "--out", str(tmp_path / "a-file" / "run")],
+        [sys.executable, "-m", "reports.cli", "run", "--quick", "--out", str(tmp_path / "a-file" / "run")],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     expected = {**{k: v[2] for k, v in USER_ERRORS.items()},
                 "unwritable-out": [f"--out {tmp_path / 'a-file' / 'run'}: cannot write"]}

@@ -16,7 +16,7 @@ import pytest
 from bench.driver import run_config
 from bench.frontier import frontier_matrix_data, frontier_matrix_path, thin, to_toml
 from bench.matrix import MatrixError, load_matrix, parse_matrix
-from bench.stats import crossing_ci, crossing_level
+from reports.stats import crossing_ci, crossing_level
 from controllers.base import available_controllers
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -94,7 +94,7 @@ def test_malformed_sweeps_name_file_line_and_key(tmp_path, body, line, key, mess
 def test_malformed_sweep_is_exit_2_one_line(tmp_path):
     path = write(tmp_path, '[matrix]\ncontrollers = ["oracle-pulse"]\nscenarios = ["thesis"]\nseeds = [0]\n'
                            '[sweep.oracle-pulse]\nband = [-1e-6]\n')
-    proc = subprocess.run([sys.executable, "-m", "bench.cli", "run", "--matrix", path, "--out", tmp_path / "o"],
+    proc = subprocess.run([sys.executable, "-m", "reports.cli", "run", "--matrix", path, "--out", tmp_path / "o"],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
@@ -235,7 +235,7 @@ def test_frontier_command_runs_its_matrix_through_run(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
     import bench.frontier as F
-    from bench.cli import app
+    from reports.cli import app
 
     tiny = {"matrix": {"controllers": ["linear", "oracle-pulse"], "scenarios": ["thesis"], "seeds": [0, 1],
                        "duration_s": 1.0, "warmup_s": 0.5},

@@ -79,14 +79,14 @@ def test_hostile_inputs_through_the_executable(tmp_path):
     cases = _cases(tmp_path)
     for name in _SUBPROCESS:
         args, code, fragments = cases[name]
-        proc = subprocess.run([sys.executable, "-m", "bench.cli", *args], cwd=ROOT, capture_output=True, text=True,
+        proc = subprocess.run([sys.executable, "-m", "reports.cli", *args], cwd=ROOT, capture_output=True, text=True,
                               timeout=120)
         _one_line_error(proc.stderr, code, proc.returncode, fragments, name)
     assert not (tmp_path / "out").exists()
 
 
 def test_hostile_inputs_are_one_line_errors_with_the_right_exit_code(tmp_path, capsys):
-    from bench.cli import main
+    from reports.cli import main
 
     cases = _cases(tmp_path)
     for name, (args, code, fragments) in cases.items():
@@ -102,7 +102,7 @@ def test_hostile_inputs_are_one_line_errors_with_the_right_exit_code(tmp_path, c
 @pytest.mark.slow
 def test_a_matrix_with_a_utf8_bom_is_read(tmp_path):
     (tmp_path / "bom.toml").write_bytes(TINY.encode("utf-8-sig"))
-    proc = subprocess.run([sys.executable, "-m", "bench.cli", "list", "--matrix", str(tmp_path / "bom.toml")],
+    proc = subprocess.run([sys.executable, "-m", "reports.cli", "list", "--matrix", str(tmp_path / "bom.toml")],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
 

@@ -217,7 +217,7 @@ def test_observer_pid_option_errors():
 @pytest.fixture(scope="module")
 def hunting():
     """Stationary set-point, a 2 mrad set-point step, 40 s; stick-slip cycles after 10 s."""
-    from bench.bound import _Observed
+    from bench.bound.run import _Observed
 
     p = PlantParams(command_velocity_std=0.0, command_velocity_initial=0.0)
     out = {}

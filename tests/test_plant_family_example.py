@@ -30,7 +30,7 @@ def _example(name: str) -> str:
 
 
 def _cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "bench.cli", *map(str, args)], cwd=cwd, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "reports.cli", *map(str, args)], cwd=cwd, capture_output=True,
                           text=True, timeout=600, env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 

@@ -103,7 +103,7 @@ def test_sigterm_and_sighup_stop_the_workers_keep_the_cells_and_resume_identical
     matrix = write_matrix(tmp_path, ["t-hold", "t-hang"], seeds=(0,), time_limit=60)
     out = tmp_path / "run"
     env = {**os.environ, "T_HANG_S": "600"}
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(matrix), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "reports.cli", "run", "--matrix", str(matrix), "--out", str(out),
                              "--workers", "2"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True, env=env)
     try:
@@ -133,7 +133,7 @@ def test_sigkill_of_the_main_process_leaves_no_orphan(tmp_path):
     """The cell processes die with the run (PR_SET_PDEATHSIG), so none writes without the lock."""
     matrix = write_matrix(tmp_path, ["t-hang"], seeds=(0, 1), time_limit=60)
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(matrix), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "reports.cli", "run", "--matrix", str(matrix), "--out", str(out),
                              "--workers", "2", "--traces", "none"], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, start_new_session=True, env={**os.environ, "T_HANG_S": "600"})
     try:

@@ -7,7 +7,8 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from bench.speed import SpeedConfig, _fixed_step_at, _lower_bound, _tolerance_at, speed_command
+from bench.speed import SpeedConfig, speed_command
+from bench.speed.accuracy import _fixed_step_at, _lower_bound, _tolerance_at
 from reports.inputs import normalise_speed
 
 pytestmark = pytest.mark.slow
@@ -16,7 +17,7 @@ pytestmark = pytest.mark.slow
 def _speed_app() -> typer.Typer:
     """The lead's CLI if it registers ``speed``, otherwise a one-command app around speed_command."""
     try:
-        from bench.cli import app
+        from reports.cli import app
     except ImportError:
         app = None
     if app is not None and any(c.name == "speed" for c in app.registered_commands):

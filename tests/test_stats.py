@@ -1,4 +1,4 @@
-"""bench.stats against independent truth: bootstrap coverage by Monte-Carlo, Pareto by brute force."""
+"""reports.stats against independent truth: bootstrap coverage by Monte-Carlo, Pareto by brute force."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.stats import median_ci, paired_ratio, pareto_front
+from reports.stats import median_ci, paired_ratio, pareto_front
 
 
 def test_median_ci_covers_the_true_median_in_at_least_93_percent_of_400_draws():

@@ -31,7 +31,7 @@ def test_sigkill_mid_matrix_then_resume(tmp_path):
     matrix.write_text(f'[matrix]\ncontrollers = ["solnic"]\nscenarios = ["thesis"]\nseeds = {SEEDS}\n'
                       f'duration_s = 5\nwarmup_s = 1\n')
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "bench.cli", "run", "--matrix", str(matrix), "--out", str(out), "--workers", "1"]
+    cmd = [sys.executable, "-m", "reports.cli", "run", "--matrix", str(matrix), "--out", str(out), "--workers", "1"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     try:

@@ -1,0 +1,71 @@
+"""The terminal tables of ``speed``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from controllers import roles
+
+
+def _fmt(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def _print_table(result: dict[str, Any], console: Any) -> None:
+    from rich.table import Table
+
+    for name, block in ((roles.IDENTIFICATION, result), (roles.CLASSICAL, result.get("linear_hold"))):
+        if not block or "rows" not in block:
+            continue
+        seq = block["sequence"]
+        table = Table(title=f"Work-precision on the {name} sequence: {seq['source']}; "
+                            f"{seq['duration_s']:g} s from t={seq['t_start_s']:g} s, {seq['n_pulses']} pulses")
+        for col in ("method", "setting", "error", "x1 err", "Δc err", "wall [s]", "real-time ×"):
+            table.add_column(col, justify="left" if col in ("method", "setting") else "right")
+        for r in block["rows"]:
+            table.add_row(r["method"], r["setting"], _fmt(r["error"]), _fmt(r["error_x1"]), _fmt(r["error_dc"]),
+                          _fmt(r["wall_s"]), _fmt(r["realtime_factor"]))
+        console.print(table)
+        key = "" if block is result else " (linear)"
+        for label, k in (("fixed-step (numba)", "fixed_step"), ("solve_ivp", "solve_ivp"),
+                         ("fixed-step (CPython)", "fixed_step_python")):
+            sp = block.get(f"speedup_vs_{k}_at_1e-6")
+            how = block["equal_accuracy"][k].get("how", "")
+            console.print(f"speed-up at equal accuracy 1e-6 vs {label}{key}: [bold]{_fmt(sp)}×[/bold]  ({how})")
+        probe = block.get("fixed_step_probe")
+        if probe and probe["rows"]:
+            steps = ", ".join(f"h={r['step_s']:g}: {_fmt(r['error_dc'])}" for r in probe["rows"])
+            console.print(f"per-pulse probe ({probe['n_pulses']} pulses), max Δc error {steps}")
+        lb = block["equal_accuracy"]["fixed_step_lower_bound"]
+        console.print(f"measured lower bound vs fixed-step (numba){key}: [bold]{_fmt(lb['speedup'])}×[/bold]  "
+                      f"({lb['how']})")
+        d = block["reference_disagreement"]
+        console.print(f"reference check: exact vs solve_ivp rtol={d['solve_ivp_rtol']:g}: "
+                      f"x1 {_fmt(d['error_x1'])}, Δc {_fmt(d['error_dc'])} (relative)")
+    noisy = result.get("noisy")
+    if noisy:
+        for r in noisy["rows"]:
+            console.print(f"noisy {r['method']} {r['setting']}: wall {_fmt(r['wall_s'])} s, "
+                          f"real-time × {_fmt(r['realtime_factor'])}")
+    weak = result.get("weak_error")
+    if weak:
+        console.print(f"noisy: Δc of a {weak['dt_u_s'] * 1e3:g} ms pulse, {weak['n_paths']} paths per method "
+                      f"(mean and p95, weak error with 95 % CI)")
+        for r in weak["rows"]:
+            if r["method"] == "multimode":
+                console.print(f"  exact: mean {_fmt(r['mean_rad'] * 1e6)} µrad, p95 {_fmt(r['p95_rad'] * 1e6)} µrad, "
+                              f"{_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
+            else:
+                console.print(f"  EM h={_fmt(r['step_s'])}: mean error {_fmt(r['mean_error_rad'] * 1e6)} µrad "
+                              f"(resolved: {r['mean_error_resolved']}), p95 error {_fmt(r['p95_error_rad'] * 1e6)} µrad "
+                              f"(resolved: {r['p95_error_resolved']}), {_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
+        bound = "≥ " if result.get("noisy_speedup_is_lower_bound") else ""
+        console.print(f"  exact vs EM at equal weak error (mean Δc): {bound}"
+                      f"{_fmt(result['noisy_speedup_at_equal_weak_error'])}×")
+    console.print(f"[yellow]technology:[/yellow] {result['technology']['caveat']}")
+    console.print(f"error: {result['error_definition']}; elapsed {_fmt(result['elapsed_s'])} s, "
+                  f"load average {_fmt(result['load_average_1min'])}")
