@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from plant.params import PlantParams
-from plant.protocol import DEFAULT_FAMILY, get_family, model_of
+from plant.protocol import BUILTIN_FAMILIES, DEFAULT_FAMILY, get_family, model_of
 
 __all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", "mismatch_factors"]
 
@@ -186,7 +186,7 @@ class Scenario:
 def builtin_scenarios() -> dict[str, Scenario]:
     """The built-in scenarios by name."""
     table = PlantParams()
-    return {
+    out = {
         "thesis": Scenario("thesis", table, 100.0, 20.0,
                            "Table 2-1, the initial estimates of section 7.3"),
         "quiet-friction": Scenario("quiet-friction", table.replace(friction_noise_psd=0.0), 100.0, 20.0,
@@ -194,6 +194,10 @@ def builtin_scenarios() -> dict[str, Scenario]:
         "ratio-2": Scenario("ratio-2", table.replace(stiction=2.8, coulomb=1.4), 100.0, 20.0,
                             "k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in)"),
     }
+    for fam in BUILTIN_FAMILIES:   # the built-in families' own scenarios (PlantFamily.scenarios)
+        for name, (fields, text) in get_family(fam).scenarios.items():
+            out[name] = derive_scenario(name, out["thesis"], {"plant": fam, "description": text, **fields})
+    return out
 
 
 def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Scenario:

@@ -77,6 +77,8 @@ class PlantFamily(abc.ABC):
     Params: ClassVar[type] = PlantParams
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
+    # Built-in scenarios of this family: name -> (fields over Table 2-1, one-line description).
+    scenarios: ClassVar[dict[str, tuple[dict[str, float], str]]] = {}
 
     def initial_state(self, params: PlantParams, x5: float) -> PlantState:
         """Shaft stuck at zero error, no current, x4 = ``command_velocity_initial``, x5 given."""

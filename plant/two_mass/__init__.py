@@ -27,6 +27,11 @@ class TwoMass(PlantFamily):
 
     Params = TwoMassParams
     description = "compliant shaft: motor and load inertias on a torsional spring and damper, friction on the load"
+    # 149 Hz, ζ = 0.029, J_m = J/10: mid-range of the 100-300 Hz first structural modes of
+    # gimbal axes, lightly damped as bolted metal structures are (Jia et al., J. Nonlinear Dyn.
+    # 2017, model a stabilized gimbal's structural resonance as this two-mass spring-damper).
+    scenarios = {"compliant": ({"motor_inertia": 0.05, "shaft_stiffness": 4.0e4, "shaft_damping": 2.5},
+                               "a compliant shaft: 149 Hz resonance, ζ = 0.029, rotor inertia J/10")}
 
     def initial_state(self, params, x5):
         """Load stuck at zero error, shaft relaxed and at rest, no current; x4, x5 as multimode."""
