@@ -271,7 +271,7 @@ def test_closed_loop_replay_matches_solve_ivp(controller, name):
     from bench.runner import run_closed_loop
     from controllers import make_controller
 
-    p = PARAMS[name]
+    p = PARAMS[name].replace(command_velocity_initial=1e-3)    # a ramp the loop must follow
     spy = _Spy()
     res = run_closed_loop(p, make_controller(controller), duration_s=3.0, warmup_s=0.0, seed=0, noise=False,
                           family=spy.family, compiled=False)
