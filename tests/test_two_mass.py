@@ -466,3 +466,20 @@ def test_stiff_shaft_approaches_the_multimode_plant():
     print("stiff limit (relative Δc error, breakaway-time error [s]) at ε = 0.1, 0.01, 0.001:", errs)
     assert errs[-1][0] < 1e-5 and errs[-1][1] < 1e-8          # measured: 5.6e-7 and 1.4e-10 s
     assert errs[0][0] > errs[1][0] > errs[2][0] and errs[0][1] > errs[1][1] > errs[2][1]
+
+
+# --- the compiled linear-law loop -------------------------------------------------------------
+
+@pytest.mark.parametrize("controller", ["linear", "dithered"])
+def test_compiled_law_loop_is_bit_identical_to_the_step_loop(controller):
+    from bench.runner import run_closed_loop
+    from bench.scenarios import builtin_scenarios
+    from controllers import make_controller
+
+    sc = builtin_scenarios()["compliant"]
+    runs = [run_closed_loop(sc.params, make_controller(controller), duration_s=8.0, warmup_s=2.0, seed=3,
+                            family=sc.family, compiled=c) for c in (True, False)]
+    a, b = ({k: v for k, v in r.metrics.items() if k not in ("runtime_s", "realtime_factor")} for r in runs)
+    assert runs[0].status == runs[1].status == "ok"
+    assert a == b
+    assert a["n_events"] > 0 or controller == "linear"

@@ -6,7 +6,7 @@ the shaft twist φ = θ_m − θ_load [rad] and the motor velocity ω_m [rad/s].
 
 Modules: ``params`` (the dataclass), ``modes`` (modal closed form, the first-root locator),
 ``motion`` (propagation, Φ(h), Q(h), the noise factor), ``bridge`` (noisy velocity zeros),
-``interval`` (the compiled pure step).
+``interval`` (the compiled pure step), ``law_loop`` (the compiled closed loop of a fixed linear law).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from plant.protocol import PlantFamily, register_family
+from plant.two_mass import law_loop
 from plant.state import PlantState
 from plant.two_mass.interval import N_X, advance
 from plant.two_mass.params import TwoMassParams
@@ -26,6 +27,7 @@ class TwoMass(PlantFamily):
     """The compliant-shaft plant; its step is :func:`plant.two_mass.interval.advance`."""
 
     Params = TwoMassParams
+    linear_law_loop = staticmethod(law_loop.run_law)
     description = "compliant shaft: motor and load inertias on a torsional spring and damper, friction on the load"
     # 149 Hz, ζ = 0.029, J_m = J/10: mid-range of the 100-300 Hz first structural modes of
     # gimbal axes, lightly damped as bolted metal structures are (Jia et al., J. Nonlinear Dyn.
