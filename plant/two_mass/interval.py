@@ -36,7 +36,7 @@ from plant.multimode.zero_velocity import _cross_prob
 from plant.randomness import NoiseExhausted, NoiseStream, normal, uniform_below
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import bisect, bridge_tables
-from plant.two_mass.modes import NCORE, decompose, first_root
+from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
 from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
                                    propagate, psd_factor, start_coords, transition)
 from plant.two_mass.params import TwoMassParams
@@ -90,25 +90,20 @@ def shaft_torque(X, q):
 
 
 @njit(cache=True)
-def _torque_root(X, mode, level, sigma, horizon, p, q, V, Vi, lam):
-    """First time the shaft torque reaches ``level`` (σ·(level − T) > 0 before it)."""
-    r = mode_row(mode)
+def _torque_exit(X, ks, horizon, p, q, V, Vi, lam):
+    """Stuck: the first time |T| reaches ks, and the side (+1, −1; 0 if not within ``horizon``)."""
     W0 = np.empty(NCORE, dtype=np.complex128)
     B0 = np.empty(NCORE, dtype=np.complex128)
-    n = start_coords(X, mode, p, q, Vi, W0, B0)
-    ca = np.zeros(NCORE + 1, dtype=np.complex128)
-    cb = np.zeros(NCORE + 1, dtype=np.complex128)
-    lm = np.zeros(NCORE + 1, dtype=np.complex128)
+    n = start_coords(X, 2, p, q, Vi, W0, B0)
+    ca = np.zeros(NCORE, dtype=np.complex128)
+    cb = np.zeros(NCORE, dtype=np.complex128)
+    lm = np.zeros(NCORE, dtype=np.complex128)
     for i in range(n):
-        if mode == 2:
-            cv = q[0] * V[r, 0, i] + q[1] * V[r, 1, i]
-        else:
-            cv = q[0] * V[r, 1, i] + q[1] * (V[r, 2, i] - V[r, 0, i])
-        ca[i] = -cv * W0[i]
-        cb[i] = -cv * B0[i]
-        lm[i] = lam[r, i]
-    ca[n] = level          # the constant, λ = 0
-    return first_root(ca, cb, lm, n + 1, sigma, horizon)
+        cv = q[0] * V[M_STUCK, 0, i] + q[1] * V[M_STUCK, 1, i]
+        ca[i] = cv * W0[i]
+        cb[i] = cv * B0[i]
+        lm[i] = lam[M_STUCK, i]
+    return first_exit(ca, cb, lm, n, -ks, ks, horizon)
 
 
 @njit(cache=True)
@@ -141,12 +136,11 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn):
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
     horizon = min(h_end, h_fb)
-    h_up = _torque_root(X, 2, ks, 1.0, horizon, p, q, V, Vi, lam)
-    h_dn = _torque_root(X, 2, -ks, -1.0, horizon, p, q, V, Vi, lam)
-    if h_up < 0.0 or h_dn < 0.0:
+    h_brk, side = _torque_exit(X, ks, horizon, p, q, V, Vi, lam)
+    if h_brk < 0.0:
         S[_STATUS] = _NO_ROOT
         return True
-    h = min(h_end, h_fb, h_up, h_dn)
+    h = min(h_end, h_fb, h_brk)
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
     propagate(X, 2, h, p, q, V, Vi, lam, Xn)
@@ -161,7 +155,7 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn):
         _end_flyback(X, S)
         return _event(S, X, _FLYBACK_END, o, ev)
     X[A2] = 0.0
-    S[_MODE] = 3.0 if h == h_up else 1.0
+    S[_MODE] = 3.0 if side > 0 else 1.0
     S[_NBRK] += 1.0
     return _event(S, X, _BREAKAWAY, o, ev)
 

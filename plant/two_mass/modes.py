@@ -138,6 +138,55 @@ def g_values(ca, cb, lam, n, t):
 
 
 @njit(cache=True)
+def first_exit(ca, cb, lam, n, lo, hi, horizon):
+    """First t in (0, horizon] at which g leaves (lo, hi) [lo < g(0) < hi]: (t, +1 at hi, −1 at lo),
+    (inf, 0) if it stays inside; t = −1 if the safe steps did not converge.
+
+    :func:`first_root` for hi − g and g − lo at once: both share g, g' and M2, and each step is
+    the smaller of the two safe steps.
+    """
+    t = 0.0
+    for _ in range(100000):
+        g, g1, m2, size = g_values(ca, cb, lam, n, t)
+        best = math.inf
+        side = 0
+        for k in range(2):
+            sigma = 1.0 if k == 0 else -1.0
+            y = (hi - g) if k == 0 else (g - lo)
+            y1 = -sigma * g1
+            if t == 0.0 and abs(y) <= 1e-14 * (size + abs(hi if k == 0 else lo)):
+                y = 0.0
+            if y <= 0.0:
+                if t > 0.0 or y < 0.0 or y1 < 0.0 or (y1 == 0.0 and -sigma * second_derivative(ca, cb, lam, n, t)[0] <= 0.0):
+                    return t, (1 if k == 0 else -1)
+                if y1 == 0.0:
+                    y2, m3 = second_derivative(ca, cb, lam, n, t)
+                    s = 1.5 * (-sigma * y2) / m3
+                else:
+                    s = 2.0 * y1 / m2 if m2 > 0.0 else math.inf
+            else:
+                r = math.sqrt(y1 * y1 + 2.0 * m2 * y)
+                if y1 >= 0.0:
+                    s = (y1 + r) / m2 if m2 > 0.0 else math.inf
+                else:
+                    s = 2.0 * y / (r - y1)
+            if s < best:
+                best = s
+                side = 1 if k == 0 else -1
+        if t + best >= horizon:
+            g, _, _, _ = g_values(ca, cb, lam, n, horizon)
+            if g >= hi:
+                return horizon, 1
+            if g <= lo:
+                return horizon, -1
+            return math.inf, 0
+        if best < 1e-15:
+            return t + best, side
+        t += best
+    return -1.0, 0
+
+
+@njit(cache=True)
 def second_derivative(ca, cb, lam, n, t):
     """g''(t) and M3(t), a bound on |g'''(t + s)| for s >= 0."""
     g2 = 0.0
