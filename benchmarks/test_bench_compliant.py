@@ -2,7 +2,9 @@
 
 Goal (issue #22): the compliant plant costs at most 3× the thesis plant's CPU per 100 s cell for
 linear, solnic-modern and pulse-width, measured in the same run (seed 0; compiled code warmed
-first by a 1 s cell of each, so the ratio is of simulation, not of compilation).
+first by a 1 s cell of each, so the ratio is of simulation, not of compilation). ``make benchmark``
+runs it (skipped under ``--benchmark-disable``); measured 2.55 (linear), 1.10 (solnic-modern),
+2.41 (pulse-width) on the shared 2-core machine.
 """
 
 import time
@@ -27,6 +29,8 @@ def _cpu(scenario, controller, duration):
 
 @pytest.mark.parametrize("controller", ["linear", "solnic-modern", "pulse-width"])
 def test_compliant_cell_cost_ratio(benchmark, controller):
+    if benchmark.disabled:   # `make test`: six 100 s cells only to time them; `make benchmark` runs it
+        pytest.skip("a timing only (make benchmark)")
     scen = builtin_scenarios()
     thesis, compliant = scen["thesis"], scen["compliant"]
     for sc in (thesis, compliant):
