@@ -483,3 +483,22 @@ def test_compiled_law_loop_is_bit_identical_to_the_step_loop(controller):
     assert runs[0].status == runs[1].status == "ok"
     assert a == b
     assert a["n_events"] > 0 or controller == "linear"
+
+
+def test_pulse_motion_waits_for_the_ringing_shaft():
+    """The oracle's pulse response: Δc equals a long noise-free run's final x1 (the shaft's
+    ringing may break the stuck load loose again), and the stop time is its last stick."""
+    from plant.protocol import PlantFamily
+
+    p = PARAMS["compliant"].noise_free().replace(command_velocity_initial=0.0)
+    early = 0
+    for dt_u in (2.2e-3, 3e-3, 5e-3):
+        dc, t_stop = FAM.pulse_motion(p, FAM.initial_state(p, 0.0), dt_u, +1)
+        s = FAM.initial_state(p, 0.0)
+        r = FAM.step(s, DriveCommand.pulse(0.0, dt_u, p.u_max), p, None, QUIET, duration=0.5, record=True)
+        sticks = r.events["t"][r.events["kind"] == int(EventKind.STICK)]
+        assert r.state.mode == 2
+        assert dc == pytest.approx(r.state.x[0], rel=1e-9, abs=1e-15)
+        assert t_stop == pytest.approx(sticks[-1], abs=1e-12)
+        early += PlantFamily.pulse_motion(FAM, p, FAM.initial_state(p, 0.0), dt_u, +1)[1] < t_stop - 1e-3
+    assert early >= 1, "the generic first-stop rule should stop too early on this shaft"
