@@ -3,8 +3,8 @@
 Goal (issue #22): the compliant plant costs at most 3× the thesis plant's CPU per 100 s cell for
 linear, solnic-modern and pulse-width, measured in the same run (seed 0; compiled code warmed
 first by a 1 s cell of each, so the ratio is of simulation, not of compilation). ``make benchmark``
-runs it (skipped under ``--benchmark-disable``); measured 2.55 (linear), 1.10 (solnic-modern),
-2.41 (pulse-width) on the shared 2-core machine.
+runs it (skipped under ``--benchmark-disable``); measured 2.49-2.55 (linear), 1.10-1.12 (solnic-modern),
+2.41-2.50 (pulse-width) on the shared 2-core machine (two runs).
 """
 
 import time
