@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from plant.params import PlantParams, as_definition
-from plant.protocol import DEFAULT_FAMILY, get_family, model_of
+from plant.protocol import BUILTIN_FAMILIES, DEFAULT_FAMILY, get_family, model_of
 
 __all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", "mismatch_factors"]
 
@@ -191,7 +191,7 @@ class Scenario:
 def builtin_scenarios() -> dict[str, Scenario]:
     """The built-in scenarios by name."""
     table = PlantParams()
-    return {
+    out = {
         "thesis": Scenario("thesis", table, 100.0, 20.0,
                            "Table 2-1, the initial estimates of section 7.3"),
         "quiet-friction": Scenario("quiet-friction", table.replace(friction_noise_psd=0.0), 100.0, 20.0,
@@ -207,6 +207,10 @@ def builtin_scenarios() -> dict[str, Scenario]:
                              mismatch=(("coulomb", 0.2), ("stiction", 0.2), ("inertia", 0.2),
                                        ("motor_time_constant", 0.2))),
     }
+    for fam in BUILTIN_FAMILIES:   # the built-in families' own scenarios (PlantFamily.scenarios)
+        for name, (fields, text) in get_family(fam).scenarios.items():
+            out[name] = derive_scenario(name, out["thesis"], {"plant": fam, "description": text, **fields})
+    return out
 
 
 def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Scenario:

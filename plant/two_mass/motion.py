@@ -1,0 +1,197 @@
+"""Noise-free motion of the two-mass plant between events, and Φ(h), Q(h) from it (compiled).
+
+Kernel vector layout (the multimode kernels' first seven slots, so their stuck propagation,
+torque integrals and sub-step peak apply unchanged)::
+
+    X = [x1, x2, x3, x4, x5, kc, u, φ, ω_m]
+
+kc the Coulomb level in force (k̄c, or −x5 when k̄c + x5 < 0, as plant.multimode), u the drive.
+``propagate`` is exact (plant.two_mass.modes): x3 by its closed form, the core modally, x1 by
+the integral of x2 − x4, x4 by its mean decay; stuck, x1 and x4 as (3-22). Φ(h) is the matrix
+of this linear map (columns from unit vectors); Q(h) = ∫₀ʰ Φ(v)·Qc·Φ(v)ᵀ dv (4-8) with
+Qc = diag(α²σ2² on x2, σ4² on x4, σ5² on x5) while moving — Gauss–Legendre (8 nodes) on panels
+with ρ·width ≤ 0.125, ρ the largest |λ|: the integrand is a sum of e^((λ_i+λ_j)v) terms, so
+the rule is exact to round-off (truncation below 0.25^16/16! ≈ 1e-23 relative).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from plant.two_mass.modes import M_STUCK, NCORE, phi1, phi2
+
+A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
+NX = 9
+# The noisy block of X (rows of the noise factor): x1, x2, x4, x5, φ, ω_m.
+NB = np.array([A1, A2, A4, A5, PHI, WM])
+NNB = 6
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+
+
+@njit(cache=True)
+def mode_row(mode):
+    """Decomposition row of a mode (1 → 0, 3 → 1, 2 → 2)."""
+    return 0 if mode == 1 else (1 if mode == 3 else M_STUCK)
+
+
+@njit(cache=True)
+def start_coords(X, mode, p, q, Vi, W0, B0):
+    """Modal coordinates w = V⁻¹z and b̃ = V⁻¹b of the segment starting at X; returns n."""
+    r = mode_row(mode)
+    z = np.empty(NCORE)
+    b = np.zeros(NCORE)
+    if mode == 2:
+        n = 3
+        z[0], z[1], z[2] = X[PHI], X[WM], X[A3]
+        b[2] = p.beta3 * X[AU]
+    else:
+        n = 5
+        s = 1.0 if mode == 3 else -1.0
+        z[0], z[1], z[2], z[3], z[4] = X[A2], X[PHI], X[WM], X[A3], X[A5]
+        b[0] = -s * p.alpha * X[AKC]
+        b[3] = p.beta3 * X[AU]
+    for i in range(n):
+        acc = 0j
+        acc2 = 0j
+        for j in range(n):
+            acc += Vi[r, i, j] * z[j]
+            acc2 += Vi[r, i, j] * b[j]
+        W0[i] = acc
+        B0[i] = acc2
+    return n
+
+
+@njit(cache=True)
+def propagate(X, mode, t, p, q, V, Vi, lam, Xout):
+    """Xout = the noise-free state t seconds after X in ``mode`` (exact)."""
+    r = mode_row(mode)
+    W0 = np.empty(NCORE, dtype=np.complex128)
+    B0 = np.empty(NCORE, dtype=np.complex128)
+    n = start_coords(X, mode, p, q, Vi, W0, B0)
+    wt = np.empty(NCORE, dtype=np.complex128)
+    it = np.empty(NCORE, dtype=np.complex128)
+    for i in range(n):
+        x = lam[r, i] * t
+        f1 = phi1(x)
+        wt[i] = np.exp(x) * W0[i] + t * f1 * B0[i]
+        it[i] = t * f1 * W0[i] + t * t * phi2(x) * B0[i]
+    b4 = p.beta4
+    E4 = -math.expm1(-b4 * t)
+    for j in range(NX):
+        Xout[j] = X[j]
+    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
+    Xout[A4] = X[A4] * (1.0 - E4)
+    if mode == 2:
+        Xout[A1] = X[A1] - X[A4] * E4 / b4
+        Xout[A2] = 0.0
+        Xout[PHI] = _row(V, r, 0, wt, n)
+        Xout[WM] = _row(V, r, 1, wt, n)
+    else:
+        Xout[A2] = _row(V, r, 0, wt, n)
+        Xout[PHI] = _row(V, r, 1, wt, n)
+        Xout[WM] = _row(V, r, 2, wt, n)
+        Xout[A5] = _row(V, r, 4, wt, n)
+        Xout[A1] = X[A1] + _row(V, r, 0, it, n) - X[A4] * E4 / b4
+
+
+@njit(cache=True)
+def _row(V, r, k, w, n):
+    acc = 0j
+    for i in range(n):
+        acc += V[r, k, i] * w[i]
+    return acc.real
+
+
+@njit(cache=True)
+def transition(mode, h, p, q, V, Vi, lam, P):
+    """P = Φ(h) (9 × 9) of ``mode``, the matrix of :func:`propagate`."""
+    E = np.zeros(NX)
+    col = np.empty(NX)
+    for j in range(NX):
+        E[j] = 1.0
+        propagate(E, mode, h, p, q, V, Vi, lam, col)
+        for i in range(NX):
+            P[i, j] = col[i]
+        E[j] = 0.0
+
+
+@njit(cache=True)
+def process_noise(mode, h, p, q, V, Vi, lam, Q):
+    """Q (6 × 6 on NB) = COV of the noise over h while moving (module docstring); stuck: w4 only."""
+    for i in range(NNB):
+        for j in range(NNB):
+            Q[i, j] = 0.0
+    if h <= 0.0:
+        return
+    r = mode_row(mode)
+    rho = p.beta4
+    for i in range(NCORE):
+        rho = max(rho, abs(lam[r, i]))
+    panels = max(1, int(math.ceil(rho * h / 0.125)))
+    width = h / panels
+    E = np.zeros(NX)
+    col = np.empty(NX)
+    srcs = (A2, A4, A5)
+    for s_i in range(3):
+        j = srcs[s_i]
+        if mode == 2 and j != A4:
+            continue
+        if j == A2:
+            qj = p.alpha * p.alpha * p.sigma2_sq
+        elif j == A4:
+            qj = p.sigma4_sq
+        else:
+            qj = p.sigma5_sq
+        if qj == 0.0:
+            continue
+        for pn in range(panels):
+            lo = pn * width
+            for k in range(8):
+                v = lo + 0.5 * width * (_GL_X[k] + 1.0)
+                E[j] = 1.0
+                propagate(E, mode, v, p, q, V, Vi, lam, col)
+                E[j] = 0.0
+                wk = 0.5 * width * _GL_W[k] * qj
+                for a in range(NNB):
+                    ca = col[NB[a]]
+                    for b in range(NNB):
+                        Q[a, b] += wk * ca * col[NB[b]]
+    for a in range(NNB):
+        for b in range(a + 1, NNB):
+            Q[a, b] = Q[b, a] = 0.5 * (Q[a, b] + Q[b, a])
+
+
+@njit(cache=True)
+def psd_factor(Q, L):
+    """Lower factor L·Lᵀ = Q of a PSD matrix in diagonally scaled coordinates (as (4-20)–(4-34)):
+    zero rows and rank-deficient directions give zero columns."""
+    n = Q.shape[0]
+    d = np.empty(n)
+    for i in range(n):
+        d[i] = math.sqrt(Q[i, i]) if Q[i, i] > 0.0 else 0.0
+    for i in range(n):
+        for j in range(n):
+            L[i, j] = 0.0
+    for j in range(n):
+        if d[j] == 0.0:
+            continue
+        acc = 1.0
+        for k in range(j):
+            acc -= L[j, k] * L[j, k]
+        if acc <= 1e-14:
+            continue
+        piv = math.sqrt(acc)
+        L[j, j] = piv
+        for i in range(j + 1, n):
+            if d[i] == 0.0:
+                continue
+            acc2 = Q[i, j] / (d[i] * d[j])
+            for k in range(j):
+                acc2 -= L[i, k] * L[j, k]
+            L[i, j] = acc2 / piv
+    for i in range(n):
+        for j in range(n):
+            L[i, j] *= d[i]
