@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from plant.params import PlantParams
-from plant.protocol import DEFAULT_FAMILY, get_family, model_of
+from plant.protocol import BUILTIN_FAMILIES, DEFAULT_FAMILY, get_family, model_of
 
 __all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", "mismatch_factors"]
 
@@ -193,7 +193,17 @@ def builtin_scenarios() -> dict[str, Scenario]:
                                    "Table 2-1 without white friction noise (σ2 = 0)"),
         "ratio-2": Scenario("ratio-2", table.replace(stiction=2.8, coulomb=1.4), 100.0, 20.0,
                             "k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in)"),
+        **_family_scenarios(table),
     }
+
+
+def _family_scenarios(table: PlantParams) -> dict[str, Scenario]:
+    """The scenarios the built-in families contribute (``PlantFamily.scenarios``): Table 2-1 in the
+    family's law, with the family's fields at their defaults except those the scenario sets."""
+    shared = dataclasses.asdict(table)
+    return {name: Scenario(name, get_family(family).Params(**shared).replace(**fields), 100.0, 20.0, story,
+                           family=family)
+            for family in BUILTIN_FAMILIES for name, (fields, story) in get_family(family).scenarios.items()}
 
 
 def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Scenario:

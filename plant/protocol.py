@@ -77,6 +77,7 @@ class PlantFamily(abc.ABC):
     Params: ClassVar[type] = PlantParams
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
+    scenarios: ClassVar[dict[str, tuple[dict[str, Any], str]]] = {}   # built-in scenarios: name -> (fields, story)
 
     def initial_state(self, params: PlantParams, x5: float) -> PlantState:
         """Shaft stuck at zero error, no current, x4 = ``command_velocity_initial``, x5 given."""

@@ -19,7 +19,7 @@ class StribeckParams(RippleParams):
     ----------
     stribeck_velocity : float
         v_s > 0 [rad/s]. Default 4e-3 rad/s: the speed scale of the pulses a positioning
-        controller emits on Table 2-1 (a 1.5 ms bridge pulse peaks near 3.7 mrad/s), so that
+        controller emits on Table 2-1 (a 1.5 ms bridge pulse peaks near 3 mrad/s on Acker's plant), so that
         a pulse's friction lies on the falling part of the curve, where the law matters. A
         v_s far above it makes a pulse slide at ks throughout; far below, the plant is
         Acker's. (Table I of Canudas de Wit et al. 1995 has 1 mm/s, i.e. 4e-3 rad/s at a
