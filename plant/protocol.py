@@ -58,6 +58,7 @@ DEFAULT_FAMILY = "multimode"
 BUILTIN_FAMILIES: dict[str, str] = {
     "multimode": "plant.multimode",
     "stribeck": "plant.stribeck",
+    "lugre": "plant.lugre",
 }
 # What truth() returns for every family (a family may add keys of its own).
 TRUTH_FIELDS = ("x1", "x2", "x3", "x4", "x5", "mode", "u", "ks_true", "kc_true")

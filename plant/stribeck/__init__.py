@@ -6,8 +6,9 @@ position-dependent factor m(θ) of :mod:`plant.ripple`. Not piecewise linear in 
 error-controlled Dormand–Prince 5(4) noise-free, stochastic Heun sub-steps with noise
 (:mod:`plant.stribeck.moving`). The state carries the load angle θ after the shared six.
 
-Modules: ``params`` (StribeckParams), ``law`` (the friction law), ``dopri`` (the tableau and
-dense output), ``moving`` (modes 1 and 3), ``interval`` (the pure step, compiled whole).
+Modules: ``params`` (StribeckParams), ``law`` (the friction law), ``moving`` (modes 1 and 3),
+``interval`` (the pure step, compiled whole), ``reference`` (solve_ivp and Euler–Maruyama);
+the Dormand–Prince tableau is shared (:mod:`plant.dopri`).
 """
 
 from __future__ import annotations

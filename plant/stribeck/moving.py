@@ -8,7 +8,7 @@ y = (v, D), v = x2 and D = ∫v dt (the load's displacement in the segment):
 
 and x1 = x1₀ + D − x4₀·τ4·(1 − e^(−β4·t)), θ = θ₀ + D.
 
-Noise-free (:func:`rk_segment`): Dormand–Prince 5(4) (plant.stribeck.dopri), order 5 with
+Noise-free (:func:`rk_segment`): Dormand–Prince 5(4) (plant.dopri), order 5 with
 local extrapolation, error control per step on the RMS of e_i/(ATOL_i + RTOL·max|y_i|) with
 RTOL = 1e-10, ATOL = (1e-13 rad/s, 1e-17 rad). Velocity zero is found on the quartic dense
 output (sign changes at θ = ¼, ½, ¾, 1), by bisection to round-off, and then polished by
@@ -36,7 +36,7 @@ from numba import njit
 from plant.multimode.segments import hermite_peak
 from plant.multimode.stuck import stuck_propagate
 from plant.randomness import normal, uniform_below
-from plant.stribeck.dopri import A, B, C, E, dense_coefficients, dense_value
+from plant.dopri import A, B, C, E, dense_coefficients, dense_value
 from plant.stribeck.law import L_ALPHA, L_BETA3, L_BETA4, L_BETA5, L_SIGMA2_SQ, L_SIGMA5_SQ, acceleration, \
     effective_levels
 
