@@ -38,7 +38,7 @@ PARAMETER_SETS = {
     "stiff-bristles": {"bristle_stiffness": 1e7, "bristle_damping": 2236.0},
     "ripple": {"friction_ripple": 0.3, "ripple_period": 2e-4, "ripple_phase": 1.0},
     "other-plant": {"inertia": 0.8, "motor_time_constant": 5e-3, "coulomb": 0.5, "stiction": 2.5, "viscous": 0.0,
-                    "bristle_damping": 300.0},
+                    "bristle_damping": 2000.0},      # ζ = 1.1: overdamped bristles
 }
 
 

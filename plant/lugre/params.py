@@ -69,7 +69,7 @@ class LuGreParams(RippleParams):
         if worst < 0.0:
             raise ValueError(f"{name}.bristle_damping = {self.bristle_damping!r} with bristle_stiffness, viscous, "
                              f"stribeck_velocity, coulomb, stiction violates dissipativity: σ1²·|v| ≤ 4·(σ1 + σ2)·g(v) "
-                             f"fails on 0 ≤ |v| ≤ 2·k̄s/σ1 (need a smaller bristle_damping or larger viscous)")
+                             f"fails on 0 ≤ |v| ≤ 2·ks/σ1: the bristle damping can feed energy in there")
 
     def dissipativity_margin(self) -> float:
         """min over 0 ≤ v ≤ 2·ks/σ1 of 4·(σ1 + σ2)·g(v) − σ1²·v at the lowest ripple levels (≥ 0: dissipative)."""

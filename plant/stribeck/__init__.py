@@ -7,7 +7,8 @@ error-controlled Dormand–Prince 5(4) noise-free, stochastic Heun sub-steps wit
 (:mod:`plant.stribeck.moving`). The state carries the load angle θ after the shared six.
 
 Modules: ``params`` (StribeckParams), ``law`` (the friction law), ``moving`` (modes 1 and 3),
-``interval`` (the pure step, compiled whole), ``reference`` (solve_ivp and Euler–Maruyama);
+``interval`` (the pure step, compiled whole), ``law_loop`` (the compiled closed loop of a
+fixed linear law), ``reference`` (solve_ivp and Euler–Maruyama);
 the Dormand–Prince tableau is shared (:mod:`plant.dopri`).
 """
 
@@ -18,6 +19,7 @@ import numpy as np
 from plant.protocol import PlantFamily, register_family
 from plant.ripple import THETA, ripple_factor
 from plant.state import X5, PlantState
+from plant.stribeck import law_loop
 from plant.stribeck.interval import N_STATE, advance
 from plant.stribeck.params import StribeckParams
 
@@ -29,6 +31,7 @@ class Stribeck(PlantFamily):
     """Stribeck + viscous sliding friction, Acker's stuck mode; step = plant.stribeck.interval.advance."""
 
     Params = StribeckParams
+    linear_law_loop = staticmethod(law_loop.run_law)
     description = "Stribeck curve (friction falls from ks to kc with speed) plus viscous drag; error-controlled RK"
     # one of the scenarios this family contributes: name -> (field changes, one-line story)
     scenarios = {
