@@ -24,7 +24,8 @@ from controllers import make_controller
 from plant import DriveCommand, DriveType, PlantParams, SimOptions, pulse_response
 from plant.lugre import LuGreParams
 from plant.lugre.integrate import TOLERANCES, rk_segment
-from plant.lugre.reference import event_driven, spring_block
+from plant.lugre.reference import euler_maruyama, event_driven, spring_block
+from plant.randomness import NoiseStream
 from plant.protocol import get_family
 from tests.cli_helpers import cli
 from tests.test_stribeck import _pulse_train, _Recording
@@ -181,6 +182,34 @@ def test_stiff_smooth_limit_approaches_the_multimode_plant():
         errors.append(abs(state.x[6] - exact) / exact)
     assert all(b < a / 2.2 for a, b in zip(errors, errors[1:])), errors
     assert errors[-1] < 0.03, errors
+
+
+@pytest.mark.slow
+def test_noisy_statistics_against_fine_euler_maruyama():
+    """Mean and sd of x1 after each interval of a pulse train, 2000 paths each, against Euler–
+    Maruyama at h = 2 µs (stable: |h·λ| ≈ 0.04). Friction noise 10× Table 2-1 and τ5 = 10 s so
+    that the noise moves x1 by much more than the Monte-Carlo error: the noise-free x1 lies
+    > 5 standard errors from the noisy mean after pulses 1, 3 and 4 (checked)."""
+    p = LuGreParams(friction_noise_psd=4e-3, correlated_friction_tau=10.0)
+    cmds = [DriveCommand.pulse(0.0, 2.0e-3, p.u_max), DriveCommand.pulse(0.0, 1.6e-3, -p.u_max),
+            DriveCommand.pulse(1e-3, 2.5e-3, p.u_max), DriveCommand.hold(0.0, DriveType.BRIDGE)]
+    n = 2000
+    fam = np.empty((n, len(cmds)))
+    for m in range(n):
+        s, noise = FAMILY.initial_state(p, 0.0), NoiseStream.from_seed(10_000 + m)
+        for i, cmd in enumerate(cmds):
+            s = FAMILY.step(s, cmd, p, noise, SimOptions()).state
+            fam[m, i] = s.x[0]
+    em = euler_maruyama(p, FAMILY.initial_state(p, 0.0).x, cmds, n, 2e-6, np.random.default_rng(7)).T
+    quiet = []
+    s = FAMILY.initial_state(p, 0.0)
+    for cmd in cmds:
+        s = FAMILY.step(s, cmd, p.noise_free(), None, QUIET).state
+        quiet.append(s.x[0])
+    se = np.sqrt(fam.var(0) / n + em.var(0) / n)
+    assert np.all(np.abs(fam.mean(0) - em.mean(0)) < 4.0 * se), (fam.mean(0), em.mean(0), se)
+    assert np.all(np.abs(fam.std(0) / em.std(0) - 1.0) < 0.08), fam.std(0) / em.std(0)
+    assert np.all(np.abs(np.array(quiet) - em.mean(0))[[0, 2, 3]] > 5.0 * se[[0, 2, 3]])
 
 
 @pytest.mark.parametrize("field, value", [
