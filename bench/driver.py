@@ -21,7 +21,6 @@ rebuilt, and :attr:`RunOutcome.signal` says which signal stopped the run.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import signal
 import threading
 import time
@@ -39,6 +38,7 @@ from bench.matrix import Matrix
 from bench.provenance import run_metadata
 from bench.scenarios import builtin_scenarios
 from bench.store import ResultsStore
+from plant.params import as_definition
 
 __all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace"]
 
@@ -116,7 +116,7 @@ def run_config(matrix: Matrix, traces: bool | str) -> dict[str, Any]:
         "matrix": matrix.to_json(),
         "controllers": {c.name: c.to_json() for c in matrix.controllers},
         "scenarios": {s.name: s.to_json() for s in matrix.scenarios},
-        "plant": dataclasses.asdict(thesis.params),
+        "plant": as_definition(thesis.params),
         "warmup_s": thesis.warmup_s,
         "duration_s": thesis.duration_s,
         "traces": traces,

@@ -2,17 +2,20 @@
 
 The plant is reached only through its family's protocol (:mod:`plant.protocol`): at every
 sample instant n·τs the family's sensor returns y(n) (``observe``: x1(n·τs) + w1(n) for an
-ideal sensor); the controller returns the drive command for [n·τs, (n+1)·τs); the family's
-pure step returns the state at the next instant with the interval's exact integrals, which the
-scoring window sums (:class:`bench.metrics.WindowTotals`).
+ideal sensor, quantized when the plant's sensor is); the controller returns the drive command
+for [n·τs, (n+1)·τs), which takes effect after the plant's compute delay (``delayed_step``,
+carrying the pending command from one interval to the next); the family's pure step returns
+the state at the next instant with the interval's exact integrals, which the scoring window
+sums (:class:`bench.metrics.WindowTotals`).
 
 Truth and model: the plant runs with the true parameters; the controller's ``reset`` gets the
 model (a :class:`~plant.params.PlantParams`, by default the truth's own fields). Only a
 ``privileged`` bound sees the truth, through ``observe_truth(state, plant)`` before each step.
 
 A controller that describes its step as a fixed linear law (the ``linear_law`` hook) runs, when
-nothing is recorded and the family offers one, in the family's compiled loop
-(``PlantFamily.linear_law_loop``) with bit-identical results; every other run calls ``step`` here.
+nothing is recorded and the family offers one for the plant (``PlantFamily.law_loop``: not with
+a quantized sensor or a delay), in the family's compiled loop with bit-identical results; every
+other run calls ``step`` here.
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
 plant noise, sensor noise, controller, and the initial draw of x5 from N(0, VAR(x5)).
@@ -37,7 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from bench.metrics import WindowTotals, run_metrics
-from controllers.base import Controller
+from controllers.base import Controller, ControllerDiverged
 from plant.params import PlantParams
 from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
 from plant.randomness import NoiseStream
@@ -208,9 +211,10 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     wall0 = time.perf_counter()
     privileged = controller.privileged
     truth = TruePlant(fam, params) if privileged else None
+    pending = None          # the command path's carry-over (compute delay), see PlantFamily.delayed_step
     try:
         controller.reset(model, streams["controller"])
-        fast = fam.linear_law_loop
+        fast = fam.law_loop(params)
         law = controller.linear_law() if (rec is None and not privileged and compiled and fast) else None
         if law is not None:
             state, sums, window, status, message = fast(law, params, opts, state, sensor, n_warm, plant_noise,
@@ -232,7 +236,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             command = controller.step(y)
             if rec is not None:
                 rec.internals(controller.internals())
-            step = fam.step(state, command, params, plant_noise, opts, record=rec is not None)
+            step, pending = fam.delayed_step(state, pending, command, params, plant_noise, opts,
+                                             record=rec is not None)
             if rec is not None:
                 rec.events(step.events)
             if n >= n_warm:
@@ -249,6 +254,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             if law is None:
                 x1_window[n_window] = state.x[X1]
                 n_window += 1
+    except ControllerDiverged as exc:   # the controller's estimates left their range: a result
+        status = Status.DIVERGED
+        message = f"controller diverged: {exc}"
     except Exception as exc:  # a failing controller is a result, not a crash (STYLE §8)
         status = Status.ERROR
         message = f"{type(exc).__name__}: {exc}"

@@ -14,7 +14,11 @@ Built in:
 
 * ``thesis`` — Table 2-1 (:class:`~plant.params.PlantParams` defaults), 100 s, warm-up 20 s;
 * ``quiet-friction`` — the same with no white friction noise, σ2² = 0;
-* ``ratio-2`` — k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in).
+* ``ratio-2`` — k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in);
+* ``quantized`` — Table 2-1 read through a 1 µrad encoder (``quantization`` = 1e-6 rad);
+* ``delayed`` — Table 2-1 with a 2 ms compute delay (``command_delay`` = 2e-3 s, τs = 10 ms);
+* ``mismatch`` — the controllers are told Table 2-1; the truth's k̄c, k̄s, J and τ3 are off
+  by a lognormal factor of relative sd 20 % per seed.
 
 A custom scenario is a base scenario plus overrides of the truth (``plant = "family"`` and the
 family's fields), of the model and of the mismatch (see :func:`derive_scenario`).
@@ -29,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from plant.params import PlantParams
+from plant.params import PlantParams, as_definition
 from plant.protocol import BUILTIN_FAMILIES, DEFAULT_FAMILY, get_family, model_of
 
 __all__ = ["Scenario", "builtin_scenarios", "derive_scenario", "SCENARIO_KEYS", "mismatch_factors"]
@@ -166,12 +170,13 @@ class Scenario:
     def definition(self) -> dict[str, Any]:
         """What determines a run of this scenario, as plain JSON data. The family, model and
         mismatch appear only when they differ from the default plant, so that a scenario of
-        Acker's plant keeps the definition (and the cell hashes) it always had."""
-        out: dict[str, Any] = {"name": self.name, "base": self.base, "plant": dataclasses.asdict(self.params)}
+        Acker's plant keeps the definition (and the cell hashes) it always had; likewise an option
+        added later (``quantization``, ``command_delay``) appears only when it is on."""
+        out: dict[str, Any] = {"name": self.name, "base": self.base, "plant": as_definition(self.params)}
         if self.family != DEFAULT_FAMILY:
             out["family"] = self.family
         if self.model is not None:
-            out["model"] = dataclasses.asdict(self.model)
+            out["model"] = as_definition(self.model)
         if self.mismatch:
             out["mismatch"] = dict(self.mismatch)
         return out
@@ -193,6 +198,14 @@ def builtin_scenarios() -> dict[str, Scenario]:
                                    "Table 2-1 without white friction noise (σ2 = 0)"),
         "ratio-2": Scenario("ratio-2", table.replace(stiction=2.8, coulomb=1.4), 100.0, 20.0,
                             "k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in)"),
+        "quantized": Scenario("quantized", table.replace(quantization=1e-6), 100.0, 20.0,
+                              "Table 2-1 read through a 1 µrad encoder (quantization 1e-6 rad)"),
+        "delayed": Scenario("delayed", table.replace(command_delay=2e-3), 100.0, 20.0,
+                            "Table 2-1 with a 2 ms compute delay: each command acts 2 ms after its sample (τs 10 ms)"),
+        "mismatch": Scenario("mismatch", table, 100.0, 20.0,
+                             "controllers told Table 2-1; the true k̄c, k̄s, J, τ3 off by lognormal 20 % per seed",
+                             mismatch=(("coulomb", 0.2), ("stiction", 0.2), ("inertia", 0.2),
+                                       ("motor_time_constant", 0.2))),
         **_family_scenarios(table),
     }
 

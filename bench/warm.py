@@ -10,26 +10,30 @@ from __future__ import annotations
 
 import numpy as np
 
+from controllers.models.acker import pulse_response as model_pulse
+from plant import pulse_response
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.interval import advance
 from plant.params import PlantParams
-from plant.multimode.pulse import pulse_response
+from plant.protocol import DEFAULT_FAMILY, get_family
 from plant.randomness import NoiseStream
-from plant.state import SimOptions, initial_state
+from plant.state import SimOptions
 
 
 def warm() -> None:
-    """Advance a few intervals through each kernel path (noise on/off, record on/off)."""
+    """Advance a few intervals of the default family through each kernel path (noise on/off,
+    record on/off); the pulse through the simulator and the controllers' closed form."""
+    family = get_family(DEFAULT_FAMILY)
     params = PlantParams()
     commands = [DriveCommand.hold(0.0, DriveType.LINEAR), DriveCommand.hold(0.5 * params.u_max, DriveType.LINEAR),
                 DriveCommand(((0.0, params.u_max), (0.3 * params.sample_period, 0.0)), DriveType.BRIDGE)]
     for noise in (True, False):
         for record in (False, True):
-            state = initial_state(params, x5=0.0)
+            state = family.initial_state(params, 0.0)
             stream = NoiseStream(np.random.default_rng(0)) if noise else None
             for command in commands:
-                state = advance(state, command, params, stream, SimOptions(noise=noise), record=record).state
-    pulse_response(params, 1.2e-3)              # the closed-form pulse (pulse controllers' predictors)
+                state = family.step(state, command, params, stream, SimOptions(noise=noise), record=record).state
+    model_pulse(params, 1.2e-3)                 # the closed form (pulse controllers' predictors)
+    pulse_response(params, 1.2e-3)
     pulse_response(params, 1.2e-3, seed=0)
 
 

@@ -46,7 +46,17 @@ from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
 __all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller",
-           "resolve_options"]
+           "resolve_options", "ControllerDiverged", "EstimateOutOfRange"]
+
+
+class ControllerDiverged(RuntimeError):
+    """A controller's own state left the range where its law is defined (e.g. an identified
+    Coulomb level driven to 0, so its pulse model coasts for ever). Raised from ``step``; the
+    runner ends the run with status ``diverged`` and this message (SPEC §3), not ``error``."""
+
+
+class EstimateOutOfRange(ControllerDiverged, ValueError):
+    """An estimate outside its valid range (also a ``ValueError`` for direct callers)."""
 
 
 class Controller(abc.ABC):

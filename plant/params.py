@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-__all__ = ["PlantParams", "KERNEL_RECORD"]
+__all__ = ["PlantParams", "KERNEL_RECORD", "as_definition"]
 
 # The one parameter record the compiled kernels read (plant.multimode.interval, plant.multimode.reference): a
 # numpy structured dtype, so a kernel reads ``prm[0].alpha`` by name and numba dispatches on it
@@ -70,6 +71,17 @@ class PlantParams:
         τ4, correlation time of x4 [s].
     command_velocity_initial : float
         x4(0) of a benchmark run [rad/s].
+    quantization : float
+        q, the sensor's resolution: y(n) = q·round((x1(nτs) + w1(n))/q) [rad], ties up
+        (:mod:`plant.sensor`); 0 (default) is the ideal sensor of section 2 (SPEC §11).
+    command_delay : float
+        δ, compute delay: the command computed from y(n) takes effect at nτs + δ and the
+        previous one holds until then [s], 0 ≤ δ < τs (:mod:`plant.delay`); 0 (default) is
+        section 2 (SPEC §11).
+
+    The last two are options of every family's observation and command path, so a controller
+    is told them through its model. Their ``omit_default`` metadata keeps them out of
+    :func:`as_definition` while off, so a run defined before they existed keeps its hash.
     """
 
     inertia: float = 0.5
@@ -85,6 +97,8 @@ class PlantParams:
     command_velocity_std: float = 3e-6
     command_velocity_tau: float = 1000.0
     command_velocity_initial: float = 30e-6
+    quantization: float = field(default=0.0, metadata={"omit_default": True})
+    command_delay: float = field(default=0.0, metadata={"omit_default": True})
 
     def __post_init__(self) -> None:
         for name in _FIELD_NAMES:
@@ -95,7 +109,7 @@ class PlantParams:
                 value = float(value)
                 object.__setattr__(self, name, value)
             if not math.isfinite(value):
-                raise ValueError(f"PlantParams.{name} must be finite, got {value!r}")
+                raise ValueError(f"PlantParams.{name} must be finite{_RANGE_HINTS.get(name, '')}, got {value!r}")
         for name in ("inertia", "motor_time_constant", "u_max", "sample_period",
                      "correlated_friction_tau", "command_velocity_tau"):
             _require(getattr(self, name) > 0, name, f"must be > 0, got {getattr(self, name)!r}")
@@ -107,6 +121,11 @@ class PlantParams:
         for name in ("measurement_noise_std", "friction_noise_psd", "correlated_friction_std",
                      "command_velocity_std"):
             _require(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)!r}")
+        _require(self.quantization >= 0, "quantization",
+                 f"must be >= 0 rad (0 = ideal sensor), got {self.quantization!r}")
+        _require(0 <= self.command_delay < self.sample_period, "command_delay",
+                 f"must be in [0, sample_period = {self.sample_period!r}) s (0 = no delay), "
+                 f"got {self.command_delay!r}")
 
     # Derived symbols of chapter 3.
     @property
@@ -210,3 +229,20 @@ class PlantParams:
 
 
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(PlantParams))
+# The allowed range of an option whose non-finite value is reported (SPEC §11).
+_RANGE_HINTS = {"quantization": " and >= 0 rad", "command_delay": " and in [0, sample_period) s"}
+
+
+def as_definition(params: Any) -> dict[str, Any]:
+    """The parameters as plain data for a run's definition (and its hash).
+
+    Every field of ``params`` (a :class:`PlantParams` or a family's subclass), except a field
+    marked ``omit_default`` (an option added after runs were defined, e.g. ``quantization``)
+    while it has its default value: a scenario that does not use the option keeps the
+    definition, and so the cell hashes, it had before the option existed.
+    """
+    out = dataclasses.asdict(params)
+    for f in dataclasses.fields(params):
+        if f.metadata.get("omit_default") and out[f.name] == f.default:
+            del out[f.name]
+    return out

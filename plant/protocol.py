@@ -15,7 +15,12 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     :class:`~plant.state.IntervalResult`. The caller's objects are not changed (the noise
     stream's read position aside).
 ``observe(params, state, w1)``
-    The sensor: y(n) from the state at the sample instant and the sensor noise w1(n) [rad].
+    The sensor: y(n) from the state at the sample instant and the sensor noise w1(n) [rad],
+    quantized to ``params.quantization`` (:mod:`plant.sensor`; an override must quantize too).
+``delayed_step(state, pending, command, params, noise, options, *, record)``
+    The closed loop's interval: the command path (compute delay ``params.command_delay``,
+    :mod:`plant.delay`: the pending command holds until δ) around :meth:`step`. Returns the
+    step and the pending command for the next interval; with δ = 0 it is :meth:`step`.
 ``truth(params, state)``
     The quantities a row and a trace report at a sample instant (:data:`TRUTH_FIELDS`: the
     state's meaning is shared by every family, SPEC §11) — the effective friction levels
@@ -29,6 +34,8 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     Optional fast path: a compiled closed loop of a fixed linear law (a
     :class:`plant.linear_drive.LawArrays`), bit-identical to calling :meth:`step` with the
     law's commands. ``None`` when the family has none; the runner then calls ``step``.
+    It models the ideal sensor and no delay, so :meth:`law_loop` offers it only when
+    ``quantization`` and ``command_delay`` are 0.
 
 The runner, traces, series, metrics and the report reach a plant only through this protocol.
 A family registers itself with :func:`register_family`; the built-in ones are listed in
@@ -45,8 +52,10 @@ import math
 from typing import Any, Callable, ClassVar, NamedTuple
 
 from plant.drive import DriveCommand, DriveType
+from plant.delay import delay_command
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
+from plant.sensor import quantize
 from plant.state import X1, X2, X3, X4, X5, U, EventKind, IntervalResult, PlantState, SimOptions, Status, initial_state
 
 __all__ = ["PlantFamily", "TruePlant", "register_family", "get_family", "available_families",
@@ -91,8 +100,30 @@ class PlantFamily(abc.ABC):
         raise NotImplementedError
 
     def observe(self, params: PlantParams, state: PlantState, w1: float) -> float:
-        """y(n) = x1(n·τs) + w1(n) [rad] (SPEC §2)."""
-        return float(state.x[X1] + w1)
+        """y(n) = q·round((x1(n·τs) + w1(n))/q) [rad], q = ``params.quantization`` (SPEC §2, §11)."""
+        return quantize(float(state.x[X1] + w1), params.quantization)
+
+    def delayed_step(self, state: PlantState, pending: DriveCommand | None, command: DriveCommand,
+                     params: PlantParams, noise: NoiseStream | None, options: SimOptions, *,
+                     record: bool = False) -> tuple[IntervalResult, DriveCommand | None]:
+        """One closed-loop interval with the compute delay δ = ``params.command_delay`` (SPEC §11).
+
+        ``command`` (computed at the interval's start) takes effect δ later; ``pending`` (what
+        the previous call returned, None at the first) holds until then (:mod:`plant.delay`).
+        Returns (the interval's :class:`IntervalResult`, the pending command for the next
+        interval). With δ = 0 this is ``step(state, command, ...)`` and the pending command None.
+        """
+        delay = params.command_delay
+        if delay == 0.0:
+            return self.step(state, command, params, noise, options, record=record), None
+        in_force, pending = delay_command(command, pending, delay, params.sample_period)
+        return self.step(state, in_force, params, noise, options, record=record), pending
+
+    def law_loop(self, params: PlantParams) -> Callable[..., Any] | None:
+        """:attr:`linear_law_loop` when it applies to ``params`` (ideal sensor, no delay), else None."""
+        if params.quantization != 0.0 or params.command_delay != 0.0:
+            return None
+        return self.linear_law_loop
 
     def truth(self, params: PlantParams, state: PlantState) -> dict[str, float]:
         """The state's shared meaning and the effective friction kc = k̄c + x5, ks = k̄s + x5 (≥ 0)."""

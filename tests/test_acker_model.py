@@ -39,7 +39,7 @@ def test_the_model_is_noise_free_and_checks_its_arguments():
         model_pulse(p, -1e-3)
     with pytest.raises(ValueError, match="sign"):
         model_pulse(p, 1e-3, sign=0)
-    with pytest.raises(RuntimeError, match="coasts"):
+    with pytest.raises(RuntimeError, match="coasts"):  # ControllerDiverged is a RuntimeError
         model_pulse(p.replace(coulomb=0.0), 2e-3)
 
 

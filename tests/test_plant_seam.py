@@ -192,3 +192,28 @@ def test_malformed_mismatch_is_exit_2_through_the_cli(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and f"{path}:14: scenarios.off.mismatch.inertia:" in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+class _RunsAway(Controller):
+    """Its 'estimate' halves every step; below 1e-3 it is out of range (a synthetic diverger)."""
+
+    drive = DriveType.LINEAR
+
+    def reset(self, params, rng):
+        self.estimate = 1.0
+
+    def step(self, y):
+        from controllers.base import EstimateOutOfRange
+        self.estimate *= 0.5
+        if self.estimate < 1e-3:
+            raise EstimateOutOfRange(f"estimate {self.estimate:.3g} below its range [1e-3, 1]")
+        return DriveCommand.hold(0.0, DriveType.LINEAR)
+
+
+def test_a_controller_whose_estimate_leaves_its_range_ends_diverged_with_the_reason():
+    from bench.runner import run_closed_loop
+    r = run_closed_loop(PlantParams(), _RunsAway(), duration_s=1.0, seed=0)
+    assert r.status == "diverged"
+    assert r.message == "controller diverged: estimate 0.000977 below its range [1e-3, 1]"
+    assert math.isnan(r.metrics["peak_error_rad"])
+    assert r.simulated_s == pytest.approx(9 * 0.01)     # stopped at the 10th step

@@ -21,6 +21,7 @@ import math
 
 from numba import njit
 
+from controllers.base import ControllerDiverged
 from plant.expfun import e1, e2
 from plant import PulseResponse
 from plant.params import PlantParams
@@ -121,7 +122,7 @@ def _closed_form(params: PlantParams, dt_u: float, sign: int) -> PulseResponse:
     if t_b < 0.0:
         return PulseResponse(0.0, None, t_cz, 0.0)
     if t_stop == math.inf:
-        raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
+        raise ControllerDiverged("the pulse model coasts for ever after the pulse: k̄c = 0")
     return PulseResponse(sign * dc, t_b, t_cz, t_stop)
 
 

@@ -38,6 +38,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 from numba import njit
 
+from controllers.base import ControllerDiverged, EstimateOutOfRange
 from controllers.solnic.braking import _pair, _timing
 from plant.params import PlantParams
 from controllers.models.acker import closed_form_kernel
@@ -323,9 +324,9 @@ class Predictor:
         code, runs, dc, tb, tcz, ts, d0, d1, t0, t1, t_off = r
         self.n_model_runs += runs
         if code == _INVALID:
-            raise ValueError(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
+            raise EstimateOutOfRange(f"estimates outside 0 <= kc <= ks < u_max: ks={ks!r}, kc={kc!r}")
         if code == _COASTS:
-            raise RuntimeError("shaft coasts for ever after the pulse: k̄c = 0")
+            raise ControllerDiverged("the pulse model coasts for ever: estimated k̂c = 0")
         return PulsePrediction(float(dt_u), sign, sign * dc, ts, None if tb < 0.0 else tb, tcz,
                                np.array((sign * d0, sign * d1)), np.array((t0, t1)),
                                peak_torque(self.params, dt_u), None if t_off < 0.0 else t_off)
