@@ -9,8 +9,10 @@ and 2 between, v_th = :data:`VELOCITY_THRESHOLD`; a change is recorded as a brea
 stick or reversal event at the integrator's step end.
 
 With noise, fixed sub-steps of ``SimOptions.substep``: the deterministic flow over the
-sub-step (Dormand–Prince), then the noise increments — w2 on x2 (every mode: pre-sliding included, as
-LuGre has no stuck mode), the exact Gaussian (x1, x4) increment of w4 (plant.multimode.stuck)
+sub-step (Dormand–Prince), then the noise increments — w2 on x2 through the sliding part of
+the contact, intensity σ2²·(1 − exp(−(x2/v_s)²)) (SPEC §2's "w2 acts only while moving", made
+continuous: LuGre has no stuck mode, and full w2 in pre-sliding would shake a resting shaft at
+√(σ2²/(2J·σ1)) ≈ 0.75 mrad/s RMS), the exact Gaussian (x1, x4) increment of w4 (plant.multimode.stuck)
 and x5's exact Ornstein–Uhlenbeck increment (x5 is not frozen: there is no stuck mode). This
 Lie–Trotter splitting is weak order 1.
 
@@ -26,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from plant.drive import DriveCommand, DriveType
-from plant.lugre.law import L_ALPHA, L_BETA5, L_SIGMA2_SQ, L_SIGMA5_SQ
+from plant.lugre.law import L_ALPHA, L_BETA5, L_SIGMA2_SQ, L_SIGMA5_SQ, L_VS
 from plant.lugre import integrate
 from plant.lugre.integrate import rk_segment
 from plant.multimode.segments import torque_integrals
@@ -122,7 +124,8 @@ def _noise_kick(X, h, p, L, z, cursor, work):
     """The noise increments over a sub-step of h [s] (after the deterministic flow)."""
     g = L[L_ALPHA] * math.sqrt(L[L_SIGMA2_SQ])
     if g > 0.0:
-        X[A2] += g * math.sqrt(h) * normal(z, cursor)
+        r = X[A2] / L[L_VS]
+        X[A2] += g * math.sqrt(-math.expm1(-r * r) * h) * normal(z, cursor)   # through the sliding part
     if p.sigma4_sq > 0.0:
         for i in range(work.shape[0]):
             work[i] = 0.0

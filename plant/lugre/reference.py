@@ -101,8 +101,8 @@ def spring_block(sigma0, sigma1, sigma2, fc, fs, vs, mass, k, pull, t_end, *, me
 def euler_maruyama(params, x0, commands, n_paths, h, rng):
     """Fixed-step Euler–Maruyama of ``n_paths`` paths: x1 at the end of each interval (n_int × n_paths).
 
-    Bridge drive with flyback diodes; w2 on x2 in every mode (LuGre has no stuck mode), w4, and
-    w5 on x5 (not frozen); x3 exact per step for constant u.
+    Bridge drive with flyback diodes; w2 on x2 with intensity σ2²·(1 − exp(−(x2/v_s)²)) (as the
+    family), w4, and w5 on x5 (not frozen); x3 exact per step for constant u.
     """
     p = params
     J, tau3, s0, s1, s2 = p.inertia, p.motor_time_constant, p.bristle_stiffness, p.bristle_damping, p.viscous
@@ -129,7 +129,8 @@ def euler_maruyama(params, x0, commands, n_paths, h, rng):
             g = kc + (ks - kc) * np.exp(-(x2 / p.stribeck_velocity) ** 2)
             zdot = x2 - s0 * np.abs(x2) * z / g
             F = s0 * z + s1 * zdot + s2 * x2
-            x2n = x2 + h * (x3 - F) / J + sw2 * rng.standard_normal(n)
+            slide = np.sqrt(-np.expm1(-(x2 / p.stribeck_velocity) ** 2))   # w2 through the sliding part
+            x2n = x2 + h * (x3 - F) / J + sw2 * slide * rng.standard_normal(n)
             x1 = x1 + h * (x2 - x4)
             th = th + h * x2
             z = z + h * zdot
