@@ -191,7 +191,7 @@ class Scenario:
 def builtin_scenarios() -> dict[str, Scenario]:
     """The built-in scenarios by name."""
     table = PlantParams()
-    out = {
+    return {
         "thesis": Scenario("thesis", table, 100.0, 20.0,
                            "Table 2-1, the initial estimates of section 7.3"),
         "quiet-friction": Scenario("quiet-friction", table.replace(friction_noise_psd=0.0), 100.0, 20.0,
@@ -206,11 +206,17 @@ def builtin_scenarios() -> dict[str, Scenario]:
                              "controllers told Table 2-1; the true k̄c, k̄s, J, τ3 off by lognormal 20 % per seed",
                              mismatch=(("coulomb", 0.2), ("stiction", 0.2), ("inertia", 0.2),
                                        ("motor_time_constant", 0.2))),
+        **_family_scenarios(table),
     }
-    for fam in BUILTIN_FAMILIES:   # the built-in families' own scenarios (PlantFamily.scenarios)
-        for name, (fields, text) in get_family(fam).scenarios.items():
-            out[name] = derive_scenario(name, out["thesis"], {"plant": fam, "description": text, **fields})
-    return out
+
+
+def _family_scenarios(table: PlantParams) -> dict[str, Scenario]:
+    """The scenarios the built-in families contribute (``PlantFamily.scenarios``): Table 2-1 in the
+    family's law, with the family's fields at their defaults except those the scenario sets."""
+    shared = dataclasses.asdict(table)
+    return {name: Scenario(name, get_family(family).Params(**shared).replace(**fields), 100.0, 20.0, story,
+                           family=family)
+            for family in BUILTIN_FAMILIES for name, (fields, story) in get_family(family).scenarios.items()}
 
 
 def derive_scenario(name: str, base: Scenario, overrides: dict[str, Any]) -> Scenario:

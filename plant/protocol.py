@@ -67,6 +67,8 @@ DEFAULT_FAMILY = "multimode"
 BUILTIN_FAMILIES: dict[str, str] = {
     "multimode": "plant.multimode",
     "two-mass": "plant.two_mass",
+    "stribeck": "plant.stribeck",
+    "lugre": "plant.lugre",
 }
 # What truth() returns for every family (a family may add keys of its own).
 TRUTH_FIELDS = ("x1", "x2", "x3", "x4", "x5", "mode", "u", "ks_true", "kc_true")
@@ -87,7 +89,7 @@ class PlantFamily(abc.ABC):
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
     # Built-in scenarios of this family: name -> (fields over Table 2-1, one-line description).
-    scenarios: ClassVar[dict[str, tuple[dict[str, float], str]]] = {}
+    scenarios: ClassVar[dict[str, tuple[dict[str, Any], str]]] = {}
 
     def initial_state(self, params: PlantParams, x5: float) -> PlantState:
         """Shaft stuck at zero error, no current, x4 = ``command_velocity_initial``, x5 given."""
