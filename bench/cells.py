@@ -274,11 +274,14 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
     from bench.series import figure_series, wants_series
     from bench.traces import TeeRecorder, TraceRecorder
 
+    from bench.names import check_cell_id
+
     wall0 = time.perf_counter()
     out = Path(out_dir)
     row = _base_row(cell)
     trace = None
     try:
+        check_cell_id(cell.cell_id)     # its artifacts' file names: never a path outside out_dir
         load_plugins(cell.plugins, cell.plugin_dirs)
         controller = cell.controller.build()
         row["controller_family"] = type(controller).family

@@ -65,6 +65,11 @@ def _out_dir(value: str, flag: str = "--out") -> Path:
     """``--out`` as a path; an empty value is a user error (not the current directory)."""
     if not value.strip():
         raise UserError(f"{flag} must name a directory, got an empty value")
+    from bench.names import out_dir_problem
+
+    problem = out_dir_problem(Path(value))
+    if problem:
+        raise UserError(f"{flag} {value[:60]}...: {problem}" if len(value) > 60 else f"{flag} {value}: {problem}")
     return Path(value)
 
 
@@ -225,6 +230,8 @@ def run(
 @_user_errors
 def report(run_dir: Path = typer.Argument(..., help="A run directory written by `solnic-bench run`.")) -> None:
     """Rebuild DIR/report.html from the results stored in DIR."""
+    if str(run_dir).strip():
+        _out_dir(str(run_dir), "report DIR")
     if not str(run_dir).strip() or not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run directory")
     if not (run_dir / "results.parquet").is_file() and not any(run_dir.glob("cells/*.json")):

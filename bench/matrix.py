@@ -44,6 +44,7 @@ from typing import Any
 
 from bench.cells import Cell, ControllerSpec, load_plugins, plugin_digest
 from bench.errors import UserError
+from bench.names import name_problem
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
 from plant.params import PlantParams
 
@@ -52,11 +53,11 @@ __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matr
 
 DEFAULT_TIME_LIMIT_S = 600.0
 MAX_TIME_LIMIT_S = 7 * 86400.0     # a week of wall clock per cell
+MAX_SAMPLES = 20_000_000           # samples of one run (~16 bytes each in the runner: 320 MB)
 _MAX_MATRIX_BYTES = 1_000_000
 _MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
                 "description")
 _PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
 class MatrixError(UserError):
@@ -167,9 +168,9 @@ def _names(source: str, key: str, value: Any) -> tuple[str, ...]:
 
 
 def _check_name(source: str, key: str, name: str) -> None:
-    if not _NAME.match(name) or "__" in name:
-        raise _fail(source, key, f"name {name!r} must start with a letter or digit, contain only "
-                                 f"letters, digits and _ . + -, and no '__'")
+    problem = name_problem(name)
+    if problem:
+        raise _fail(source, key, problem)
 
 
 def _field_of(message: str, prefix: str) -> str | None:
@@ -234,6 +235,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         if name in variants:
             chosen_controllers.append(variants[name])
         elif name in registered:
+            _check_name(source, f"matrix.controllers[{i}]", name)   # a plugin may register any string
             chosen_controllers.append(ControllerSpec(name, name, {}))
         else:
             known = sorted(set(registered) | set(variants))
@@ -258,6 +260,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     frontier = data.get("frontier", {})
     if not isinstance(frontier, dict):
         raise _fail(source, "frontier", "must be a table (settings of the report's frontier section)")
+    _check_plan_names(source, plan, sweep_fail)
     for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
     if check_resets:
@@ -267,13 +270,44 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
                   frontier)
 
 
+def _check_plan_names(source: str, plan: Any, sweep_fail: Any) -> None:
+    """Every controller and scenario name of the expanded matrix (sweep points and their swept
+    values included) is a safe, short file-name part (:func:`bench.names.name_problem`), and no
+    two controllers or scenarios share a name (so no cell is planned twice)."""
+    from bench.sweep import point_name
+
+    for kind, items, points in (("controller", [c.name for c in plan.controllers], plan.controller_points),
+                                ("scenario", [s.name for s in plan.scenarios], plan.scenario_points)):
+        seen: set[str] = set()
+        for name in items:
+            point = points.get(name)
+            knobs = (point or {}).get("knobs" if kind == "controller" else "params") or {}
+            table = "scenario" if kind == "scenario" else (point or {}).get("parent", "")
+            problem = name_problem(name)
+            if name in seen:
+                problem = f"plans the {kind} {name!r} twice (values that print alike, e.g. 40 and 40.0?)"
+            if problem:
+                if knobs:
+                    bad = [k for k, v in knobs.items() if name_problem(point_name(point["parent"], {k: v}))]
+                    raise sweep_fail(f"sweep.{table}.{(bad or list(knobs))[0]}", problem)
+                key = f"controllers.{name}" if kind == "controller" else f"scenarios.{name}"
+                raise _fail(source, key, problem)
+            seen.add(name)
+
+
 def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matrix_warmup: bool) -> None:
     """The run length and warm-up in whole samples, as the runner counts them: at least one
-    sample, and a scoring window of at least one sample."""
+    sample, a scoring window of at least one sample, and at most :data:`MAX_SAMPLES` samples."""
     tau = scenario.params.sample_period
-    n = round(scenario.duration_s / tau)
-    n_warm = round(scenario.warmup_s / tau)
     where = "matrix" if matrix_duration or matrix_warmup else f"scenarios.{scenario.name}"
+    ratio = scenario.duration_s / tau      # both finite and tau >= 1e-6 s (PlantParams): no overflow to round
+    if not ratio <= MAX_SAMPLES:
+        raise _fail(source, f"{where}.duration_s",
+                    f"scenario {scenario.name!r}: duration_s = {scenario.duration_s!r} s is {ratio:.3g} samples of "
+                    f"{tau} s; at most {MAX_SAMPLES} samples (duration_s <= {MAX_SAMPLES * tau:g} s at this "
+                    f"sample period; the runner holds ~16 bytes per sample)")
+    n = round(ratio)
+    n_warm = round(scenario.warmup_s / tau)
     if n < 1:
         raise _fail(source, f"{where}.duration_s", f"scenario {scenario.name!r}: {scenario.duration_s!r} s is "
                                                    f"less than half a sample period ({tau} s)")
