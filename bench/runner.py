@@ -32,7 +32,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from bench.compiled_loop import run_law
-from bench.metrics import WindowTotals, run_metrics
+from bench.metrics import WindowTotals, run_metrics, unphysical
 from controllers.base import Controller
 from plant.interval import advance
 from plant.params import PlantParams
@@ -172,6 +172,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     opts = options or SimOptions(noise=noise)
     if not noise and opts.noise:
         opts = dataclasses.replace(opts, noise=False)
+    if x5_initial is not None and not math.isfinite(x5_initial):
+        raise ValueError(f"x5_initial must be a finite friction [ozf·in], got {x5_initial!r}")
     streams = spawn_streams(seed)
     if x5_initial is None:
         x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
@@ -239,6 +241,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             rec.close()
     wall = time.perf_counter() - wall0
     metrics = run_metrics(totals, x1_window[:n_window])
+    if status is Status.OK and (why := unphysical(state.x, metrics, params.u_max)) is not None:
+        status, message = Status.DIVERGED, why
     if status is not Status.OK:
         metrics = {k: (math.nan if isinstance(v, float) else v) for k, v in metrics.items()}
     metrics["runtime_s"] = wall

@@ -255,3 +255,63 @@ def test_a_variant_named_like_a_sweep_point_is_not_planned_twice(tmp_path, capsy
     ''')
     line = _main_exit2(["run", "--matrix", m, "--out", tmp_path / "out", "--no-traces"], capsys)
     assert "plans the controller 'linear[crossover=40]' twice" in line
+
+
+# --------------------------------------------------------------------------- 3. no silent "ok"
+
+def test_a_nan_initial_friction_is_rejected():
+    """Before: run_closed_loop(..., x5_initial=nan) returned ``ok`` with a NaN friction state."""
+    from bench.runner import run_closed_loop
+    from controllers.base import make_controller
+    from plant.params import PlantParams
+
+    with pytest.raises(ValueError, match=r"x5_initial must be a finite friction \[ozf·in\], got nan"):
+        run_closed_loop(PlantParams(), make_controller("linear"), duration_s=0.5, warmup_s=0.1, x5_initial=math.nan)
+
+
+def test_a_state_that_leaves_the_finite_range_ends_diverged(monkeypatch):
+    """A fault injected into the plant step (x5 becomes NaN, x1 stays finite so the plant's own
+    |x1| check does not fire) was ``ok`` before; now the run ends ``diverged`` with NaN metrics."""
+    import numpy as np
+
+    import bench.runner as runner
+    from controllers.base import make_controller
+    from plant.params import PlantParams
+    from plant.state import X5
+
+    real = runner.advance
+    calls = itertools.count()
+
+    def faulty(state, command, params, noise, opts, record=False):
+        step = real(state, command, params, noise, opts, record=record)
+        if next(calls) == 10:
+            x = np.array(step.state.x)
+            x[X5] = math.nan
+            step = step._replace(state=step.state._replace(x=x))
+        return step
+
+    monkeypatch.setattr(runner, "advance", faulty)
+    result = runner.run_closed_loop(PlantParams(), make_controller("pulse-width"), duration_s=0.3, warmup_s=0.1)
+    assert result.status == "diverged" and "plant state left the finite range" in result.message
+    assert math.isnan(result.metrics["peak_error_rad"]) and math.isnan(result.metrics["mean_abs_current"])
+
+
+def test_the_current_metrics_never_exceed_the_drive_limit():
+    """The physical bound used by ``unphysical``: |x3| <= u_max, so mean |i| <= RMS i <= u_max,
+    on real runs of a saturating controller; and a value above it is reported."""
+    from bench.metrics import unphysical
+    from bench.runner import run_closed_loop
+    from controllers.base import make_controller
+    from plant.params import PlantParams
+
+    import numpy as np
+
+    p = PlantParams(u_max=3.0)
+    for seed in range(3):
+        r = run_closed_loop(p, make_controller("pulse-width"), duration_s=2.0, warmup_s=0.1, seed=seed)
+        assert r.status == "ok", r.message
+        assert 0 < r.metrics["mean_abs_current"] <= r.metrics["rms_current"] <= p.u_max
+    ok = {"mean_abs_current": 1.0, "rms_current": 2.9, "peak_error_rad": 1e-5}
+    assert unphysical(np.zeros(6), ok, 3.0) is None
+    assert "rms_current = 3.5 ozf·in exceeds u_max = 3.0" in unphysical(np.zeros(6), {**ok, "rms_current": 3.5}, 3.0)
+    assert "metric peak_error_rad = inf" in unphysical(np.zeros(6), {**ok, "peak_error_rad": math.inf}, 3.0)
