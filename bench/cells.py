@@ -49,7 +49,7 @@ SIZE_PEAK_COLUMNS = ("peak_error_small_rad", "peak_error_medium_rad", "peak_erro
 LEADING_COLUMNS = ("cell", "controller", "scenario", "seed", "status", "message", "controller_base",
                    "controller_family", "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
                    "runtime_s", "realtime_factor", "simulated_s", *SIZE_PEAK_COLUMNS, "config_hash",
-                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash")
+                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash", "privileged")
 # Why a cell has status "error": "run" (the controller or the plant failed: a result of the
 # configuration), "time_limit" (over its wall-clock limit), "crash" (its process died),
 # "artifact" (its trace or series could not be written). Only "run" errors are final; the
@@ -133,6 +133,15 @@ class ControllerSpec:
             return get_controller(self.base).family
         except ValueError:
             return ""
+
+    @property
+    def privileged(self) -> bool:
+        """Whether the base is a privileged bound (sees the true state; not a real controller)."""
+        from controllers.base import get_controller
+        try:
+            return bool(get_controller(self.base).privileged)
+        except ValueError:
+            return False
 
     def to_json(self) -> dict[str, Any]:
         return {"base": self.base, "options": dict(self.options)}
@@ -251,6 +260,7 @@ def _base_row(cell: Cell) -> dict[str, Any]:
     row["error_kind"] = ""
     row["time_limit_s"] = math.nan if cell.time_limit_s is None else float(cell.time_limit_s)
     row["definition_hash"] = cell.definition_hash
+    row["privileged"] = cell.controller.privileged   # a bound, told apart without importing its plugin
     return row
 
 
@@ -285,6 +295,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         load_plugins(cell.plugins, cell.plugin_dirs)
         controller = cell.controller.build()
         row["controller_family"] = type(controller).family
+        row["privileged"] = bool(type(controller).privileged)
         series = wants_series(controller)
         memory = MemoryRecorder() if series else None
         if traces:

@@ -98,6 +98,43 @@ def _build_report(out: Path) -> Path | None:
     return build_report_from_dir(out)
 
 
+def _stopped(exc: KeyboardInterrupt, what_then: str) -> typer.Exit:
+    """One line for a Ctrl-C, SIGTERM or SIGHUP, and the exit code of the run phase (130, 143, 129)."""
+    import signal as _signal
+
+    signum = getattr(exc, "signum", None)
+    what = _signal.Signals(signum).name if signum else "interrupted"
+    err_console.print(f"{what}: {what_then}", soft_wrap=True)
+    return typer.Exit(128 + signum if signum else 130)
+
+
+def _signals_stop(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a command with SIGTERM/SIGHUP handled like Ctrl-C for its whole length (the run phase
+    nests its own handling), so that no phase dies silently or leaves a temporary file."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from bench.driver import stop_on_signals
+
+        try:
+            with stop_on_signals():
+                return fn(*args, **kwargs)
+        except KeyboardInterrupt as exc:
+            raise _stopped(exc, "stopped; what was stored is kept") from None
+
+    return wrapper
+
+
+def _report_phase(out: Path, build: Callable[[Path], Any]) -> Any:
+    """``build(out)``; a Ctrl-C, SIGTERM or SIGHUP meanwhile removes the temporary file
+    (``write_atomic``) and says so in one line, with the run phase's exit code."""
+    try:
+        return build(out)
+    except KeyboardInterrupt as exc:
+        raise _stopped(exc, f"stopped while writing the report; the results are stored; rebuild it with "
+                            f"`solnic-bench report {escape(str(out))}`") from None
+
+
 def _fmt(v: float, digits: int = 3) -> str:
     if v != v:  # NaN
         return "—"
@@ -133,6 +170,7 @@ def _print_aggregate(results, matrix) -> None:
 
 @app.command("run")
 @_user_errors
+@_signals_stop
 def run(
     matrix: Optional[Path] = typer.Option(None, "--matrix", help="Matrix TOML file (default: the built-in default matrix)."),
     quick: bool = typer.Option(False, "--quick", help="The built-in quick matrix (about a minute on 2 cores)."),
@@ -214,7 +252,9 @@ def run(
                           f"--out {out} to resume", soft_wrap=True)
         raise typer.Exit(128 + outcome.signal if outcome.signal else 130)
     try:
-        path = _build_report(out)
+        path = _report_phase(out, _build_report)
+    except typer.Exit:
+        raise
     except Exception as exc:  # the results are stored; say what failed, exit 1
         err_console.print(f"error: report: {type(exc).__name__}: {escape(str(exc))} "
                           f"(results are stored; retry with `solnic-bench report {out}`)", soft_wrap=True)
@@ -228,6 +268,7 @@ def run(
 
 @app.command("report")
 @_user_errors
+@_signals_stop
 def report(run_dir: Path = typer.Argument(..., help="A run directory written by `solnic-bench run`.")) -> None:
     """Rebuild DIR/report.html from the results stored in DIR."""
     if str(run_dir).strip():
@@ -243,7 +284,7 @@ def report(run_dir: Path = typer.Argument(..., help="A run directory written by 
         err_console.print(f"error: reports is not importable: {escape(str(exc))}")
         raise typer.Exit(1) from None
     try:
-        path = build_report_from_dir(run_dir)
+        path = _report_phase(run_dir, build_report_from_dir)
     except (ValueError, OSError) as exc:   # a malformed or unreadable input file; the message names it
         raise UserError(f"{run_dir}: {exc}") from None
     out_console.print(f"report: {path}")

@@ -86,11 +86,18 @@ class Matrix:
     frontier: dict[str, Any] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
-        """Every cell, in matrix order: controller, then scenario, then seed. Each carries a
-        digest of the plugins' source (an edited plugin gives new config hashes)."""
+        """Every cell, in matrix order: controller, then scenario, then seed. A cell of a
+        controller that a plugin provides carries the plugins and a digest of their source (an
+        edited plugin gives new config hashes); a built-in controller's cell does not depend on
+        them, so a run directory may grow by a plugin controller."""
         source = plugin_digest(self.plugins, self.plugin_dirs)
-        return [Cell(c, s, seed, self.time_limit_s, self.plugins, self.plugin_dirs, plugin_source=source)
-                for c in self.controllers for s in self.scenarios for seed in self.seeds]
+        cells = []
+        for c in self.controllers:
+            plugins = self.plugins if self.plugins and not _builtin(c.base) else ()
+            dirs, digest = (self.plugin_dirs, source) if plugins else ((), "")
+            cells += [Cell(c, s, seed, self.time_limit_s, plugins, dirs, plugin_source=digest)
+                      for s in self.scenarios for seed in self.seeds]
+        return cells
 
     def to_json(self) -> dict[str, Any]:
         """The resolved matrix, for ``DIR/config.json``."""
@@ -102,6 +109,14 @@ class Matrix:
             "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
             "sweep": self.sweep, "frontier": self.frontier,
         }
+
+
+def _builtin(base: str) -> bool:
+    """Whether the registered controller ``base`` ships with the package (not from a plugin)."""
+    from controllers.base import get_controller
+
+    module = get_controller(base).__module__
+    return module == "controllers" or module.startswith("controllers.")
 
 
 def builtin_matrix_path(quick: bool = False) -> Path:
@@ -264,7 +279,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
     if check_resets:
-        _check_resets(source, plan.controllers, plan.scenarios, set(variants))
+        _check_resets(source, plan.controllers, plan.scenarios, set(variants), tuple(plugins), plugin_dirs, limit)
     return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
                   tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
                   frontier)
@@ -317,25 +332,82 @@ def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matri
                                                  f"{scenario.duration_s!r} s (sample period {tau} s)")
 
 
+RESET_CHECK_GRACE_S = 2.0    # the reset check's process: plugin imports, beyond one cell's time limit
+
+
 def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: list[Scenario],
-                  variants: set[str]) -> None:
-    """Reset every controller on every scenario's plant once, so that an option the controller
-    rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now, not an
-    ``error`` row in every cell later."""
+                  variants: set[str], plugins: tuple[str, ...] = (), plugin_dirs: tuple[str, ...] = (),
+                  limit_s: float = DEFAULT_TIME_LIMIT_S) -> None:
+    """Build and reset every controller on every scenario's plant once, so that an option the
+    controller rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now,
+    not an ``error`` row in every cell later.
+
+    The resets run in a supervised cell process (:func:`bench.isolation.call_isolated`) with one
+    cell's time limit plus :data:`RESET_CHECK_GRACE_S`: a reset that loops, exits the process or
+    leaves a thread running cannot hang or end the CLI; it is a user error naming the controller.
+    """
+    from bench.isolation import CellFailure, call_isolated, ready, reopen, retire_idle
+
+    def supervised(specs: list[ControllerSpec]) -> tuple | None:
+        reopen()      # a previous run in this process may have closed the pool
+        ready()       # the forkserver's start and imports are not part of the limit
+        try:
+            return call_isolated(_first_reset_failure, (specs, scenarios, plugins, plugin_dirs),
+                                 limit_s + RESET_CHECK_GRACE_S, key=("reset-check", plugins, plugin_dirs))
+        finally:
+            retire_idle()
+
+    def failed(cs: ControllerSpec, what: str) -> MatrixError:
+        key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
+        return _fail(source, key, f"controller {cs.name!r}: {what}")
+
+    try:
+        failure = supervised(list(controllers))
+    except CellFailure as first:
+        for cs in controllers if len(controllers) > 1 else ():   # find the culprit: a process per controller
+            try:
+                failure = supervised([cs])
+            except CellFailure as exc:
+                raise failed(cs, _reset_failure_text(exc, limit_s)) from None
+            if failure is not None:
+                break
+        else:
+            if len(controllers) == 1:
+                raise failed(controllers[0], _reset_failure_text(first, limit_s)) from None
+            raise _fail(source, "matrix.controllers", f"the controllers' reset check failed and no single "
+                                                      f"controller reproduces it: {first.message}") from None
+    if failure is None:
+        return
+    name, scenario, kind, msg = failure
+    cs = next(c for c in controllers if c.name == name)
+    named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
+    key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
+    if named and cs.name in variants:
+        key += f".{named[0]}"
+    raise _fail(source, key, f"rejected on scenario {scenario!r}: {kind}: {msg}")
+
+
+def _reset_failure_text(exc: Any, limit_s: float) -> str:
+    if exc.kind == "time_limit":
+        return (f"construction or reset did not return within {limit_s + RESET_CHECK_GRACE_S:g} s "
+                f"(matrix.time_limit_s + {RESET_CHECK_GRACE_S:g} s)")
+    return f"construction or reset failed: {exc.message}"
+
+
+def _first_reset_failure(controllers: list[ControllerSpec], scenarios: list[Scenario], plugins: tuple[str, ...],
+                         plugin_dirs: tuple[str, ...]) -> tuple[str, str, str, str] | None:
+    """(controller, scenario, exception type, message) of the first build or reset that raises an
+    Exception, or None (runs in the reset check's cell process)."""
     import numpy as np
 
+    load_plugins(plugins, plugin_dirs)
     for cs in controllers:
         for scenario in scenarios:
             try:
                 cs.build().reset(scenario.params, np.random.default_rng(0))
             except Exception as exc:   # the controller's own validation message
-                msg = str(exc)
-                named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
-                key = f"controllers.{cs.name}" if cs.name in variants else f"matrix.controllers"
-                if named and cs.name in variants:
-                    key += f".{named[0]}"
-                raise _fail(source, key, f"rejected on scenario {scenario.name!r}: "
-                                         f"{type(exc).__name__}: {msg}") from None
+                return cs.name, scenario.name, type(exc).__name__, str(exc)
+    return None
 
 
 def _scenarios(source: str, table: Any) -> dict[str, Scenario]:

@@ -315,3 +315,245 @@ def test_the_current_metrics_never_exceed_the_drive_limit():
     assert unphysical(np.zeros(6), ok, 3.0) is None
     assert "rms_current = 3.5 ozf·in exceeds u_max = 3.0" in unphysical(np.zeros(6), {**ok, "rms_current": 3.5}, 3.0)
     assert "metric peak_error_rad = inf" in unphysical(np.zeros(6), {**ok, "peak_error_rad": math.inf}, 3.0)
+
+
+# --------------------------------------------------------------------------- a stored run (items 4, 5, 9)
+
+BOUND = '''
+
+@register("t-bound")
+class Bound(_Hold):
+    privileged = True
+
+    def observe_truth(self, state):
+        pass
+
+
+@register("t-plain")
+class Plain(_Hold):
+    pass
+'''
+
+
+def _run_matrix_text(module: str, controllers: list[str], plugins: bool = True) -> str:
+    return textwrap.dedent(f'''
+        [matrix]
+        {f'plugins = ["{module}"]' if plugins else ''}
+        controllers = {json.dumps(controllers)}
+        scenarios = ["thesis"]
+        seeds = [0]
+        duration_s = 0.3
+        warmup_s = 0.1
+    ''')
+
+
+@pytest.fixture(scope="module")
+def stored_run(tmp_path_factory):
+    """A finished run (through the executable) of a built-in controller, a plugin controller and a
+    plugin bound; the test process never imports the plugin."""
+    tmp = tmp_path_factory.mktemp("stored")
+    module = f"hostile28_bound_{os.getpid()}"
+    (tmp / f"{module}.py").write_text(PLUGIN + BOUND)
+    m = tmp / "m.toml"
+    m.write_text(_run_matrix_text(module, ["linear", "t-plain", "t-bound"]))
+    proc = cli("run", "--matrix", m, "--out", tmp / "out", "--no-traces")
+    assert proc.returncode == 0, proc.stderr
+    assert module not in sys.modules
+    return tmp, m, tmp / "out"
+
+
+def _copy_run(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+def test_rows_flag_a_privileged_bound_and_the_report_tells_a_plugin_bound_apart(stored_run):
+    """Before: no flag column; the report, which does not import plugins, ranked the plugin bound
+    as a controller (frontier ``bound`` False, a peer in the claims)."""
+    import pandas as pd
+
+    from reports.claims import _bound_rows
+    from reports.frontier import point_table
+    from reports.inputs import load_inputs
+
+    _, _, out = stored_run
+    stored = pd.read_parquet(out / "results.parquet").set_index("controller")
+    assert stored.loc["t-bound", "privileged"] and not stored.loc["t-plain", "privileged"]
+    assert not stored.loc["linear", "privileged"]
+    inputs = load_inputs(out)
+    points = point_table(inputs.results, inputs.config).set_index("controller")["bound"]
+    assert points.to_dict() == {"linear": False, "t-plain": False, "t-bound": True}
+    flags = _bound_rows(inputs.results)
+    assert dict(zip(inputs.results["controller"], flags)) == {"linear": False, "t-plain": False, "t-bound": True}
+
+
+def test_report_reads_the_stored_cells_when_the_tables_are_missing(stored_run, tmp_path):
+    """After a SIGKILL of the main process the cells are stored but the tables are not rebuilt.
+    Before: ``report DIR`` wrote "the benchmark matrix was not run"."""
+    out = _copy_run(stored_run[2], tmp_path / "killed")
+    (out / "results.parquet").unlink()
+    (out / "results.csv").unlink()
+    (out / "report.html").unlink()
+    proc = cli("report", out)
+    assert proc.returncode == 0, proc.stderr
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert "was not run" not in html and "the 3 stored cell files in cells/" in html
+    for name in ("linear", "t-plain", "t-bound"):
+        assert f">{name}<" in html
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_while_the_report_is_written(stored_run, tmp_path, sig, code):
+    """Every cell is stored, so ``run`` goes straight to the report; the signal arrives while it is
+    written. Before: SIGTERM killed it silently (exit -15, a 4 MB temporary file left), SIGINT
+    gave no message."""
+    tmp, m, src = stored_run
+    out = _copy_run(src, tmp_path / "out")
+    (out / "report.html").unlink()
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(m), "--out", str(out),
+                             "--no-traces"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+    for line in proc.stdout:                   # the run phase ends with this line; the report follows
+        if " cells in " in line:
+            break
+    time.sleep(0.3)                            # into the report (importing plotly and rendering take ~2 s)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:                   # the report was already written: nothing to test here
+        pytest.skip("the report finished before the signal arrived")
+    assert proc.returncode == code, err
+    assert "Traceback" not in err
+    assert "stopped while writing the report; the results are stored" in err
+    assert not list(out.glob(".*.tmp")) and not (out / "report.html").exists()
+
+
+def test_a_run_directory_grows_by_a_plugin_controller(tmp_path, capsys):
+    """Before: the plugin list entered every cell's definition, so adding a plugin controller to a
+    run of built-in controllers was refused ("run with another definition")."""
+    from bench.cli import main
+    from bench.matrix import load_matrix
+
+    module = _plugin(tmp_path, ["t-grow"])
+    plain, grown = tmp_path / "plain.toml", tmp_path / "grown.toml"
+    plain.write_text(_run_matrix_text(module, ["linear"], plugins=False))
+    grown.write_text(_run_matrix_text(module, ["linear", "t-grow"]))
+    before, after = load_matrix(plain).cells(), load_matrix(grown).cells()
+    assert before[0].definition() == after[0].definition() and before[0].config_hash == after[0].config_hash
+    assert before[0].definition()["plugins"] == [] and after[1].definition()["plugins"] == [module]
+    for m in (plain, grown):
+        with pytest.raises(SystemExit) as stop:
+            main(["run", "--matrix", str(m), "--out", str(tmp_path / "out"), "--no-traces"])
+        assert stop.value.code == 0, capsys.readouterr().err
+    rows = sorted(p.stem for p in (tmp_path / "out" / "cells").glob("*.json"))
+    assert rows == ["linear__thesis__s0", "t-grow__thesis__s0"]
+    meta = json.loads((tmp_path / "out" / "meta.json").read_text())
+    assert meta["to_run"] == 1 and meta["computed"] == 1
+
+
+# --------------------------------------------------------------------------- 6. orphans and supervised resets
+
+FAULTS = '''
+import ctypes, os, subprocess, sys, threading, time
+
+PIDS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "pids")
+
+
+def _note(pid):
+    with open(PIDS, "a") as fh:
+        fh.write(f"{pid}\\n")
+
+
+@register("t-spawn-hang")
+class SpawnHang(_Hold):
+    def step(self, y):          # a child process, then a hang in C until the time-limit kill
+        _note(subprocess.Popen(["sleep", "300"]).pid)
+        ctypes.CDLL(None).sleep(300)
+
+
+@register("t-fork")
+class Fork(_Hold):
+    def reset(self, params, rng):
+        self.forked = False
+
+    def step(self, y):          # a fork that outlives the step (and the cell)
+        if not self.forked:
+            self.forked = True
+            pid = os.fork()
+            if pid == 0:
+                time.sleep(300)
+                os._exit(0)
+            _note(pid)
+        return super().step(y)
+
+
+@register("t-reset-loop")
+class ResetLoop(_Hold):
+    def reset(self, params, rng):
+        while True:
+            pass
+
+
+@register("t-reset-exit")
+class ResetExit(_Hold):
+    def reset(self, params, rng):
+        os._exit(7)
+
+
+@register("t-reset-thread")
+class ResetThread(_Hold):
+    def reset(self, params, rng):
+        threading.Thread(target=time.sleep, args=(300,), daemon=False).start()
+'''
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in state          # a zombie is dead (a container's init may not reap it)
+
+
+def _faults_run(tmp: Path, controllers: list[str], time_limit: float = 1.0, timeout: float = 120):
+    module = f"hostile28_faults_{os.getpid()}_{next(_UNIQUE)}"
+    (tmp / f"{module}.py").write_text(PLUGIN + FAULTS)
+    m = tmp / "m.toml"
+    m.write_text(_run_matrix_text(module, controllers) + f"time_limit_s = {time_limit}\n")
+    t0 = time.monotonic()
+    proc = cli("run", "--matrix", m, "--out", tmp / "out", "--no-traces", timeout=timeout)
+    return proc, time.monotonic() - t0
+
+
+@pytest.mark.slow
+def test_cells_are_killed_with_everything_they_started_and_a_reset_thread_does_not_keep_the_cli(tmp_path):
+    """Before: the ``sleep`` of a cell killed at its time limit survived with PPID 1; a step's fork
+    survived the run; a non-daemon thread started by ``reset`` in the CLI's own process (the
+    matrix check) kept it from exiting after the report."""
+    proc, wall = _faults_run(tmp_path, ["t-spawn-hang", "t-fork", "t-reset-thread"], time_limit=1.0)
+    assert proc.returncode == 0, proc.stderr
+    status = {c: json.loads((tmp_path / "out" / "cells" / f"{c}__thesis__s0.json").read_text())["status"]
+              for c in ("t-spawn-hang", "t-fork", "t-reset-thread")}
+    assert status == {"t-spawn-hang": "error", "t-fork": "ok", "t-reset-thread": "ok"}
+    pids = [int(p) for p in (tmp_path / "pids").read_text().split()]
+    assert len(pids) == 2
+    time.sleep(0.5)
+    assert not [p for p in pids if _alive(p)]
+    assert wall < 90
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("controller, fragment", [
+    ("t-reset-loop", "construction or reset did not return within 3 s (matrix.time_limit_s + 2 s)"),
+    ("t-reset-exit", "construction or reset failed: cell process exited with code 7"),
+])
+def test_a_reset_that_loops_or_exits_during_validation_is_a_user_error(tmp_path, controller, fragment):
+    """Before: the matrix check reset the controller in the CLI's own process: a looping reset
+    hung it for ever, ``os._exit(7)`` ended it with exit 7 and nothing written."""
+    proc, wall = _faults_run(tmp_path, [controller])
+    assert proc.returncode == 2, proc.stderr
+    line = _one_line(proc.stderr)
+    assert f"matrix.controllers: controller '{controller}': {fragment}" in line
+    assert not (tmp_path / "out").exists() and wall < 60
