@@ -242,7 +242,7 @@ _SKIP = object()
 
 
 def _error_message(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {exc}"
+    return str(exc) if isinstance(exc, _TraceLost) else f"{type(exc).__name__}: {exc}"
 
 
 def _base_row(cell: Cell) -> dict[str, Any]:
@@ -307,6 +307,8 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         row["status"], row["message"] = result.status, result.message
         if result.status == "error":
             row["error_kind"] = "time_limit" if result.message.startswith("time limit") else "run"
+        if trace is not None and trace.error is not None:   # the numbers are fine; the trace is lost
+            raise _TraceLost(trace.error)
         row.update({k: _scalar(v) for k, v in result.metrics.items()})
         row["simulated_s"] = float(result.simulated_s)
         summary = {k: _scalar(v) for k, v in result.summary.items()}
@@ -322,7 +324,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
             row.update(peaks)
             _write_parquet(frame, out / "series" / f"{cell.cell_id}.parquet")
     except BaseException as exc:  # noqa: BLE001 — a failing cell is a result (STYLE §8), whatever it raised
-        artifact = row["status"] != "error"
+        artifact = row["status"] != "error" or isinstance(exc, _TraceLost) or (trace is not None and trace.error)
         row["status"], row["message"] = "error", ("artifact: " if artifact else "") + _error_message(exc)
         row["error_kind"] = "artifact" if artifact else "run"
     if row["status"] != "ok":
@@ -330,6 +332,13 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
             row[col] = math.nan
     row["cell_wall_s"] = time.perf_counter() - wall0
     return row
+
+
+class _TraceLost(Exception):
+    """The cell's trace writer gave up (full or hung file system): an ``artifact`` error."""
+
+    def __str__(self) -> str:
+        return f"trace: {self.args[0]}"
 
 
 def _write_parquet(frame, path: Path) -> None:

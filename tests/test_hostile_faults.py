@@ -557,3 +557,69 @@ def test_a_reset_that_loops_or_exits_during_validation_is_a_user_error(tmp_path,
     line = _one_line(proc.stderr)
     assert f"matrix.controllers: controller '{controller}': {fragment}" in line
     assert not (tmp_path / "out").exists() and wall < 60
+
+
+# --------------------------------------------------------------------------- 7. the trace writer never blocks a cell
+
+def _trace_cell():
+    from bench.cells import Cell, ControllerSpec
+    from bench.scenarios import builtin_scenarios
+
+    scenario = builtin_scenarios()["thesis"].with_durations(duration_s=3.0, warmup_s=0.1)
+    return Cell(ControllerSpec("pulse-width", "pulse-width"), scenario, 0, time_limit_s=60.0)
+
+
+def _run_cell_within(cell, out: Path, limit_s: float) -> tuple[dict | None, float]:
+    """run_cell on a thread; (row or None if it did not return within ``limit_s``, wall seconds)."""
+    import threading
+
+    from bench.cells import run_cell
+
+    box: dict = {}
+    t0 = time.monotonic()
+    thread = threading.Thread(target=lambda: box.setdefault("row", run_cell(cell, out, traces=True)), daemon=True)
+    thread.start()
+    thread.join(limit_s)
+    return box.get("row"), time.monotonic() - t0
+
+
+def test_a_hung_trace_sink_gives_an_artifact_row_within_the_writer_timeout(tmp_path, monkeypatch):
+    """rerun's sink blocks for ever (a hung or full file system). Before: the cell hung inside
+    the sink until the executor's wall-clock kill (636 s with the default limit)."""
+    import threading
+
+    import rerun
+
+    import bench.traces
+
+    hang = threading.Event()
+    monkeypatch.setattr(rerun.RecordingStream, "send_columns", lambda self, *a, **k: hang.wait())
+    monkeypatch.setattr(bench.traces, "WRITER_TIMEOUT_S", 1.0, raising=False)
+    row, wall = _run_cell_within(_trace_cell(), tmp_path, 30.0)
+    hang.set()
+    assert row is not None, "run_cell blocked on its trace"
+    assert row["status"] == "error" and row["error_kind"] == "artifact", row["message"]
+    assert row["message"].startswith("artifact: trace: the trace writer took no data for 1 s")
+    assert wall < 10.0
+    assert not list(tmp_path.glob("traces/*"))
+
+
+def test_a_failing_trace_sink_is_an_artifact_error_retried_on_resume(tmp_path, monkeypatch):
+    """rerun's own error on a full disk ("File-writer thread shut down prematurely", measured on a
+    1 MB tmpfs). Before: error_kind ``run``, so the cell was final and never retried."""
+    import rerun
+
+    from bench.store import ResultsStore
+
+    def full(self, *a, **k):
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(rerun.RecordingStream, "send_columns", full)
+    cell = _trace_cell()
+    row, _ = _run_cell_within(cell, tmp_path, 60.0)
+    assert row["status"] == "error" and row["error_kind"] == "artifact"
+    assert row["message"] == "artifact: trace: RuntimeError: File-writer thread shut down prematurely"
+    assert not [p for p in (tmp_path / "traces").iterdir()]
+    store = ResultsStore(tmp_path)
+    store.save(row)
+    assert not store.is_done(cell, traces=True)
