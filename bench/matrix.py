@@ -332,7 +332,7 @@ def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matri
                                                  f"{scenario.duration_s!r} s (sample period {tau} s)")
 
 
-RESET_CHECK_GRACE_S = 2.0    # the reset check's process: plugin imports, beyond one cell's time limit
+RESET_CHECK_GRACE_S = 5.0    # the reset check: plugin imports and first-call compilation, beyond a cell's limit
 
 
 def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: list[Scenario],
@@ -342,49 +342,33 @@ def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: lis
     controller rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now,
     not an ``error`` row in every cell later.
 
-    The resets run in a supervised cell process (:func:`bench.isolation.call_isolated`) with one
-    cell's time limit plus :data:`RESET_CHECK_GRACE_S`: a reset that loops, exits the process or
-    leaves a thread running cannot hang or end the CLI; it is a user error naming the controller.
+    Each build and reset runs in a supervised cell process (:func:`bench.isolation.call_isolated`,
+    one process reused while it stays healthy) within one cell's time limit plus
+    :data:`RESET_CHECK_GRACE_S`: a reset that loops, exits the process or leaves a thread running
+    cannot hang or end the CLI; it is a user error naming the controller.
     """
     from bench.isolation import CellFailure, call_isolated, ready, reopen, retire_idle
 
-    def supervised(specs: list[ControllerSpec]) -> tuple | None:
-        reopen()      # a previous run in this process may have closed the pool
-        ready()       # the forkserver's start and imports are not part of the limit
-        try:
-            return call_isolated(_first_reset_failure, (specs, scenarios, plugins, plugin_dirs),
-                                 limit_s + RESET_CHECK_GRACE_S, key=("reset-check", plugins, plugin_dirs))
-        finally:
-            retire_idle()
-
-    def failed(cs: ControllerSpec, what: str) -> MatrixError:
-        key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
-        return _fail(source, key, f"controller {cs.name!r}: {what}")
-
+    reopen()      # a previous run in this process may have closed the pool
+    ready()       # the forkserver's start and imports are not part of the limit
     try:
-        failure = supervised(list(controllers))
-    except CellFailure as first:
-        for cs in controllers if len(controllers) > 1 else ():   # find the culprit: a process per controller
-            try:
-                failure = supervised([cs])
-            except CellFailure as exc:
-                raise failed(cs, _reset_failure_text(exc, limit_s)) from None
-            if failure is not None:
-                break
-        else:
-            if len(controllers) == 1:
-                raise failed(controllers[0], _reset_failure_text(first, limit_s)) from None
-            raise _fail(source, "matrix.controllers", f"the controllers' reset check failed and no single "
-                                                      f"controller reproduces it: {first.message}") from None
-    if failure is None:
-        return
-    name, scenario, kind, msg = failure
-    cs = next(c for c in controllers if c.name == name)
-    named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
-    key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
-    if named and cs.name in variants:
-        key += f".{named[0]}"
-    raise _fail(source, key, f"rejected on scenario {scenario!r}: {kind}: {msg}")
+        for cs in controllers:
+            key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
+            for scenario in scenarios:
+                try:
+                    failure = call_isolated(_first_reset_failure, ([cs], [scenario], plugins, plugin_dirs),
+                                            limit_s + RESET_CHECK_GRACE_S, key=("reset-check", plugins, plugin_dirs))
+                except CellFailure as exc:
+                    raise _fail(source, key, f"controller {cs.name!r} on scenario {scenario.name!r}: "
+                                             f"{_reset_failure_text(exc, limit_s)}") from None
+                if failure is not None:
+                    _, _, kind, msg = failure
+                    named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
+                    if named and cs.name in variants:
+                        key += f".{named[0]}"
+                    raise _fail(source, key, f"rejected on scenario {scenario.name!r}: {kind}: {msg}")
+    finally:
+        retire_idle()
 
 
 def _reset_failure_text(exc: Any, limit_s: float) -> str:
