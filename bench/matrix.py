@@ -215,7 +215,13 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     if not isinstance(plugins, list) or not all(isinstance(p, str) and p for p in plugins):
         raise _fail(source, "matrix.plugins", f"must be a list of module names, got {plugins!r}")
     plugin_dirs = (str(base_dir),) if base_dir is not None and plugins else ()
+    limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
+                    positive=True, allow_zero=False)
+    if limit > MAX_TIME_LIMIT_S:
+        raise _fail(source, "matrix.time_limit_s", f"must be <= {MAX_TIME_LIMIT_S:g} s (a week), got {limit!r}")
     for i, module in enumerate(plugins):
+        if check_resets:
+            _check_plugin_import(source, i, module, plugin_dirs, limit)
         try:
             load_plugins((module,), plugin_dirs)
         except Exception as exc:
@@ -232,10 +238,6 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     duration = _number(source, "matrix.duration_s", m["duration_s"], positive=True, allow_zero=False) \
         if "duration_s" in m else None
     warmup = _number(source, "matrix.warmup_s", m["warmup_s"], positive=True) if "warmup_s" in m else None
-    limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
-                    positive=True, allow_zero=False)
-    if limit > MAX_TIME_LIMIT_S:
-        raise _fail(source, "matrix.time_limit_s", f"must be <= {MAX_TIME_LIMIT_S:g} s (a week), got {limit!r}")
     description = m.get("description", "")
     if not isinstance(description, str):
         raise _fail(source, "matrix.description", f"must be a string, got {description!r}")
@@ -369,6 +371,42 @@ def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: lis
                     raise _fail(source, key, f"rejected on scenario {scenario.name!r}: {kind}: {msg}")
     finally:
         retire_idle()
+
+
+def _check_plugin_import(source: str, i: int, module: str, plugin_dirs: tuple[str, ...], limit_s: float) -> None:
+    """Import plugin ``module`` first in a supervised cell process: an import that loops or ends
+    the process, or that leaves a non-daemon thread running (it would keep the CLI alive), is a
+    user error before the CLI imports it itself."""
+    from bench.isolation import CellFailure, call_isolated, ready, reopen, retire_idle
+
+    key = f"matrix.plugins[{i}]"
+    reopen()
+    ready()
+    try:
+        threads = call_isolated(_import_probe, (module, plugin_dirs), limit_s + RESET_CHECK_GRACE_S,
+                                key=("plugin-check", module, plugin_dirs))
+    except CellFailure as exc:
+        what = (f"did not finish within {limit_s + RESET_CHECK_GRACE_S:g} s (matrix.time_limit_s + "
+                f"{RESET_CHECK_GRACE_S:g} s)" if exc.kind == "time_limit" else f"failed: {exc.message}")
+        raise _fail(source, key, f"importing {module!r} {what}") from None
+    finally:
+        retire_idle()
+    if threads:
+        raise _fail(source, key, f"importing {module!r} starts non-daemon thread(s) {threads}, which would keep "
+                                 f"the command from exiting; make them daemon threads or start them in reset")
+
+
+def _import_probe(module: str, plugin_dirs: tuple[str, ...]) -> list[str]:
+    """Import ``module`` (in the plugin check's process); the names of the non-daemon threads it
+    left running. An import error is left to the caller's own import, which reports it."""
+    import threading
+
+    before = set(threading.enumerate())
+    try:
+        load_plugins((module,), plugin_dirs)
+    except Exception:
+        return []
+    return [t.name for t in threading.enumerate() if t not in before and t.is_alive() and not t.daemon]
 
 
 def _reset_failure_text(exc: Any, limit_s: float) -> str:

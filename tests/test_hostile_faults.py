@@ -623,3 +623,25 @@ def test_a_failing_trace_sink_is_an_artifact_error_retried_on_resume(tmp_path, m
     store = ResultsStore(tmp_path)
     store.save(row)
     assert not store.is_done(cell, traces=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("body, fragment", [
+    ("while True:\n    pass\n", "did not finish within 6 s (matrix.time_limit_s + 5 s)"),
+    ("import os\nos._exit(5)\n", "failed: cell process exited with code 5"),
+    ("raise SystemExit(3)\n", "failed: SystemExit: 3"),
+    ("import threading, time\nthreading.Thread(target=time.sleep, args=(300,), name='keeper').start()\n",
+     "starts non-daemon thread(s) ['keeper']"),
+])
+def test_a_plugin_whose_import_hangs_exits_or_leaves_a_thread_is_a_user_error(tmp_path, body, fragment):
+    """The plugin is imported first in a supervised process. Before: the CLI's own import looped
+    for ever, ended the CLI with the plugin's exit code, or never exited (a non-daemon thread)."""
+    module = f"hostile28_import_{os.getpid()}_{next(_UNIQUE)}"
+    (tmp_path / f"{module}.py").write_text(body)
+    m = tmp_path / "m.toml"
+    m.write_text(_run_matrix_text(module, ["linear"]) + "time_limit_s = 1\n")
+    proc = cli("run", "--matrix", m, "--out", tmp_path / "out", "--no-traces", timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    line = _one_line(proc.stderr)
+    assert f"{m}: matrix.plugins[0]: importing '{module}' {fragment}" in line, line
+    assert not (tmp_path / "out").exists()
