@@ -357,29 +357,46 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of ``solnic-bench`` and ``python -m bench.cli``: click's usage errors (unknown
     flag, missing value, bad type) become one line ``error: ...`` and exit 2, like every user error."""
     try:
-        from typer._click import exceptions as click_errors   # typer >= 0.22 vendors click
-    except ImportError:  # pragma: no cover - older typer on click
-        from click import exceptions as click_errors
+        try:
+            from typer._click import exceptions as click_errors   # typer >= 0.22 vendors click
+        except ImportError:  # pragma: no cover - older typer on click
+            from click import exceptions as click_errors
 
-    try:
-        code = app(args=argv, standalone_mode=False)
-    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:   # bare command: its help
-        exc.show()
-        sys.exit(2)
-    except click_errors.UsageError as exc:
-        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
-        err_console.print(f"error: {escape(where + ' '.join(exc.format_message().split()))}", soft_wrap=True)
-        sys.exit(2)
-    except click_errors.ClickException as exc:
-        err_console.print(f"error: {escape(' '.join(exc.format_message().split()))}", soft_wrap=True)
-        sys.exit(exc.exit_code)
-    except typer.Abort:   # Ctrl-C outside a run
-        err_console.print("interrupted")
-        sys.exit(130)
-    except UserError as exc:  # raised outside a command body; commands handle their own
-        err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
-        sys.exit(2)
-    sys.exit(code if isinstance(code, int) else 0)
+        try:
+            code = app(args=argv, standalone_mode=False)
+        except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:   # bare command: its help
+            exc.show()
+            sys.exit(2)
+        except click_errors.UsageError as exc:
+            where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+            err_console.print(f"error: {escape(where + ' '.join(exc.format_message().split()))}", soft_wrap=True)
+            sys.exit(2)
+        except click_errors.ClickException as exc:
+            err_console.print(f"error: {escape(' '.join(exc.format_message().split()))}", soft_wrap=True)
+            sys.exit(exc.exit_code)
+        except typer.Abort:   # Ctrl-C outside a run
+            err_console.print("interrupted")
+            sys.exit(130)
+        except UserError as exc:  # raised outside a command body; commands handle their own
+            err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
+            sys.exit(2)
+        sys.exit(code if isinstance(code, int) else 0)
+    finally:
+        if argv is None:   # the program itself (not a test calling main): see below
+            _ignore_signals_while_exiting()
+
+
+def _ignore_signals_while_exiting() -> None:
+    """The command is done (its exit code is decided): a Ctrl-C or SIGTERM during the
+    interpreter's shutdown (up to ~1 s: atexit, finalizers) must not turn it into a killed process
+    (exit -2/-15, no message). Python keeps an ignored signal ignored through finalization."""
+    import signal as _signal
+
+    for sig in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
+        try:
+            _signal.signal(sig, _signal.SIG_IGN)
+        except (ValueError, OSError):   # not the main thread (tests): nothing to protect
+            pass
 
 
 if __name__ == "__main__":

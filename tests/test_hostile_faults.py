@@ -645,3 +645,24 @@ def test_a_plugin_whose_import_hangs_exits_or_leaves_a_thread_is_a_user_error(tm
     line = _one_line(proc.stderr)
     assert f"{m}: matrix.plugins[0]: importing '{module}' {fragment}" in line, line
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_a_signal_after_the_report_does_not_kill_a_finished_command(stored_run, tmp_path):
+    """Found by the signal test: a Ctrl-C during the interpreter's shutdown (up to ~1 s after the
+    ``report:`` line) killed the finished command (exit -2, no message). Now: exit 0, or 130 with
+    the message if it lands before the command returned."""
+    tmp, m, src = stored_run
+    out = _copy_run(src, tmp_path / "out")
+    (out / "report.html").unlink()
+    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(m), "--out", str(out),
+                             "--no-traces"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    for line in proc.stdout:
+        if line.startswith("report: "):
+            break
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode in (0, 130) and "Traceback" not in err, err     # done, or stopped with a message
+    assert proc.returncode == 0 or "interrupted: stopped" in err, err
+    assert (out / "report.html").is_file() and not list(out.glob(".*.tmp"))
