@@ -49,7 +49,7 @@ SIZE_PEAK_COLUMNS = ("peak_error_small_rad", "peak_error_medium_rad", "peak_erro
 LEADING_COLUMNS = ("cell", "controller", "scenario", "seed", "status", "message", "controller_base",
                    "controller_family", "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
                    "runtime_s", "realtime_factor", "simulated_s", *SIZE_PEAK_COLUMNS, "config_hash",
-                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash")
+                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash", "privileged")
 # Why a cell has status "error": "run" (the controller or the plant failed: a result of the
 # configuration), "time_limit" (over its wall-clock limit), "crash" (its process died),
 # "artifact" (its trace or series could not be written). Only "run" errors are final; the
@@ -133,6 +133,15 @@ class ControllerSpec:
             return get_controller(self.base).family
         except ValueError:
             return ""
+
+    @property
+    def privileged(self) -> bool:
+        """Whether the base is a privileged bound (sees the true state; not a real controller)."""
+        from controllers.base import get_controller
+        try:
+            return bool(get_controller(self.base).privileged)
+        except ValueError:
+            return False
 
     def to_json(self) -> dict[str, Any]:
         return {"base": self.base, "options": dict(self.options)}
@@ -232,7 +241,7 @@ _SKIP = object()
 
 
 def _error_message(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {exc}"
+    return str(exc) if isinstance(exc, _TraceLost) else f"{type(exc).__name__}: {exc}"
 
 
 def _base_row(cell: Cell) -> dict[str, Any]:
@@ -253,6 +262,7 @@ def _base_row(cell: Cell) -> dict[str, Any]:
     row["error_kind"] = ""
     row["time_limit_s"] = math.nan if cell.time_limit_s is None else float(cell.time_limit_s)
     row["definition_hash"] = cell.definition_hash
+    row["privileged"] = cell.controller.privileged   # a bound, told apart without importing its plugin
     return row
 
 
@@ -276,14 +286,18 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
     from bench.series import figure_series, wants_series
     from bench.traces import TeeRecorder, TraceRecorder
 
+    from bench.names import check_cell_id
+
     wall0 = time.perf_counter()
     out = Path(out_dir)
     row = _base_row(cell)
     trace = None
     try:
+        check_cell_id(cell.cell_id)     # its artifacts' file names: never a path outside out_dir
         load_plugins(cell.plugins, cell.plugin_dirs)
         controller = cell.controller.build()
         row["controller_family"] = type(controller).family
+        row["privileged"] = bool(type(controller).privileged)
         series = wants_series(controller)
         memory = MemoryRecorder() if series else None
         if traces:
@@ -297,6 +311,8 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         row["status"], row["message"] = result.status, result.message
         if result.status == "error":
             row["error_kind"] = "time_limit" if result.message.startswith("time limit") else "run"
+        if trace is not None and trace.error is not None:   # the numbers are fine; the trace is lost
+            raise _TraceLost(trace.error)
         row.update({k: _scalar(v) for k, v in result.metrics.items()})
         row["simulated_s"] = float(result.simulated_s)
         summary = {k: _scalar(v) for k, v in result.summary.items()}
@@ -312,7 +328,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
             row.update(peaks)
             _write_parquet(frame, out / "series" / f"{cell.cell_id}.parquet")
     except BaseException as exc:  # noqa: BLE001 — a failing cell is a result (STYLE §8), whatever it raised
-        artifact = row["status"] != "error"
+        artifact = row["status"] != "error" or isinstance(exc, _TraceLost) or (trace is not None and trace.error)
         row["status"], row["message"] = "error", ("artifact: " if artifact else "") + _error_message(exc)
         row["error_kind"] = "artifact" if artifact else "run"
     if row["status"] != "ok":
@@ -320,6 +336,13 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
             row[col] = math.nan
     row["cell_wall_s"] = time.perf_counter() - wall0
     return row
+
+
+class _TraceLost(Exception):
+    """The cell's trace writer gave up (full or hung file system): an ``artifact`` error."""
+
+    def __str__(self) -> str:
+        return f"trace: {self.args[0]}"
 
 
 def _write_parquet(frame, path: Path) -> None:

@@ -22,7 +22,8 @@ from rich.markup import escape
 
 from bench.errors import UserError
 
-__all__ = ["UserError", "out_console", "err_console", "user_errors", "out_dir", "writable_dir"]
+__all__ = ["UserError", "out_console", "err_console", "user_errors", "out_dir", "writable_dir", "signals_stop",
+           "report_phase"]
 
 # Wide when not a terminal, so that logs keep whole tables and one-line messages.
 out_console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
@@ -47,6 +48,11 @@ def out_dir(value: str, flag: str = "--out") -> Path:
     """``--out`` as a path; an empty value is a user error (not the current directory)."""
     if not value.strip():
         raise UserError(f"{flag} must name a directory, got an empty value")
+    from bench.names import out_dir_problem
+
+    problem = out_dir_problem(Path(value))
+    if problem:
+        raise UserError(f"{flag} {value[:60]}...: {problem}" if len(value) > 60 else f"{flag} {value}: {problem}")
     return Path(value)
 
 
@@ -62,3 +68,40 @@ def writable_dir(path: Path, flag: str = "--out") -> Path:
     except OSError as exc:
         raise UserError(f"{flag} {path}: cannot write: {exc.strerror or exc}") from None
     return path
+
+
+def _stopped(exc: KeyboardInterrupt, what_then: str) -> typer.Exit:
+    """One line for a Ctrl-C, SIGTERM or SIGHUP, and the exit code of the run phase (130, 143, 129)."""
+    import signal as _signal
+
+    signum = getattr(exc, "signum", None)
+    what = _signal.Signals(signum).name if signum else "interrupted"
+    err_console.print(f"{what}: {what_then}", soft_wrap=True)
+    return typer.Exit(128 + signum if signum else 130)
+
+
+def signals_stop(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a command with SIGTERM/SIGHUP handled like Ctrl-C for its whole length (the run phase
+    nests its own handling), so that no phase dies silently or leaves a temporary file."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from bench.driver import stop_on_signals
+
+        try:
+            with stop_on_signals():
+                return fn(*args, **kwargs)
+        except KeyboardInterrupt as exc:
+            raise _stopped(exc, "stopped; what was stored is kept") from None
+
+    return wrapper
+
+
+def report_phase(out: Path, build: Callable[[Path], Any]) -> Any:
+    """``build(out)``; a Ctrl-C, SIGTERM or SIGHUP meanwhile removes the temporary file
+    (``write_atomic``) and says so in one line, with the run phase's exit code."""
+    try:
+        return build(out)
+    except KeyboardInterrupt as exc:
+        raise _stopped(exc, f"stopped while writing the report; the results are stored; rebuild it with "
+                            f"`solnic-bench report {escape(str(out))}`") from None

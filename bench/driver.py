@@ -40,7 +40,7 @@ from bench.scenarios import builtin_scenarios
 from bench.store import ResultsStore
 from plant.params import as_definition
 
-__all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace"]
+__all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace", "stop_on_signals"]
 
 
 class Stopped(KeyboardInterrupt):
@@ -72,6 +72,9 @@ def _stop_on_signals():
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+
+
+stop_on_signals = _stop_on_signals   # also the report phase of the CLI (a message, no temporary file)
 
 
 def wants_trace(cell: Cell, policy: str, first_seed: int | None) -> bool:

@@ -22,6 +22,8 @@ A cell process
 * ignores SIGINT (Ctrl-C reaches the whole process group; the parent decides what stops);
 * asks the kernel to SIGKILL it when its parent dies (``PR_SET_PDEATHSIG``), so a killed run
   leaves no orphan computing and writing into the run directory;
+* leads its own process group, and is killed as a group (``killpg``) whenever it is stopped:
+  whatever it started (a ``sleep``, a fork, a multiprocessing resource tracker) dies with it;
 * answers each call with ``("ok", result)`` or ``("raised", message)`` over a pipe, and exits
   after a ``raised``.
 
@@ -104,6 +106,10 @@ def _serve(conn) -> None:
     """The cell process: answer calls ``(fn, args)`` one after another until told to stop."""
     _die_with_parent()
     _release_forkserver()
+    try:
+        os.setpgid(0, 0)      # its own process group: killed whole, children included (_kill_group)
+    except OSError:
+        pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for sig in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_DFL)
@@ -127,6 +133,23 @@ def _serve(conn) -> None:
         if answer[0] != "ok":     # whatever escaped may have left this process in a bad state
             break
     conn.close()
+
+
+def _kill_group(pid: int | None) -> None:
+    """SIGKILL the process group that the cell process ``pid`` leads (it and everything it
+    started); nothing if the group is gone. A group id is never reused while the group has a
+    member, so this cannot hit an unrelated process group."""
+    if pid is None:
+        return
+    try:
+        if os.getpgid(pid) != pid:     # not (or no longer) a leader of its own group: only itself
+            return
+    except OSError:
+        pass                           # the leader is gone; its group may still have members
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
 
 
 def _death(exitcode: int | None) -> str:
@@ -157,8 +180,12 @@ class _Worker:
         child_end.close()
 
     def retire(self, kill: bool = False) -> None:
-        """Stop the process (politely unless ``kill``) and forget it."""
+        """Stop the process (politely unless ``kill``), kill what it left behind (its process
+        group) and forget it."""
+        pid = self.proc.pid
         try:
+            if kill:
+                _kill_group(pid)
             if not kill and self.proc.is_alive():
                 try:
                     self.conn.send(None)
@@ -168,6 +195,7 @@ class _Worker:
             if self.proc.is_alive():
                 self.proc.kill()
                 self.proc.join()
+            _kill_group(pid)
         finally:
             self.conn.close()
             with _live_lock:
@@ -245,6 +273,7 @@ def call_isolated(fn: Callable[..., Any], args: tuple[Any, ...], deadline_s: flo
         if worker.proc.sentinel in ready:
             worker.proc.join()
             raise CellFailure("crash", _death(worker.proc.exitcode))
+        _kill_group(worker.proc.pid)
         worker.proc.kill()
         worker.proc.join()
         raise CellFailure("time_limit", f"time limit exceeded: cell process killed after "
@@ -273,6 +302,7 @@ def kill_all() -> int:
         procs = list(_live)
     for p in procs:
         try:
+            _kill_group(p.pid)
             p.kill()
         except (ValueError, OSError):
             pass

@@ -44,6 +44,7 @@ from typing import Any
 
 from bench.cells import Cell, ControllerSpec, load_plugins, plugin_digest
 from bench.errors import UserError
+from bench.names import name_problem
 from bench.scenarios import SCENARIO_KEYS, Scenario, builtin_scenarios, derive_scenario
 from plant.params import PlantParams
 
@@ -52,11 +53,11 @@ __all__ = ["MatrixError", "Matrix", "load_matrix", "parse_matrix", "builtin_matr
 
 DEFAULT_TIME_LIMIT_S = 600.0
 MAX_TIME_LIMIT_S = 7 * 86400.0     # a week of wall clock per cell
+MAX_SAMPLES = 20_000_000           # samples of one run (~16 bytes each in the runner: 320 MB)
 _MAX_MATRIX_BYTES = 1_000_000
 _MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
                 "description")
 _PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
 class MatrixError(UserError):
@@ -85,11 +86,18 @@ class Matrix:
     frontier: dict[str, Any] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
-        """Every cell, in matrix order: controller, then scenario, then seed. Each carries a
-        digest of the plugins' source (an edited plugin gives new config hashes)."""
+        """Every cell, in matrix order: controller, then scenario, then seed. A cell of a
+        controller that a plugin provides carries the plugins and a digest of their source (an
+        edited plugin gives new config hashes); a built-in controller's cell does not depend on
+        them, so a run directory may grow by a plugin controller."""
         source = plugin_digest(self.plugins, self.plugin_dirs)
-        return [Cell(c, s, seed, self.time_limit_s, self.plugins, self.plugin_dirs, plugin_source=source)
-                for c in self.controllers for s in self.scenarios for seed in self.seeds]
+        cells = []
+        for c in self.controllers:
+            plugins = self.plugins if self.plugins and not _builtin(c.base) else ()
+            dirs, digest = (self.plugin_dirs, source) if plugins else ((), "")
+            cells += [Cell(c, s, seed, self.time_limit_s, plugins, dirs, plugin_source=digest)
+                      for s in self.scenarios for seed in self.seeds]
+        return cells
 
     def to_json(self) -> dict[str, Any]:
         """The resolved matrix, for ``DIR/config.json``."""
@@ -101,6 +109,14 @@ class Matrix:
             "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
             "sweep": self.sweep, "frontier": self.frontier,
         }
+
+
+def _builtin(base: str) -> bool:
+    """Whether the registered controller ``base`` ships with the package (not from a plugin)."""
+    from controllers.base import get_controller
+
+    module = get_controller(base).__module__
+    return module == "controllers" or module.startswith("controllers.")
 
 
 def builtin_matrix_path(quick: bool = False) -> Path:
@@ -167,9 +183,9 @@ def _names(source: str, key: str, value: Any) -> tuple[str, ...]:
 
 
 def _check_name(source: str, key: str, name: str) -> None:
-    if not _NAME.match(name) or "__" in name:
-        raise _fail(source, key, f"name {name!r} must start with a letter or digit, contain only "
-                                 f"letters, digits and _ . + -, and no '__'")
+    problem = name_problem(name)
+    if problem:
+        raise _fail(source, key, problem)
 
 
 def _field_of(message: str, prefix: str) -> str | None:
@@ -199,7 +215,13 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     if not isinstance(plugins, list) or not all(isinstance(p, str) and p for p in plugins):
         raise _fail(source, "matrix.plugins", f"must be a list of module names, got {plugins!r}")
     plugin_dirs = (str(base_dir),) if base_dir is not None and plugins else ()
+    limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
+                    positive=True, allow_zero=False)
+    if limit > MAX_TIME_LIMIT_S:
+        raise _fail(source, "matrix.time_limit_s", f"must be <= {MAX_TIME_LIMIT_S:g} s (a week), got {limit!r}")
     for i, module in enumerate(plugins):
+        if check_resets:
+            _check_plugin_import(source, i, module, plugin_dirs, limit)
         try:
             load_plugins((module,), plugin_dirs)
         except Exception as exc:
@@ -216,10 +238,6 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     duration = _number(source, "matrix.duration_s", m["duration_s"], positive=True, allow_zero=False) \
         if "duration_s" in m else None
     warmup = _number(source, "matrix.warmup_s", m["warmup_s"], positive=True) if "warmup_s" in m else None
-    limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
-                    positive=True, allow_zero=False)
-    if limit > MAX_TIME_LIMIT_S:
-        raise _fail(source, "matrix.time_limit_s", f"must be <= {MAX_TIME_LIMIT_S:g} s (a week), got {limit!r}")
     description = m.get("description", "")
     if not isinstance(description, str):
         raise _fail(source, "matrix.description", f"must be a string, got {description!r}")
@@ -234,6 +252,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         if name in variants:
             chosen_controllers.append(variants[name])
         elif name in registered:
+            _check_name(source, f"matrix.controllers[{i}]", name)   # a plugin may register any string
             chosen_controllers.append(ControllerSpec(name, name, {}))
         else:
             known = sorted(set(registered) | set(variants))
@@ -258,22 +277,54 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     frontier = data.get("frontier", {})
     if not isinstance(frontier, dict):
         raise _fail(source, "frontier", "must be a table (settings of the report's frontier section)")
+    _check_plan_names(source, plan, sweep_fail)
     for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
     if check_resets:
-        _check_resets(source, plan.controllers, plan.scenarios, set(variants))
+        _check_resets(source, plan.controllers, plan.scenarios, set(variants), tuple(plugins), plugin_dirs, limit)
     return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
                   tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
                   frontier)
 
 
+def _check_plan_names(source: str, plan: Any, sweep_fail: Any) -> None:
+    """Every controller and scenario name of the expanded matrix (sweep points and their swept
+    values included) is a safe, short file-name part (:func:`bench.names.name_problem`), and no
+    two controllers or scenarios share a name (so no cell is planned twice)."""
+    from bench.sweep import point_name
+
+    for kind, items, points in (("controller", [c.name for c in plan.controllers], plan.controller_points),
+                                ("scenario", [s.name for s in plan.scenarios], plan.scenario_points)):
+        seen: set[str] = set()
+        for name in items:
+            point = points.get(name)
+            knobs = (point or {}).get("knobs" if kind == "controller" else "params") or {}
+            table = "scenario" if kind == "scenario" else (point or {}).get("parent", "")
+            problem = name_problem(name)
+            if name in seen:
+                problem = f"plans the {kind} {name!r} twice (values that print alike, e.g. 40 and 40.0?)"
+            if problem:
+                if knobs:
+                    bad = [k for k, v in knobs.items() if name_problem(point_name(point["parent"], {k: v}))]
+                    raise sweep_fail(f"sweep.{table}.{(bad or list(knobs))[0]}", problem)
+                key = f"controllers.{name}" if kind == "controller" else f"scenarios.{name}"
+                raise _fail(source, key, problem)
+            seen.add(name)
+
+
 def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matrix_warmup: bool) -> None:
     """The run length and warm-up in whole samples, as the runner counts them: at least one
-    sample, and a scoring window of at least one sample."""
+    sample, a scoring window of at least one sample, and at most :data:`MAX_SAMPLES` samples."""
     tau = scenario.params.sample_period
-    n = round(scenario.duration_s / tau)
-    n_warm = round(scenario.warmup_s / tau)
     where = "matrix" if matrix_duration or matrix_warmup else f"scenarios.{scenario.name}"
+    ratio = scenario.duration_s / tau      # both finite and tau >= 1e-6 s (PlantParams): no overflow to round
+    if not ratio <= MAX_SAMPLES:
+        raise _fail(source, f"{where}.duration_s",
+                    f"scenario {scenario.name!r}: duration_s = {scenario.duration_s!r} s is {ratio:.3g} samples of "
+                    f"{tau} s; at most {MAX_SAMPLES} samples (duration_s <= {MAX_SAMPLES * tau:g} s at this "
+                    f"sample period; the runner holds ~16 bytes per sample)")
+    n = round(ratio)
+    n_warm = round(scenario.warmup_s / tau)
     if n < 1:
         raise _fail(source, f"{where}.duration_s", f"scenario {scenario.name!r}: {scenario.duration_s!r} s is "
                                                    f"less than half a sample period ({tau} s)")
@@ -283,25 +334,102 @@ def _check_samples(source: str, scenario: Scenario, matrix_duration: bool, matri
                                                  f"{scenario.duration_s!r} s (sample period {tau} s)")
 
 
+RESET_CHECK_GRACE_S = 5.0    # the reset check: plugin imports and first-call compilation, beyond a cell's limit
+
+
 def _check_resets(source: str, controllers: list[ControllerSpec], scenarios: list[Scenario],
-                  variants: set[str]) -> None:
-    """Reset every controller on every scenario's plant once, so that an option the controller
-    rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now, not an
-    ``error`` row in every cell later."""
+                  variants: set[str], plugins: tuple[str, ...] = (), plugin_dirs: tuple[str, ...] = (),
+                  limit_s: float = DEFAULT_TIME_LIMIT_S) -> None:
+    """Build and reset every controller on every scenario's plant once, so that an option the
+    controller rejects against the plant (e.g. a dither amplitude >= u_max) is a user error now,
+    not an ``error`` row in every cell later.
+
+    Each build and reset runs in a supervised cell process (:func:`bench.isolation.call_isolated`,
+    one process reused while it stays healthy) within one cell's time limit plus
+    :data:`RESET_CHECK_GRACE_S`: a reset that loops, exits the process or leaves a thread running
+    cannot hang or end the CLI; it is a user error naming the controller.
+    """
+    from bench.isolation import CellFailure, call_isolated, ready, reopen, retire_idle
+
+    reopen()      # a previous run in this process may have closed the pool
+    ready()       # the forkserver's start and imports are not part of the limit
+    try:
+        for cs in controllers:
+            key = f"controllers.{cs.name}" if cs.name in variants else "matrix.controllers"
+            for scenario in scenarios:
+                try:
+                    failure = call_isolated(_first_reset_failure, ([cs], [scenario], plugins, plugin_dirs),
+                                            limit_s + RESET_CHECK_GRACE_S, key=("reset-check", plugins, plugin_dirs))
+                except CellFailure as exc:
+                    raise _fail(source, key, f"controller {cs.name!r} on scenario {scenario.name!r}: "
+                                             f"{_reset_failure_text(exc, limit_s)}") from None
+                if failure is not None:
+                    _, _, kind, msg = failure
+                    named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
+                    if named and cs.name in variants:
+                        key += f".{named[0]}"
+                    raise _fail(source, key, f"rejected on scenario {scenario.name!r}: {kind}: {msg}")
+    finally:
+        retire_idle()
+
+
+def _check_plugin_import(source: str, i: int, module: str, plugin_dirs: tuple[str, ...], limit_s: float) -> None:
+    """Import plugin ``module`` first in a supervised cell process: an import that loops or ends
+    the process, or that leaves a non-daemon thread running (it would keep the CLI alive), is a
+    user error before the CLI imports it itself."""
+    from bench.isolation import CellFailure, call_isolated, ready, reopen, retire_idle
+
+    key = f"matrix.plugins[{i}]"
+    reopen()
+    ready()
+    try:
+        threads = call_isolated(_import_probe, (module, plugin_dirs), limit_s + RESET_CHECK_GRACE_S,
+                                key=("plugin-check", module, plugin_dirs))
+    except CellFailure as exc:
+        what = (f"did not finish within {limit_s + RESET_CHECK_GRACE_S:g} s (matrix.time_limit_s + "
+                f"{RESET_CHECK_GRACE_S:g} s)" if exc.kind == "time_limit" else f"failed: {exc.message}")
+        raise _fail(source, key, f"importing {module!r} {what}") from None
+    finally:
+        retire_idle()
+    if threads:
+        raise _fail(source, key, f"importing {module!r} starts non-daemon thread(s) {threads}, which would keep "
+                                 f"the command from exiting; make them daemon threads or start them in reset")
+
+
+def _import_probe(module: str, plugin_dirs: tuple[str, ...]) -> list[str]:
+    """Import ``module`` (in the plugin check's process); the names of the non-daemon threads it
+    left running. An import error is left to the caller's own import, which reports it."""
+    import threading
+
+    before = set(threading.enumerate())
+    try:
+        load_plugins((module,), plugin_dirs)
+    except Exception:
+        return []
+    return [t.name for t in threading.enumerate() if t not in before and t.is_alive() and not t.daemon]
+
+
+def _reset_failure_text(exc: Any, limit_s: float) -> str:
+    if exc.kind == "time_limit":
+        return (f"construction or reset did not return within {limit_s + RESET_CHECK_GRACE_S:g} s "
+                f"(matrix.time_limit_s + {RESET_CHECK_GRACE_S:g} s)")
+    return f"construction or reset failed: {exc.message}"
+
+
+def _first_reset_failure(controllers: list[ControllerSpec], scenarios: list[Scenario], plugins: tuple[str, ...],
+                         plugin_dirs: tuple[str, ...]) -> tuple[str, str, str, str] | None:
+    """(controller, scenario, exception type, message) of the first build or reset that raises an
+    Exception, or None (runs in the reset check's cell process)."""
     import numpy as np
 
+    load_plugins(plugins, plugin_dirs)
     for cs in controllers:
         for scenario in scenarios:
             try:
                 cs.build().reset(scenario.model_params(), np.random.default_rng(0))
             except Exception as exc:   # the controller's own validation message
-                msg = str(exc)
-                named = [o for o in cs.options if re.search(rf"\b{re.escape(o)}\b", msg)]
-                key = f"controllers.{cs.name}" if cs.name in variants else f"matrix.controllers"
-                if named and cs.name in variants:
-                    key += f".{named[0]}"
-                raise _fail(source, key, f"rejected on scenario {scenario.name!r}: "
-                                         f"{type(exc).__name__}: {msg}") from None
+                return cs.name, scenario.name, type(exc).__name__, str(exc)
+    return None
 
 
 def _scenarios(source: str, table: Any, text: str | None = None) -> dict[str, Scenario]:

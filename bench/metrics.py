@@ -9,7 +9,7 @@ import numpy as np
 
 from plant.state import IntervalResult
 
-__all__ = ["WindowTotals", "run_metrics", "METRIC_COLUMNS"]
+__all__ = ["WindowTotals", "run_metrics", "METRIC_COLUMNS", "unphysical"]
 
 METRIC_COLUMNS = (
     "peak_error_rad", "rms_error_rad", "p99_error_rad", "mean_abs_current", "rms_current",
@@ -73,3 +73,26 @@ def run_metrics(totals: WindowTotals, x1_window: np.ndarray) -> dict[str, float]
         "n_stick_slip": totals.n_breakaways,
         "n_substeps": totals.n_substeps,
     }
+
+
+def unphysical(x: np.ndarray, metrics: dict[str, float], u_max: float) -> str | None:
+    """Why a run that ended ``ok`` is not a result (None if it is): its final state ``x`` or a
+    metric is not finite, or a current metric exceeds what the drive can give.
+
+    The motor torque follows the drive through a first-order lag (3-2) and |u| <= u_max, so
+    |x3| <= u_max at all times and mean |i| <= RMS i <= u_max [ozf·in]; a larger value is a
+    numerical failure (a float that lost every digit), not a measurement. The runner turns a
+    reason into status ``diverged``.
+    """
+    state = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(state)):
+        return f"diverged: the plant state left the finite range (x = {np.array2string(state, precision=3)})"
+    for key, value in metrics.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"diverged: metric {key} = {value!r} is not finite"
+    limit = u_max * (1.0 + 1e-9)
+    for key in ("mean_abs_current", "rms_current"):
+        value = metrics.get(key, 0.0)
+        if value > limit:
+            return f"diverged: {key} = {value!r} ozf·in exceeds u_max = {u_max!r} ozf·in"
+    return None

@@ -17,7 +17,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from bench.cli import err_console, out_console, out_dir, user_errors, writable_dir
+from bench.cli import err_console, out_console, out_dir, report_phase, signals_stop, user_errors, writable_dir
 from bench.errors import UserError
 
 __all__ = ["ReportBuilder", "make_run_command", "print_aggregate"]
@@ -64,6 +64,7 @@ def make_run_command(build_report: ReportBuilder) -> Callable[..., None]:
     """The ``run`` command, building the report with ``build_report`` after the cells."""
 
     @user_errors
+    @signals_stop
     def run(
         matrix: Optional[Path] = typer.Option(None, "--matrix", help="Matrix TOML file (default: the built-in default matrix)."),
         quick: bool = typer.Option(False, "--quick", help="The built-in quick matrix (about a minute on 2 cores)."),
@@ -145,7 +146,9 @@ def make_run_command(build_report: ReportBuilder) -> Callable[..., None]:
                               f"--out {out} to resume", soft_wrap=True)
             raise typer.Exit(128 + outcome.signal if outcome.signal else 130)
         try:
-            path = build_report(out)
+            path = report_phase(out, build_report)
+        except typer.Exit:
+            raise
         except Exception as exc:  # the results are stored; say what failed, exit 1
             err_console.print(f"error: report: {type(exc).__name__}: {escape(str(exc))} "
                               f"(results are stored; retry with `solnic-bench report {out}`)", soft_wrap=True)

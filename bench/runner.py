@@ -39,7 +39,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bench.metrics import WindowTotals, run_metrics
+from bench.metrics import WindowTotals, run_metrics, unphysical
 from controllers.base import Controller, ControllerDiverged
 from plant.params import PlantParams
 from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
@@ -195,6 +195,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     opts = options or SimOptions(noise=noise)
     if not noise and opts.noise:
         opts = dataclasses.replace(opts, noise=False)
+    if x5_initial is not None and not math.isfinite(x5_initial):
+        raise ValueError(f"x5_initial must be a finite friction [ozf·in], got {x5_initial!r}")
     streams = spawn_streams(seed)
     if x5_initial is None:
         x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
@@ -268,6 +270,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
             rec.close()
     wall = time.perf_counter() - wall0
     metrics = run_metrics(totals, x1_window[:n_window])
+    if status is Status.OK and (why := unphysical(state.x, metrics, params.u_max)) is not None:
+        status, message = Status.DIVERGED, why
     if status is not Status.OK:
         metrics = {k: (math.nan if isinstance(v, float) else v) for k, v in metrics.items()}
     metrics["runtime_s"] = wall

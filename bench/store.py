@@ -40,6 +40,7 @@ import pandas as pd
 
 from bench.cells import LEADING_COLUMNS, Cell
 from bench.errors import UserError
+from bench.names import check_cell_id
 
 __all__ = ["ResultsStore", "StoreBusy", "RunDirConflict", "write_atomic", "results_frame", "check_layout"]
 
@@ -136,10 +137,10 @@ class ResultsStore:
         self.cells_dir = self.root / "cells"
 
     def cell_path(self, cell_id: str) -> Path:
-        return self.cells_dir / f"{cell_id}.json"
+        return self.cells_dir / f"{check_cell_id(cell_id)}.json"
 
     def trace_path(self, cell_id: str) -> Path:
-        return self.root / "traces" / f"{cell_id}.rrd"
+        return self.root / "traces" / f"{check_cell_id(cell_id)}.rrd"
 
     def load(self, cell: Cell) -> dict[str, Any] | None:
         """The stored row of ``cell`` if it has the same config hash, else None."""

@@ -120,7 +120,7 @@ def _grid(fail: Callable[[str, str], Exception], key: str, table: dict[str, Any]
         for v in values:
             if isinstance(v, (dict, list)) or (isinstance(v, float) and not math.isfinite(v)):
                 raise fail(f"{key}.{name}", f"values must be finite scalars, got {v!r}")
-        if len({repr(v) for v in values}) != len(values):
+        if len({format_value(v) for v in values}) != len(values):   # 40 and 40.0: one point name
             raise fail(f"{key}.{name}", f"lists a value more than once: {values!r}")
     names = list(table)
     if combine == "separate":

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PlantParams", "KERNEL_RECORD", "as_definition", "bohacek_tuteur_limit", "lti_peak_bound"]
+__all__ = ["PlantParams", "KERNEL_RECORD", "PLAUSIBLE", "as_definition", "bohacek_tuteur_limit", "lti_peak_bound"]
 
 # The one parameter record the compiled kernels read (plant.multimode.interval, plant.multimode.reference): a
 # numpy structured dtype, so a kernel reads ``prm[0].alpha`` by name and numba dispatches on it
@@ -32,6 +32,26 @@ KERNEL_RECORD = np.dtype([
     ("coulomb", np.float64),     # k̄c [ozf·in]
     ("stiction", np.float64),    # k̄s [ozf·in]
 ])
+
+
+# Plausible ranges [low, high] of each field (checked after the signs): wide enough for any
+# precision servo, narrow enough that a run never overflows a float (a drive of 1e308 ozf·in,
+# a sample period of 5e-324 s or a noise of 1e200 is a typing error, not a plant).
+PLAUSIBLE = {
+    "inertia": (1e-9, 1e6, "ozf·in·s²"),
+    "motor_time_constant": (1e-7, 10.0, "s"),
+    "u_max": (0.0, 1e6, "ozf·in"),
+    "coulomb": (0.0, 1e6, "ozf·in"),
+    "stiction": (0.0, 1e6, "ozf·in"),
+    "sample_period": (1e-6, 10.0, "s"),
+    "measurement_noise_std": (0.0, 1.0, "rad"),
+    "friction_noise_psd": (0.0, 1e6, "ozf²·in²·s"),
+    "correlated_friction_std": (0.0, 1e6, "ozf·in"),
+    "correlated_friction_tau": (1e-6, 1e12, "s"),
+    "command_velocity_std": (0.0, 1e3, "rad/s"),
+    "command_velocity_tau": (1e-6, 1e12, "s"),
+    "command_velocity_initial": (-1e3, 1e3, "rad/s"),
+}
 
 
 def _require(condition: bool, field: str, message: str) -> None:
@@ -126,6 +146,10 @@ class PlantParams:
         _require(0 <= self.command_delay < self.sample_period, "command_delay",
                  f"must be in [0, sample_period = {self.sample_period!r}) s (0 = no delay), "
                  f"got {self.command_delay!r}")
+        for name, (low, high, unit) in PLAUSIBLE.items():
+            value = getattr(self, name)
+            _require(low <= value <= high, name, f"must be in [{low:g}, {high:g}] {unit} (a plausible "
+                                                 f"servo), got {value!r}")
 
     # Derived symbols of chapter 3.
     @property

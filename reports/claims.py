@@ -280,6 +280,16 @@ def _is_bound(name: str) -> bool:
     return bool(cls is not None and cls.privileged)
 
 
+def _bound_rows(r: pd.DataFrame) -> pd.Series:
+    """Rows of privileged bounds: the row's ``privileged`` flag (also a plugin's bound, whose
+    plugin this process need not import), else the registry."""
+    by_registry = r["controller"].map(_is_bound).astype(bool)
+    if "privileged" not in r.columns:
+        return by_registry
+    return pd.Series([b if f is None or pd.isna(f) else bool(f) for f, b in zip(r["privileged"], by_registry)],
+                     index=r.index, dtype=bool)
+
+
 def _not_measured(why: str) -> Measurement:
     return Measurement(None, f"not measured in this run ({why})")
 
@@ -463,7 +473,7 @@ def _m_vs_peers(ctx: _Context) -> Measurement:
     fam = _family(ok)
     base = ok["controller_base"].astype(str) if "controller_base" in ok.columns else ok["controller"]
     plain = ok[(ok["controller"] == base) & (ok["controller"] == fam)]
-    plain = plain[~plain["controller"].map(_is_bound).astype(bool)]   # a bound is not a peer
+    plain = plain[~_bound_rows(plain)]   # a bound is not a peer
     means = plain.groupby(fam[plain.index])["peak_error_rad"].mean()
     if s.solnic not in means.index or len(means) < 2:
         return _not_measured(f"needs ok {s.solnic} and other controllers on {s.thesis_scenario}")

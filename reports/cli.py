@@ -32,7 +32,7 @@ import typer
 from rich.markup import escape
 
 from bench.bound.command import check_bound_command
-from bench.cli import err_console, out_console, user_errors
+from bench.cli import err_console, out_console, out_dir, report_phase, signals_stop, user_errors
 from bench.errors import UserError
 from bench.frontier import make_frontier_command
 from bench.list_command import list_command
@@ -54,8 +54,11 @@ def _build_report(out: Path) -> Path | None:
 
 
 @user_errors
+@signals_stop
 def report(run_dir: Path = typer.Argument(..., help="A run directory written by `solnic-bench run`.")) -> None:
     """Rebuild DIR/report.html from the results stored in DIR."""
+    if str(run_dir).strip():
+        out_dir(str(run_dir), "report DIR")
     if not str(run_dir).strip() or not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run directory")
     if not (run_dir / "results.parquet").is_file() and not any(run_dir.glob("cells/*.json")):
@@ -67,7 +70,7 @@ def report(run_dir: Path = typer.Argument(..., help="A run directory written by 
         err_console.print(f"error: reports is not importable: {escape(str(exc))}")
         raise typer.Exit(1) from None
     try:
-        path = build_report_from_dir(run_dir)
+        path = report_phase(run_dir, build_report_from_dir)
     except (ValueError, OSError) as exc:   # a malformed or unreadable input file; the message names it
         raise UserError(f"{run_dir}: {exc}") from None
     out_console.print(f"report: {path}")
@@ -95,30 +98,47 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of ``solnic-bench`` and ``python -m reports.cli``: click's usage errors (unknown
     flag, missing value, bad type) become one line ``error: ...`` and exit 2, like every user error."""
     try:
-        from typer._click import exceptions as click_errors   # typer >= 0.22 vendors click
-    except ImportError:  # pragma: no cover - older typer on click
-        from click import exceptions as click_errors
+        try:
+            from typer._click import exceptions as click_errors   # typer >= 0.22 vendors click
+        except ImportError:  # pragma: no cover - older typer on click
+            from click import exceptions as click_errors
 
-    try:
-        code = app(args=argv, standalone_mode=False)
-    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:   # bare command: its help
-        exc.show()
-        sys.exit(2)
-    except click_errors.UsageError as exc:
-        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
-        err_console.print(f"error: {escape(where + ' '.join(exc.format_message().split()))}", soft_wrap=True)
-        sys.exit(2)
-    except click_errors.ClickException as exc:
-        err_console.print(f"error: {escape(' '.join(exc.format_message().split()))}", soft_wrap=True)
-        sys.exit(exc.exit_code)
-    except typer.Abort:   # Ctrl-C outside a run
-        err_console.print("interrupted")
-        sys.exit(130)
-    except UserError as exc:  # raised outside a command body; commands handle their own
-        err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
-        sys.exit(2)
-    sys.exit(code if isinstance(code, int) else 0)
+        try:
+            code = app(args=argv, standalone_mode=False)
+        except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:   # bare command: its help
+            exc.show()
+            sys.exit(2)
+        except click_errors.UsageError as exc:
+            where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+            err_console.print(f"error: {escape(where + ' '.join(exc.format_message().split()))}", soft_wrap=True)
+            sys.exit(2)
+        except click_errors.ClickException as exc:
+            err_console.print(f"error: {escape(' '.join(exc.format_message().split()))}", soft_wrap=True)
+            sys.exit(exc.exit_code)
+        except typer.Abort:   # Ctrl-C outside a run
+            err_console.print("interrupted")
+            sys.exit(130)
+        except UserError as exc:  # raised outside a command body; commands handle their own
+            err_console.print(f"error: {escape(str(exc))}", soft_wrap=True)
+            sys.exit(2)
+        sys.exit(code if isinstance(code, int) else 0)
 
+    finally:
+        if argv is None:   # the program itself (not a test calling main): see below
+            _ignore_signals_while_exiting()
+
+
+def _ignore_signals_while_exiting() -> None:
+    """The command is done (its exit code is decided): a Ctrl-C or SIGTERM during the
+    interpreter's shutdown (up to ~1 s: atexit, finalizers) must not turn it into a killed process
+    (exit -2/-15, no message). Python keeps an ignored signal ignored through finalization."""
+    import signal as _signal
+
+    for sig in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
+        try:
+            _signal.signal(sig, _signal.SIG_IGN)
+        except (ValueError, OSError):   # not the main thread (tests): nothing to protect
+            pass
 
 if __name__ == "__main__":
     main()

@@ -6,8 +6,9 @@ Present only when the run's ``config.json`` records sweeps (``matrix.sweep``, wr
 * **Points.** One per (controller point, scenario): the median over seeds of every metric with
   its 95 % bootstrap CI (:mod:`reports.stats`), beside the mean and the worst seed.
 * **Groups.** A point belongs to the controller it was swept from (``parent``); a group's
-  *family* and whether it is a privileged bound come from the controller registry via the
-  point's registered base — nothing here knows a controller by name.
+  *family* comes from the controller registry via the point's registered base; whether it is a
+  privileged bound from the rows' ``privileged`` flag (a plugin's bound too, without importing
+  the plugin), else the registry — nothing here knows a controller by name.
 * **Pareto front** per group and scenario from the medians, both coordinates minimised.
 * **Noise sweeps.** Scenario points of ``[sweep.scenario]`` that vary one plant field (σ2² =
   ``friction_noise_psd``, σ1 = ``measurement_noise_std``) around their parent; for every group
@@ -87,8 +88,10 @@ def point_table(results: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFram
     for (ctrl, scen), g in results.groupby(["controller", "scenario"], sort=False):
         ok = g[g["status"] == "ok"]
         i = info[ctrl]
+        flags = g["privileged"].dropna() if "privileged" in g.columns else ()
+        bound = bool(flags.astype(bool).any()) if len(flags) else i.bound   # the rows' flag first (plugins)
         row = {"controller": ctrl, "scenario": scen, "group": i.parent, "family": i.family,
-               "bound": i.bound, "knobs": i.knobs, "ok": len(ok), "cells": len(g)}
+               "bound": bound, "knobs": i.knobs, "ok": len(ok), "cells": len(g)}
         for m in metrics:
             ci = median_ci(ok[m].to_numpy())
             v = ok[m].dropna()

@@ -3,7 +3,8 @@
 On-disk layout of a run directory ``DIR`` (every piece is optional; whatever is missing is
 shown in the report as "not measured in this run", never as a number):
 
-``DIR/results.parquet`` (or ``DIR/results.csv`` if there is no parquet)
+``DIR/results.parquet`` (or ``DIR/results.csv`` if there is no parquet, or the stored
+``DIR/cells/*.json`` of a run killed before it rebuilt the tables)
     One row per cell of the matrix. Required columns: ``controller, scenario, seed, status``.
     Metric columns, each optional (a missing column is "not measured"):
 
@@ -191,6 +192,12 @@ def normalise_results(results: pd.DataFrame | None) -> pd.DataFrame:
     for col in (*RESULT_METRICS, *SIZE_PEAK_COLUMNS.values()):
         if col in df.columns:
             df[col] = pd.to_numeric(df[col], errors="coerce").astype(float)
+    if "privileged" in df.columns:   # the row's own flag: a plugin's bound is known without its plugin
+        flag = df["privileged"].astype(object)
+        known = flag.notna()
+        df["privileged"] = flag.where(known, None)
+        if known.any():
+            df.loc[known, "privileged"] = _as_bool(flag[known], "results column privileged")
     if "cell" not in df.columns:
         df["cell"] = [cell_id(c, s, n) for c, s, n in
                       zip(df["controller"], df["scenario"], df["seed"])]
@@ -343,6 +350,29 @@ def _series_read(files: Mapping[str, Path], results: pd.DataFrame, config: Any) 
     return keep
 
 
+def _stored_cells(out_dir: Path, config: Any) -> tuple[pd.DataFrame | None, str]:
+    """The rows of ``out_dir/cells/*.json`` when the tables are missing (a run killed before it
+    rebuilt them), in the order of ``config.json``'s cells; unreadable files are skipped."""
+    from bench.store import results_frame
+
+    rows = []
+    for path in sorted((out_dir / "cells").glob("*.json")):
+        try:
+            row = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(row, dict) and isinstance(row.get("cell"), str):
+            rows.append(row)
+    if not rows:
+        return None, "No results.parquet or results.csv: the benchmark matrix was not run."
+    order = config.get("cells") if isinstance(config, dict) else None
+    if isinstance(order, list):
+        rank = {str(c): i for i, c in enumerate(order)}
+        rows.sort(key=lambda r: (rank.get(r["cell"], len(rank)), r["cell"]))
+    return results_frame(rows), (f"No results.parquet or results.csv (the run stopped before it rebuilt "
+                                 f"them): the results are the {len(rows)} stored cell files in cells/.")
+
+
 def load_inputs(out_dir: Path | str) -> ReportInputs:
     """Read whatever exists in ``out_dir`` (see the module docstring) into :class:`ReportInputs`.
 
@@ -363,10 +393,12 @@ def load_inputs(out_dir: Path | str) -> ReportInputs:
         results = pd.read_csv(out_dir / "results.csv", keep_default_na=True)
     else:
         results = None
-        notes.append("No results.parquet or results.csv: the benchmark matrix was not run.")
+    config = _read_json(out_dir / "config.json") if (out_dir / "config.json").exists() else {}
+    if results is None:
+        results, note = _stored_cells(out_dir, config)
+        notes.append(note)
     results = normalise_results(results)
 
-    config = _read_json(out_dir / "config.json") if (out_dir / "config.json").exists() else {}
     series: dict[str, pd.DataFrame] = {}
     sdir = out_dir / "series"
     if sdir.is_dir():
