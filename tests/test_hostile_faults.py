@@ -1,4 +1,4 @@
-"""Hostile inputs and faults of issue 28, each through the real CLI (``bench.cli.main`` in-process
+"""Hostile inputs and faults of issue 28, each through the real CLI (``reports.cli.main`` in-process
 for the user errors, the executable in a subprocess for runs): one line and exit 2 before anything
 runs, nothing written outside ``--out``, no silent ``ok`` for an absurd plant, no hang, no orphan."""
 
@@ -70,7 +70,7 @@ def _one_line(stderr: str) -> str:
 
 
 def _main_exit2(args: list, capsys) -> str:
-    from bench.cli import main
+    from reports.cli import main
 
     with pytest.raises(SystemExit) as stop:
         main([str(a) for a in args])
@@ -214,7 +214,7 @@ def test_an_implausible_plant_is_a_user_error_with_the_range(tmp_path, capsys, f
         {field} = {value}
     ''')
     line = _main_exit2(["run", "--matrix", m, "--out", tmp_path / "out", "--no-traces"], capsys)
-    assert f"{m}: scenarios.big.{field}: {fragment}" in line, line
+    assert line.startswith(f"error: {m}:") and f": scenarios.big.{field}: {fragment}" in line, line
     assert not (tmp_path / "out").exists()
 
 
@@ -277,21 +277,22 @@ def test_a_state_that_leaves_the_finite_range_ends_diverged(monkeypatch):
     import bench.runner as runner
     from controllers.base import make_controller
     from plant.params import PlantParams
+    from plant.protocol import get_family
     from plant.state import X5
 
-    real = runner.advance
     calls = itertools.count()
 
-    def faulty(state, command, params, noise, opts, record=False):
-        step = real(state, command, params, noise, opts, record=record)
-        if next(calls) == 10:
-            x = np.array(step.state.x)
-            x[X5] = math.nan
-            step = step._replace(state=step.state._replace(x=x))
-        return step
+    class Faulty(type(get_family("multimode"))):   # the plant step with a fault injected
+        def step(self, state, command, params, noise, options, *, duration=None, record=False):
+            step = super().step(state, command, params, noise, options, duration=duration, record=record)
+            if next(calls) == 10:
+                x = np.array(step.state.x)
+                x[X5] = math.nan
+                step = step._replace(state=step.state._replace(x=x))
+            return step
 
-    monkeypatch.setattr(runner, "advance", faulty)
-    result = runner.run_closed_loop(PlantParams(), make_controller("pulse-width"), duration_s=0.3, warmup_s=0.1)
+    result = runner.run_closed_loop(PlantParams(), make_controller("pulse-width"), duration_s=0.3, warmup_s=0.1,
+                                    family=Faulty())
     assert result.status == "diverged" and "plant state left the finite range" in result.message
     assert math.isnan(result.metrics["peak_error_rad"]) and math.isnan(result.metrics["mean_abs_current"])
 
@@ -413,7 +414,7 @@ def test_a_signal_while_the_report_is_written(stored_run, tmp_path, sig, code):
     out = _copy_run(src, tmp_path / "out")
     (out / "report.html").unlink()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(m), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "reports.cli", "run", "--matrix", str(m), "--out", str(out),
                              "--no-traces"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env)
     for line in proc.stdout:                   # the run phase ends with this line; the report follows
@@ -433,7 +434,7 @@ def test_a_signal_while_the_report_is_written(stored_run, tmp_path, sig, code):
 def test_a_run_directory_grows_by_a_plugin_controller(tmp_path, capsys):
     """Before: the plugin list entered every cell's definition, so adding a plugin controller to a
     run of built-in controllers was refused ("run with another definition")."""
-    from bench.cli import main
+    from reports.cli import main
     from bench.matrix import load_matrix
 
     module = _plugin(tmp_path, ["t-grow"])
@@ -655,7 +656,7 @@ def test_a_signal_after_the_report_does_not_kill_a_finished_command(stored_run, 
     tmp, m, src = stored_run
     out = _copy_run(src, tmp_path / "out")
     (out / "report.html").unlink()
-    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--matrix", str(m), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "reports.cli", "run", "--matrix", str(m), "--out", str(out),
                              "--no-traces"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     for line in proc.stdout:

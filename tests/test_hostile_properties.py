@@ -11,7 +11,7 @@ hypothesis generates a matrix file and, for some examples, a plugin, from these 
 * **plugins** — a controller that holds, raises in ``reset``, raises in ``step``, or returns a
   non-finite drive.
 
-Each example runs ``solnic-bench run`` (``bench.cli.main``, in this process, so that the cells'
+Each example runs ``solnic-bench run`` (``reports.cli.main``, in this process, so that the cells'
 processes and the reset check's process come from one warm forkserver) and checks:
 
 * exit 0 with every planned cell stored (``cells/<id>.json``, one row each in ``results.csv``),
@@ -195,7 +195,7 @@ def _left_behind() -> list[str]:
 
 def _check_example(text: str, plugin: str | None, module: str) -> None:
     from bench.cells import ERROR_KINDS
-    from bench.cli import main
+    from reports.cli import main
 
     with tempfile.TemporaryDirectory(prefix="hostile28-") as tmp:
         root = Path(tmp)

@@ -95,7 +95,7 @@ def test_bad_parameter_in_a_matrix_file_exits_2_naming_the_field(tmp_path):
         plant = "two-mass"
         shaft_damping = -1.0
     """))
-    proc = subprocess.run([sys.executable, "-m", "bench.cli", "run", "--matrix", str(matrix), "--out",
+    proc = subprocess.run([sys.executable, "-m", "reports.cli", "run", "--matrix", str(matrix), "--out",
                            str(tmp_path / "out"), "--no-traces"], capture_output=True, text=True, cwd=ROOT,
                           env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert proc.returncode == 2, proc.stdout + proc.stderr
