@@ -6,7 +6,7 @@ statistics of what a controller cares about: the motion Δc of one switched-brid
 (Δt_u = 1.2 ms, Table 2-1 noise, from rest with x4 = 0).
 
 * **Exact**: ``n_paths`` noisy :func:`plant.pulse_response` draws (seeds 0 … n−1).
-* **Euler–Maruyama** (:func:`plant.multimode.reference.fixed_step_pulses`, compiled, same mode logic) at
+* **Euler–Maruyama** (the default family's ``fixed_step_pulses``, compiled, same mode logic) at
   several step sizes h, ``n_paths`` paths each.
 
 For each statistic — the mean of Δc and its 95th percentile — the weak error of EM at h is
@@ -33,7 +33,7 @@ import numpy as np
 from scipy import stats
 
 from plant import PlantParams, pulse_response
-from plant.multimode.reference import fixed_step_pulses
+from bench.exact import EXACT_METHOD, fixed_step_pulses
 
 __all__ = ["WeakErrorConfig", "weak_error_comparison", "QUICK_WEAK", "FULL_WEAK"]
 
@@ -75,7 +75,7 @@ def weak_error_comparison(params: PlantParams | None = None, config: WeakErrorCo
     exact = np.array([pulse_response(p, cfg.dt_u, seed=seed + k).delta_c for k in range(cfg.n_paths)])
     exact_wall = (time.perf_counter() - t0) / cfg.n_paths
     ref = {w: _stat(exact, w) for w in ("mean", "p95")}
-    rows = [{"method": "multimode", "step_s": None, "wall_per_path_s": exact_wall,
+    rows = [{"method": EXACT_METHOD, "step_s": None, "wall_per_path_s": exact_wall,
              **{f"{w}_rad": ref[w][0] for w in ref}, **{f"{w}_se_rad": ref[w][1] for w in ref}}]
     for h in cfg.steps:
         t0 = time.perf_counter()

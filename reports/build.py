@@ -28,6 +28,7 @@ import plotly.offline
 from reports import claims as _claims
 from reports import figures as _fig
 from reports import frontier as _frontier
+from reports.plants import plants_context
 from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
@@ -312,6 +313,15 @@ def _typical_run(series: Mapping[str, SeriesRun], sel: _claims.Selection) -> Ser
     return runs[0]
 
 
+def _plants_tables(config: Mapping[str, Any], results: pd.DataFrame) -> dict[str, Any]:
+    """:func:`reports.plants.plants_context` as table cells."""
+    ctx = plants_context(config, results)
+    scen = [[_cell(r["name"]), _cell(r["family"]), _cell(r["told"]), _cell(r["mismatch"])] for r in ctx["scenarios"]]
+    factors = [[_cell(c) for c in row] for row in ctx["factors"]["rows"]]
+    return {"all_default": ctx["all_default"], "scenarios": scen, "factors_header": ctx["factors"]["header"],
+            "factors": factors}
+
+
 def render_html(inputs: ReportInputs) -> str:
     """The report page for normalised ``inputs`` (see :func:`reports.inputs.load_inputs`)."""
     config, meta = inputs.config, inputs.meta
@@ -376,6 +386,7 @@ def render_html(inputs: ReportInputs) -> str:
         "aggregate_table": _aggregate_table(inputs.results),
         "stats_method": METHOD_TEXT,
         "frontier": frontier,
+        "plants": _plants_tables(config, inputs.results),
         "n_cells": len(inputs.results),
         "n_ok": int((inputs.results["status"] == "ok").sum()) if len(inputs.results) else 0,
         "figs": figs,

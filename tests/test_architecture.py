@@ -178,3 +178,26 @@ def test_bench_and_reports_never_name_a_registered_controller():
                  for layer in ("bench", "reports") for path in sorted((ROOT / layer).rglob("*.py"))
                  for value, line in _string_literals(path) if value in names]
     assert not offenders, "\n".join(offenders)
+
+
+def test_bench_and_reports_never_name_a_plant_family():
+    """bench/ and reports/ reach a plant only through plant.protocol: no string literal equals a
+    plant family's name and no import names a family's module (plant.<family>...). Families and
+    their built-in scenarios live in plant/ (``PlantFamily.scenarios``)."""
+    from plant.protocol import BUILTIN_FAMILIES, available_families
+
+    names = set(available_families())
+    assert {"multimode", "two-mass"} <= names     # the check is not vacuous
+    modules = {m.rsplit(".", 1)[-1] for m in BUILTIN_FAMILIES.values()}
+    offenders = []
+    for layer in ("bench", "reports"):
+        for path in sorted((ROOT / layer).rglob("*.py")):
+            rel = path.relative_to(ROOT)
+            offenders += [f"{rel}:{line}: {value!r}" for value, line in _string_literals(path) if value in names]
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                mod = node.module if isinstance(node, ast.ImportFrom) else None
+                mods = [a.name for a in node.names] if isinstance(node, ast.Import) else [mod] if mod else []
+                offenders += [f"{rel}:{node.lineno}: import {m}" for m in mods
+                              if m.startswith("plant.") and m.split(".")[1] in modules]
+    assert not offenders, "\n".join(offenders)

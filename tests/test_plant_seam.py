@@ -154,6 +154,10 @@ def test_mismatch_is_paired_across_controllers_and_executors(tmp_path):
         assert all(a[f"mismatch_{k}"] == v for k, v in want.items())
     assert local["mismatch_coulomb"].nunique() == 3
     assert (local["model_exact"] == False).all()  # noqa: E712
+    html = (tmp_path / "local" / "report.html").read_text(encoding="utf-8")   # shown in the report
+    assert 'id="plants"' in html and "coulomb ±20 %" in html
+    for seed in (0, 1, 2):
+        assert f"{local.loc[f'linear__off__s{seed}', 'mismatch_coulomb']:.4f}" in html
 
 
 @pytest.mark.parametrize("body, key, line", [

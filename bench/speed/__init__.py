@@ -13,9 +13,9 @@ measures that claim:
    which). The full run also replays the ``linear`` controller's held levels.
 2. **Contestants, noise-free, on that sequence:** the exact simulator
    (:func:`plant.advance`, one compiled call per sample interval); fixed-step Euler
-   (:func:`plant.multimode.reference.fixed_step`, same mode logic, steps 1e-4 … 1e-7 s, every step size
+   (the default family's ``fixed_step`` (:mod:`bench.exact`), same mode logic, steps 1e-4 … 1e-7 s, every step size
    run over the whole window — nothing is scaled); ``solve_ivp`` (DOP853) with terminal events
-   (:func:`plant.multimode.reference.event_driven`) at rtol 1e-3 … 1e-12.
+   (``event_driven``) at rtol 1e-3 … 1e-12.
 3. **Error** against the exact simulator (closed forms, event times exact to ≤ 1e-12 s; the
    window's clock is restarted at 0 — the plant is time-invariant — so the rounding of
    absolute time does not blur anyone's event times):

@@ -14,8 +14,7 @@ from bench.speed.accuracy import (_MOVING_DC_RAD, _errors, _fixed_step_at, _lowe
 from bench.speed.config import _AT, TARGET_ERROR, Progress, SpeedConfig
 from bench.speed.contestants import _best_time, _exact_child, _fixed_step_child, _in_fresh_process, _timed
 from bench.speed.sequence import _Sequence
-from plant.multimode.interval import advance
-from plant.multimode.reference import event_driven, fixed_step, schedule_from_commands
+from bench.exact import EXACT_METHOD, advance, event_driven, fixed_step, schedule_from_commands
 from plant.state import X1, X2, X3, X4, X5, SimOptions, Status
 
 
@@ -43,7 +42,7 @@ def _compare(seq: _Sequence, cfg: SpeedConfig, seed: int, say: Progress, *, nois
     xref_wall = time.perf_counter() - t0
     agreement = _errors(xref, ref_x1, seq)
 
-    rows = [_row("multimode", "exact (closed forms)", agreement, exact_wall, T,
+    rows = [_row(EXACT_METHOD, "exact (closed forms)", agreement, exact_wall, T,
                  wall_warm_cache_s=min(c["warm_s"] for c in children),
                  wall_with_metrics_s=min(c["with_metrics_s"] for c in children),
                  error_basis=f"disagreement with solve_ivp rtol={cfg.reference_rtol:g}")]
@@ -159,7 +158,7 @@ def _probe(seq: _Sequence, cfg: SpeedConfig, say: Progress) -> dict[str, Any]:
 def _noisy(seq: _Sequence, cfg: SpeedConfig, exact: dict[str, Any], seed: int, say: Progress) -> dict[str, Any]:
     """Real-time factors with the noise on (no error metric: the paths' noise differs)."""
     p, T = seq.params, seq.duration
-    rows = [{"method": "multimode", "setting": "exact, noisy (bridge zero locator)", "wall_s": exact["noisy_s"],
+    rows = [{"method": EXACT_METHOD, "setting": "exact, noisy (bridge zero locator)", "wall_s": exact["noisy_s"],
              "realtime_factor": T / exact["noisy_s"], "status": exact["noisy_status"],
              "n_events": exact["noisy_events"], "n_substeps": exact["noisy_substeps"]}]
     for h in cfg.noisy_fixed_steps:

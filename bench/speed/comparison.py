@@ -16,6 +16,7 @@ from bench.speed.config import FULL, QUICK, TARGET_ERROR, Progress, SpeedConfig
 from bench.speed.contestants import _warm_up_references
 from bench.speed.sequence import _window, record_commands, synthetic_pulse_train
 from bench.weak_error import weak_error_comparison
+from bench.exact import EXACT_METHOD
 from controllers import roles
 from plant.params import PlantParams
 from plant.state import Status
@@ -25,7 +26,7 @@ __all__ = ["speed_comparison"]
 
 def _technology() -> dict[str, str]:
     return {
-        "multimode": ("numba-compiled: one compiled call per sample interval (plant.multimode.interval.interval_kernel) "
+        EXACT_METHOD: ("numba-compiled: one compiled call per sample interval (plant.multimode.interval.interval_kernel) "
                       "over the closed forms (3-20)–(3-22); Python calls it once per interval"),
         "fixed_step": "numba-compiled Euler loop (plant.multimode.reference.fixed_step)",
         "fixed_step_python": "the same Euler kernel uncompiled (NUMBA_DISABLE_JIT=1), CPython",

@@ -16,8 +16,7 @@ import numpy as np
 
 from bench.metrics import WindowTotals
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.interval import advance
-from plant.multimode.reference import Schedule, event_driven, fixed_step
+from bench.exact import Schedule, advance, event_driven, fixed_step
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
 from plant.state import X1, PlantState, SimOptions, Status, initial_state

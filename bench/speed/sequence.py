@@ -11,8 +11,7 @@ from typing import Any
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.interval import advance
-from plant.multimode.reference import Schedule, schedule_from_commands
+from bench.exact import Schedule, advance, schedule_from_commands
 from plant.params import PlantParams
 from plant.state import X1, X2, X3, X4, X5, PlantState, SimOptions, Status, initial_state
 

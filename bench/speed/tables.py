@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from bench.exact import EXACT_METHOD
 from controllers import roles
 
 
@@ -56,7 +57,7 @@ def _print_table(result: dict[str, Any], console: Any) -> None:
         console.print(f"noisy: Δc of a {weak['dt_u_s'] * 1e3:g} ms pulse, {weak['n_paths']} paths per method "
                       f"(mean and p95, weak error with 95 % CI)")
         for r in weak["rows"]:
-            if r["method"] == "multimode":
+            if r["method"] == EXACT_METHOD:
                 console.print(f"  exact: mean {_fmt(r['mean_rad'] * 1e6)} µrad, p95 {_fmt(r['p95_rad'] * 1e6)} µrad, "
                               f"{_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
             else:

@@ -14,7 +14,9 @@ response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulator
 
 from __future__ import annotations
 
-from plant.multimode import law_loop
+from types import SimpleNamespace
+
+from plant.multimode import law_loop, reference
 from plant.multimode.interval import advance
 from plant.params import PlantParams
 from plant.protocol import PlantFamily, register_family
@@ -29,6 +31,9 @@ class Multimode(PlantFamily):
     Params = PlantParams
     description = "Acker's shaft: Coulomb friction and stiction, exact multimode linearization (ch. 3-4)"
     linear_law_loop = staticmethod(law_loop.run_law)
+    references = SimpleNamespace(exact_step=advance, fixed_step=reference.fixed_step,
+                                 fixed_step_pulses=reference.fixed_step_pulses, event_driven=reference.event_driven,
+                                 Schedule=reference.Schedule, schedule_from_commands=reference.schedule_from_commands)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
         return advance(state, command, params, noise, options, duration=duration, record=record)
