@@ -11,6 +11,7 @@ import math
 
 import pytest
 
+from plant import law_driver
 from plant.multimode import law_loop as compiled_loop
 from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
@@ -50,7 +51,7 @@ def test_noise_buffer_refills_and_overruns_inside_an_interval_change_nothing(mon
     params = builtin_scenarios()["thesis"].params
     python = run_closed_loop(params, make_controller("dithered"), duration_s=3.0, warmup_s=1.0, seed=7,
                              compiled=False)
-    monkeypatch.setattr(compiled_loop, "NOISE_MARGIN", 64)
+    monkeypatch.setattr(law_driver, "NOISE_MARGIN", 64)
     grown = []
     original = compiled_loop.NoiseStream.grow
     monkeypatch.setattr(compiled_loop.NoiseStream, "grow", lambda self, pos: grown.append(pos) or original(self, pos))

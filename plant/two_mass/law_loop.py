@@ -16,15 +16,13 @@ the noise buffer.
 
 from __future__ import annotations
 
-import math
-import time
 
 import numpy as np
 from numba import njit
 
 from plant.linear_drive import compensator_step, square_wave_segments
-from plant.multimode.law_loop import CHUNK, NOISE_MARGIN, TOTAL_FIELDS
-from plant.randomness import NoiseExhausted, NoiseStream
+from plant.law_driver import CHUNK, NEED_NOISE, TOTAL_FIELDS, run_chunks
+from plant.randomness import NoiseStream
 from plant.state import PlantState, SimOptions, Status
 from plant.two_mass.interval import N_X as N_STATE
 from plant.two_mass.interval import (_FB, _IABS, _ISQ, _CHG, _DUR, _MODE, _NBRK, _NEV, _NO_EVENTS,
@@ -46,7 +44,7 @@ def interval_status(code, state, options):
 
 __all__ = ["run_law", "CHUNK", "TOTAL_FIELDS"]
 
-_NEED_NOISE = -1
+_NEED_NOISE = NEED_NOISE
 _TDUR, _TPEAK, _TIABS, _TISQ, _TCHG, _TNEV, _TNBRK, _TNSUB = range(8)
 
 
@@ -99,70 +97,12 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
 def run_law(law, params: TwoMassParams, options: SimOptions, state: PlantState, sensor: np.ndarray,
             n_warm: int, noise: NoiseStream | None, deadline: float
             ) -> tuple[PlantState, dict[str, float], np.ndarray, Status, str]:
-    """Run ``len(sensor)`` samples of ``law`` from ``state``; what the runner's Python loop computes.
-
-    ``law`` has the attributes of ``controllers.law.LinearLaw`` (A, B, C, D, u_max,
-    dither_amplitude, dither_frequency, dither_phase); ``sensor`` holds w1(n) [rad].
-    Returns the final state, the scoring window's sums (:data:`TOTAL_FIELDS`), x1 at the window's sample instants
-    (with the final one when the run completes), the status and its message. The run stops with
-    status ``error`` when ``time.perf_counter()`` passes ``deadline`` (checked every
-    :data:`CHUNK` samples).
-    """
-    n_samples = sensor.shape[0]
+    """:func:`plant.law_driver.run_chunks` around this family's compiled chunk."""
     noisy = options.noise and noise is not None
     q, V, Vi, lam, o, TP, TL, BT = plan(params, options)
     if not noisy:
         o = o.copy()
         o[_O_NOISE] = 0.0
-    prm = params.kernel_record()
-    A, B, C, D = (np.ascontiguousarray(m, dtype=np.float64) for m in (law.A, law.B, law.C, law.D))
-    cx = np.zeros(A.shape[0])
-    x = np.array(state.x, dtype=np.float64)
-    x_view = x.view()
-    x_view.flags.writeable = False
-    sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
-    out = np.empty(N_STATE + SHEET_SIZE)
-    totals = np.zeros(8)
-    x1_window = np.empty(n_samples - n_warm + 1)
-    prog = np.zeros(2, dtype=np.int64)
-    if noisy:
-        z, zpos = noise.window()
-    else:
-        z, zpos = np.empty(0), 0
-    margin = NOISE_MARGIN if noisy else 0
-    n, code = 0, STATUS_OK
-    while n < n_samples:
-        stop = min(n + CHUNK, n_samples)
-        try:
-            code = _chunk(n, stop, n_warm, sensor, x, x_view, False, sheet, A, B, C, D, cx, float(law.u_max),
-                          float(law.dither_amplitude), float(law.dither_frequency), float(law.dither_phase),
-                          params.sample_period, prm, q, V, Vi, lam, o, TP, TL, BT, z, zpos, margin, NO_EVENTS, out,
-                          totals, x1_window, prog)
-        except NoiseExhausted:        # one interval wanted more than the margin: extend, redo it
-            code = _NEED_NOISE
-        n, zpos = int(prog[0]), int(prog[1])
-        if code == _NEED_NOISE:
-            z, zpos = noise.grow(zpos)
-            while z.shape[0] - zpos < NOISE_MARGIN:
-                z, zpos = noise.grow(zpos)
-            continue
-        if code != STATUS_OK:
-            break
-        if time.perf_counter() > deadline and n < n_samples:
-            break
-    if noisy:
-        noise.consumed(zpos)
-    x.flags.writeable = False
-    final = PlantState(float(sheet[0]), x, int(sheet[1]), sheet[2] != 0.0)
-    n_window = max(0, n - n_warm)
-    if code != STATUS_OK:
-        status, message = interval_status(code, final, options)
-    elif n < n_samples:
-        status = Status.ERROR
-        message = "time limit exceeded"   # completed by the runner
-    else:
-        status, message = Status.OK, ""
-        x1_window[n_window] = final.x[0]
-        n_window += 1
-    sums = {name: (float(v) if i < _TNEV else int(v)) for i, (name, v) in enumerate(zip(TOTAL_FIELDS, totals))}
-    return final, sums, x1_window[:n_window], status, message
+    return run_chunks(_chunk, (q, V, Vi, lam, o, TP, TL, BT), law, params, options, state, sensor, n_warm, noise, noisy, deadline,
+                      n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
+                      interval_status=interval_status)
