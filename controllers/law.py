@@ -7,10 +7,11 @@ A :class:`LinearLaw` says: at every sample instant n·τs, with y(n) the measure
 
 with sq(θ) = +1 for frac(θ) < ½ and −1 otherwise (no dither when A_d = 0). A controller that
 returns one from :meth:`Controller.linear_law` promises that its ``step`` computes exactly
-this, in this order of floating-point operations (:func:`plant.linear_drive.compensator_step`,
-:func:`plant.linear_drive.square_wave_segments`: the same compiled code). The runner then runs the closed loop in
-one compiled call (the plant family's ``linear_law_loop``, e.g. :mod:`plant.multimode.law_loop`) instead of calling ``step`` at every sample,
-with bit-identical results (tested); the controller's own state is not advanced then, only
+this, with :func:`plant.linear_drive.compensator_step` and
+:func:`plant.linear_drive.square_wave_segments` (the same compiled code the fast path runs). The
+runner then runs the closed loop in one compiled call (the plant family's ``linear_law_loop``,
+e.g. :mod:`plant.multimode.law_loop`) instead of calling ``step`` at every sample, with
+bit-identical results (tested); the controller's own state is not advanced then, only
 its ``summary`` is read afterwards.
 """
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from plant.drive import DriveCommand, DriveType
+from plant.drive import DriveType
 
 __all__ = ["event_driven", "euler_maruyama"]
 

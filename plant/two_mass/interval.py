@@ -30,7 +30,6 @@ from numba import njit
 from plant.drive import DriveCommand, DriveType
 from plant.multimode.interval import _apply_level, _end_flyback, _flyback_time, _torque_metrics
 from plant.multimode.moving import substep_peak
-from plant.multimode.segments import torque_crossing_time
 from plant.multimode.stuck import stuck_propagate
 from plant.multimode.zero_velocity import _cross_prob
 from plant.randomness import NoiseExhausted, NoiseStream, normal, uniform_below
