@@ -259,8 +259,10 @@ def make_robustness_command(run: Callable[..., None]) -> Callable[..., None]:
         """Every registered controller, at its default and its best thesis frontier point, told
         Table 2-1, on every real-plant scenario: DIR/results.{parquet,csv}, DIR/robustness-matrix.toml,
         DIR/report.html with a robustness section."""
+        from bench.executors import make_executor
         from bench.matrix import parse_matrix
 
+        make_executor(executor, workers, scheduler)    # the flags first: nothing is written on a bad one
         out = out_dir(out_value)
         if frontier is not None:
             if not frontier.is_dir():

@@ -341,16 +341,20 @@ def test_robustness_command_runs_writes_its_matrix_and_resumes(tmp_path, monkeyp
 
 @pytest.mark.parametrize("args, message", [
     (["--frontier", "/nonexistent/frontier-run"], "--frontier /nonexistent/frontier-run: no such run directory"),
+    (["--executor", "bogus"], "--executor must be one of ['local', 'dask'], got 'bogus'"),
+    (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--out", ""], "--out must name a directory"),
 ])
-def test_robustness_user_errors_are_exit_2_one_line(tmp_path, args, message):
+def test_robustness_user_errors_are_exit_2_one_line_nothing_written(tmp_path, args, message):
     from typer.testing import CliRunner
 
     from reports.cli import app
 
-    result = CliRunner().invoke(app, ["robustness", *args])
+    out = tmp_path / "never"
+    result = CliRunner().invoke(app, ["robustness", "--out", str(out), *args])
     assert result.exit_code == 2
-    assert message in result.output and "Traceback" not in result.output
+    assert message in " ".join(result.output.split()) and "Traceback" not in result.output
+    assert not out.exists()
 
 
 def test_frontier_option_takes_the_best_points_from_a_frontier_run(tmp_path):
