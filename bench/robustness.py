@@ -11,7 +11,8 @@ run lengths; :func:`robustness_matrix_data` completes them from the registries:
   ``bench/matrices/robustness-best.toml`` (its header says which frontier run produced it), or
   from a frontier run directory (``--frontier DIR``); a controller the table does not know runs
   at its defaults only. A privileged bound (the oracle) runs at its best point only, as the
-  floor (as in the frontier); the report never ranks it.
+  floor (as in the frontier); the report never ranks it. ``--quick`` leaves the bounds out
+  (``[robustness] bounds = false`` in its file): at its 0.5 µrad band the oracle is half the cost.
 * **scenarios** — the reference (``thesis``) and every built-in *real-plant* scenario
   (:func:`real_plant_scenarios`), collected from :func:`bench.scenarios.builtin_scenarios`
   (which includes the plant families' own ``scenarios``), so a scenario added there joins.
@@ -197,7 +198,10 @@ def robustness_matrix_data(quick: bool = False, best: dict[str, dict[str, Any]] 
     if best is None:
         best, best_source = load_best_table(best_table_path())
     matrix = data["matrix"]
+    table = data.setdefault("robustness", {})
     registered = available_controllers()
+    if not table.get("bounds", True):                 # --quick: no privileged bound (half the cost)
+        registered = {n: c for n, c in registered.items() if not c.privileged}
     controllers: list[str] = []
     variants: dict[str, dict[str, Any]] = {}
     best_rows: dict[str, str] = {}
@@ -231,7 +235,6 @@ def robustness_matrix_data(quick: bool = False, best: dict[str, dict[str, Any]] 
     matrix["scenarios"] = names
     if custom:
         data["scenarios"] = custom
-    table = data.setdefault("robustness", {})
     table["reference"] = REFERENCE
     table["best_source"] = best_source or ""
     if best_rows:
