@@ -195,7 +195,9 @@ def robustness_matrix_data(quick: bool = False, best: dict[str, dict[str, Any]] 
     from bench.sweep import point_name
 
     data = tomllib.loads(robustness_matrix_path(quick).read_text(encoding="utf-8"))
+    where = best_source or "best points"
     if best is None:
+        where = str(best_table_path())
         best, best_source = load_best_table(best_table_path())
     matrix = data["matrix"]
     table = data.setdefault("robustness", {})
@@ -207,7 +209,10 @@ def robustness_matrix_data(quick: bool = False, best: dict[str, dict[str, Any]] 
     best_rows: dict[str, str] = {}
     for name, cls in registered.items():
         knobs = best.get(name)
-        has_point = bool(knobs) and not _is_default(cls, knobs)
+        try:
+            has_point = bool(knobs) and not _is_default(cls, knobs)
+        except ValueError as exc:           # a knob the controller does not have, or a bad value
+            raise UserError(f"{where}: points.{name}: {exc}") from None
         if not (has_point and cls.privileged):      # a bound is its floor: the best point only
             controllers.append(name)
         if has_point:

@@ -102,6 +102,18 @@ def test_committed_best_points_are_knob_points_of_registered_controllers():
         assert resolve_options(cls, None, None, knobs) != resolve_options(cls), parent
 
 
+def test_a_bad_point_in_the_best_table_is_a_user_error_naming_it(tmp_path, monkeypatch):
+    from bench.errors import UserError
+
+    with pytest.raises(UserError, match=r"my-table: points\.linear: .*crossuver"):
+        R.robustness_matrix_data(False, {"linear": {"crossuver": 30.0}}, "my-table")
+    table = tmp_path / "best.toml"
+    table.write_text('source = "x"\n[points.linear]\nlag_ratio = -1.0\n', encoding="utf-8")
+    monkeypatch.setattr(R, "best_table_path", lambda: table)
+    with pytest.raises(UserError, match=rf"{table}: points\.linear: .*lag_ratio"):
+        R.robustness_matrix_data(False)
+
+
 def _frontier_rows(spec: dict[str, list[float]], seeds=range(20), bad: tuple = ()) -> pd.DataFrame:
     rows = []
     for name, peaks in spec.items():
