@@ -26,6 +26,9 @@ Schema (public API, documented in the README)::
     [frontier]                # optional settings of the report's frontier section (bench.frontier)
     crossing_family = "solnic"
 
+    [robustness]              # optional settings of the report's robustness section (bench.robustness)
+    reference = "thesis"
+
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
 e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0`` or
 ``matrix.toml: controllers.lin.crossuver: unknown option 'crossuver' of 'linear'; options: [...]``.
@@ -84,6 +87,7 @@ class Matrix:
     variants: dict[str, ControllerSpec] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     frontier: dict[str, Any] = field(default_factory=dict)
+    robustness: dict[str, Any] = field(default_factory=dict)
 
     def cells(self) -> list[Cell]:
         """Every cell, in matrix order: controller, then scenario, then seed. A cell of a
@@ -108,6 +112,7 @@ class Matrix:
             "duration_s": self.duration_s, "warmup_s": self.warmup_s,
             "time_limit_s": self.time_limit_s, "plugins": list(self.plugins),
             "sweep": self.sweep, "frontier": self.frontier,
+            **({"robustness": self.robustness} if self.robustness else {}),
         }
 
 
@@ -197,10 +202,10 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
                  check_resets: bool = True, text: str | None = None) -> Matrix:
     """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages;
     with the file's ``text``, errors in ``[sweep.*]`` tables also name the line."""
-    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers", "sweep", "frontier"})
+    unknown = sorted(set(data) - {"matrix", "scenarios", "controllers", "sweep", "frontier", "robustness"})
     if unknown:
         raise _fail(source, unknown[0], "unknown table; expected [matrix], [scenarios.NAME], "
-                                        "[controllers.NAME] or [sweep.NAME]")
+                                        "[controllers.NAME], [sweep.NAME], [frontier] or [robustness]")
     m = data.get("matrix")
     if not isinstance(m, dict):
         raise _fail(source, "matrix", "missing [matrix] table")
@@ -277,6 +282,9 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     frontier = data.get("frontier", {})
     if not isinstance(frontier, dict):
         raise _fail(source, "frontier", "must be a table (settings of the report's frontier section)")
+    robustness = data.get("robustness", {})
+    if not isinstance(robustness, dict):
+        raise _fail(source, "robustness", "must be a table (settings of the report's robustness section)")
     _check_plan_names(source, plan, sweep_fail)
     for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
@@ -284,7 +292,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
         _check_resets(source, plan.controllers, plan.scenarios, set(variants), tuple(plugins), plugin_dirs, limit)
     return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
                   tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
-                  frontier)
+                  frontier, robustness)
 
 
 def _check_plan_names(source: str, plan: Any, sweep_fail: Any) -> None:

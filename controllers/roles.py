@@ -8,7 +8,7 @@ sequences of the registered controllers below. Change them here, or per run in
 
 from __future__ import annotations
 
-__all__ = ["IDENTIFICATION", "CLASSICAL"]
+__all__ = ["IDENTIFICATION", "CLASSICAL", "ADAPTIVE_PULSE"]
 
 #: Acker's identification-and-control controller: the subject of the claims; its pulse
 #: sequence is the speed comparison's workload.
@@ -17,3 +17,7 @@ IDENTIFICATION = "solnic"
 #: The lag-compensated linear controller the claims compare against (2-6); its held levels are
 #: the speed comparison's second sequence.
 CLASSICAL = "linear"
+
+#: Today's model-free adaptive pulse-width peer (Yang & Tomizuka 1988), which beats solnic on
+#: thesis (docs/results.md); the robustness claims test that on every real plant.
+ADAPTIVE_PULSE = "pulse-width"

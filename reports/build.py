@@ -28,6 +28,7 @@ import plotly.offline
 from reports import claims as _claims
 from reports import figures as _fig
 from reports import frontier as _frontier
+from reports import robustness as _robustness
 from reports.plants import plants_context
 from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
@@ -334,6 +335,9 @@ def render_html(inputs: ReportInputs) -> str:
     frontier = _frontier.frontier_context(inputs.results, config)
     if frontier is not None:
         rows = list(rows) + list(frontier["claims"])
+    robustness = _robustness.robustness_context(inputs.results, config)
+    if robustness is not None:
+        rows = list(rows) + list(robustness["claims"])
     by_key = {r.key: r for r in rows}
     typical = _typical_run(inputs.series, selection)
 
@@ -386,6 +390,7 @@ def render_html(inputs: ReportInputs) -> str:
         "aggregate_table": _aggregate_table(inputs.results),
         "stats_method": METHOD_TEXT,
         "frontier": frontier,
+        "robustness": robustness,
         "plants": _plants_tables(config, inputs.results),
         "n_cells": len(inputs.results),
         "n_ok": int((inputs.results["status"] == "ok").sum()) if len(inputs.results) else 0,

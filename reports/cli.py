@@ -12,7 +12,9 @@ Commands (one function each, defined beside what they run; a new command is one 
   :mod:`bench.bound`);
 * ``speed`` — the work-precision comparison behind the ≥ 1000× claim (SPEC §8, :mod:`bench.speed`);
 * ``frontier`` — every controller swept over its knob, the oracle floor and the noise sweeps
-  (:mod:`bench.frontier`).
+  (:mod:`bench.frontier`);
+* ``robustness`` — every controller at its default and best thesis point, told Table 2-1, on every
+  real plant (:mod:`bench.robustness`).
 
 Exit codes: 0 done (cells with status ``error`` are results, not failures of the command — also a
 cell whose process died or hung); 1 the run directory could not be written (full disk ...) or the
@@ -36,6 +38,7 @@ from bench.cli import err_console, out_console, out_dir, report_phase, signals_s
 from bench.errors import UserError
 from bench.frontier import make_frontier_command
 from bench.list_command import list_command
+from bench.robustness import make_robustness_command
 from bench.run_command import make_run_command
 from bench.speed.command import speed_command
 
@@ -88,6 +91,7 @@ def _compose() -> typer.Typer:
     app.command("check-bound")(user_errors(check_bound_command))
     app.command("speed")(user_errors(speed_command))
     app.command("frontier")(make_frontier_command(run))
+    app.command("robustness")(make_robustness_command(run))
     return app
 
 

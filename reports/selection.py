@@ -28,6 +28,8 @@ class Selection:
         the dissertation's controller and of the lag-compensated linear controller. A claim
         about "solnic" reads the cells of the family's registered controller itself (its name
         equals ``controller_base``), not its variants.
+    adaptive_pulse : str
+        Family of the model-free adaptive pulse-width peer (the robustness claims).
     high_error_cost : str
         Marker of the "high error cost" preset: a cell counts when it belongs to the ``solnic``
         family and its controller or scenario name contains this marker.
@@ -38,6 +40,7 @@ class Selection:
     thesis_scenario: str = "thesis"
     solnic: str = roles.IDENTIFICATION
     linear: str = roles.CLASSICAL
+    adaptive_pulse: str = roles.ADAPTIVE_PULSE
     high_error_cost: str = "high"
     typical_cell: str | None = None
 
