@@ -10,10 +10,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import re
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import gymnasium
 import numpy as np
+import pandas as pd
 import pytest
 from gymnasium.utils.env_checker import check_env
 
@@ -26,6 +32,7 @@ from controllers.policy import command_of, policy_controller, register_policy
 from plant.drive import DriveType
 from plant.protocol import get_family
 
+ROOT = Path(__file__).resolve().parent.parent
 # One built-in scenario of each plant family (asserted below, so a renamed scenario fails loudly).
 FAMILY_SCENARIOS = {"multimode": "thesis", "two-mass": "compliant", "stribeck": "stribeck", "lugre": "lugre"}
 
@@ -188,3 +195,35 @@ def test_policy_options_and_actions_are_checked(registered_linear_policy):
         command_of(np.array([math.nan]), DriveType.LINEAR, p)
     with pytest.raises(ValueError, match="bridge command for a linear drive"):
         command_of(command_of(np.array([1e-3]), DriveType.BRIDGE, p), DriveType.LINEAR, p)
+
+
+def _doc_example(name: str) -> str:
+    text = (ROOT / "docs" / "gym.md").read_text(encoding="utf-8")
+    m = re.search(rf"<!-- example: {re.escape(name)} -->\n```\w+\n(.*?)\n```", text, re.S)
+    assert m, f"docs/gym.md has no example block {name!r}"
+    return m.group(1) + "\n"
+
+
+@pytest.mark.slow
+def test_docs_example_runs_in_the_env_and_through_the_matrix(tmp_path):
+    """docs/gym.md's scripted policy, exactly as printed: its episode in the environment, then
+    the matrix through the real CLI (twice: the second run resumes every cell)."""
+    for name in ("scripted_policy.py", "policy.toml"):
+        (tmp_path / name).write_text(_doc_example(name))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    episode = subprocess.run([sys.executable, "scripted_policy.py"], cwd=tmp_path, env=env, capture_output=True,
+                             text=True, timeout=300)
+    assert episode.returncode == 0, episode.stderr
+    returns = dict(re.findall(r"^(\w+): return (\S+) over", episode.stdout, re.M))
+    assert returns["scripted"] == "-140.2"                      # the number docs/gym.md states
+    assert float(returns["random"]) < 1e3 * float(returns["scripted"])
+    for attempt in range(2):
+        proc = subprocess.run([sys.executable, "-m", "reports.cli", "run", "--matrix", "policy.toml", "--out", "run",
+                               "--no-traces"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+    assert "0 computed, 6 resumed" in proc.stdout
+    df = pd.read_parquet(tmp_path / "run" / "results.parquet").set_index("cell")
+    assert (df["status"] == "ok").all(), df["message"]
+    policy_rows = df[df["controller"].str.startswith("scripted-pulse")]
+    assert len(policy_rows) == 4 and (policy_rows["controller_family"] == "policy").all()
+    assert (policy_rows["rms_error_rad"] > 0).all()
