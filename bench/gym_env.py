@@ -30,12 +30,14 @@ module registers the id, or ``gymnasium.make("bench.gym_env:solnic-bench/StickSl
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from bench.matrix import load_matrix
 from bench.runner import PlantLoop
 from bench.scenarios import Scenario, builtin_scenarios
 from controllers.policy import MeasurementWindow, action_bounds, command_of
@@ -54,8 +56,10 @@ class StickSlipEnv(gymnasium.Env):
     Parameters
     ----------
     scenario : str or Scenario
-        A built-in scenario name (``solnic-bench list``) or a :class:`~bench.scenarios.Scenario`
-        (e.g. one of a loaded matrix's ``scenarios``).
+        A built-in scenario name (``solnic-bench list``), a scenario of ``matrix`` by name, or a
+        :class:`~bench.scenarios.Scenario`.
+    matrix : str or Path, optional
+        A matrix file whose scenarios (custom ones, with its run length) ``scenario`` names.
     drive : str
         ``"linear"`` (amplifier) or ``"bridge"`` (switched bridge, SPEC §2).
     window : int
@@ -73,11 +77,15 @@ class StickSlipEnv(gymnasium.Env):
 
     def __init__(self, scenario: str | Scenario = "thesis", drive: str = DriveType.LINEAR.value, window: int = 1,
                  error_weight: float = 1e4, current_weight: float = 0.01, max_steps: int | None = None,
-                 noise: bool = True) -> None:
+                 noise: bool = True, matrix: str | Path | None = None) -> None:
         if isinstance(scenario, str):
-            known = builtin_scenarios()
+            if matrix is not None:
+                known = {sc.name: sc for sc in load_matrix(matrix, check_resets=False).scenarios}
+                where = f"in {matrix}"
+            else:
+                known, where = builtin_scenarios(), "built-in"
             if scenario not in known:
-                raise ValueError(f"scenario: unknown {scenario!r}; built-in: {sorted(known)}")
+                raise ValueError(f"scenario: unknown {scenario!r}; {where}: {sorted(known)}")
             scenario = known[scenario]
         if not isinstance(scenario, Scenario):
             raise ValueError(f"scenario must be a built-in name or a Scenario, got {type(scenario).__name__}")

@@ -149,6 +149,16 @@ def test_bridge_pulse_width_sets_the_charge():
     assert charges[0.01][1] > 0 > command_of(np.array([-0.01]), DriveType.BRIDGE, env.scenario.params).segments[0][1]
 
 
+def test_scenario_of_a_matrix_file(tmp_path):
+    (tmp_path / "m.toml").write_text('[matrix]\ncontrollers = ["linear"]\nscenarios = ["heavy"]\nseeds = [0]\n'
+                                     'duration_s = 0.5\nwarmup_s = 0.1\n\n[scenarios.heavy]\nbase = "lugre"\ninertia = 1.5\n')
+    env = StickSlipEnv(scenario="heavy", matrix=tmp_path / "m.toml")
+    assert env.scenario.family == "lugre" and env.scenario.params.inertia == 1.5
+    assert env.max_steps == 50                                      # the matrix's duration_s / τs
+    with pytest.raises(ValueError, match="scenario: unknown 'thesis'"):
+        StickSlipEnv(scenario="thesis", matrix=tmp_path / "m.toml")
+
+
 @pytest.mark.parametrize("kw,field", [({"drive": "pwm"}, "drive"), ({"window": 0}, "window"),
                                       ({"error_weight": -1.0}, "error_weight"), ({"max_steps": 0}, "max_steps"),
                                       ({"scenario": "nope"}, "scenario")])
