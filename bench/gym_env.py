@@ -124,6 +124,7 @@ class StickSlipEnv(gymnasium.Env):
         self._params = truth
         self.loop = PlantLoop(self.family, truth, seed=seed, n_measurements=self.max_steps + 1, noise=self.noise,
                               options=SimOptions(noise=self.noise))
+        self._ended = False
         self._window.reset()
         y = self.loop.measure()
         return self._window.push(y), self._info(y)
@@ -132,13 +133,14 @@ class StickSlipEnv(gymnasium.Env):
         """One sample interval under ``action``; returns (obs, reward, terminated, truncated, info)."""
         if self.loop is None:
             raise RuntimeError("call reset() before step()")
-        if self.loop.n >= self.max_steps:
-            raise RuntimeError(f"the episode ended after max_steps = {self.max_steps}: call reset()")
+        if self.loop.n >= self.max_steps or self._ended:
+            raise RuntimeError("the episode has ended (plant status or max_steps): call reset()")
         interval = self.loop.advance(command_of(action, self.drive, self._params))
         y = self.loop.measure()
         mean_abs_current = interval.int_abs_current / interval.duration if interval.duration > 0 else 0.0
         reward = -(self.error_weight * abs(float(self.loop.state.x[X1])) + self.current_weight * mean_abs_current)
         terminated = interval.status is not Status.OK
+        self._ended = terminated
         truncated = self.loop.n >= self.max_steps and not terminated
         info = self._info(y)
         info.update(status=str(interval.status), message=interval.message,

@@ -119,6 +119,8 @@ def test_env_truth_per_step_equals_the_runner_on_the_same_seed(scenario):
         rows.append(info)
         current += info["int_abs_current"]
     assert truncated and not terminated
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(policy(obs))
     for k, series in ref.samples.items():
         assert np.array_equal(np.array([r[k] for r in rows[:n]]), series), k
     # the scored sums agree too: Σ∫|x3|dt over the episode / T is the runner's mean_abs_current
@@ -157,6 +159,21 @@ def test_scenario_of_a_matrix_file(tmp_path):
     assert env.max_steps == 50                                      # the matrix's duration_s / τs
     with pytest.raises(ValueError, match="scenario: unknown 'thesis'"):
         StickSlipEnv(scenario="thesis", matrix=tmp_path / "m.toml")
+
+
+def test_a_runaway_terminates_the_episode():
+    """Full-width pulses one way from rest: the shaft runs off (|x1| beyond SimOptions.diverge_error,
+    1 rad) and the episode terminates with the plant's status; stepping on is refused."""
+    env = StickSlipEnv(scenario="thesis", drive="bridge", noise=False, max_steps=2000)
+    env.reset(seed=0)
+    for n in range(2000):
+        _, _, terminated, truncated, info = env.step(np.array([0.01]))
+        if terminated or truncated:
+            break
+    assert terminated and not truncated and n < 100
+    assert info["status"] == "diverged" and abs(info["x1"]) > 1.0
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(np.array([0.0]))
 
 
 @pytest.mark.parametrize("kw,field", [({"drive": "pwm"}, "drive"), ({"window": 0}, "window"),
