@@ -43,10 +43,12 @@ from bench.metrics import WindowTotals, run_metrics, unphysical
 from controllers.base import Controller, ControllerDiverged
 from plant.params import PlantParams
 from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
+from plant.drive import DriveCommand
 from plant.randomness import NoiseStream
-from plant.state import EVENT_FIELDS, SimOptions, Status, X1
+from plant.state import EVENT_FIELDS, IntervalResult, SimOptions, Status, X1
 
-__all__ = ["RunResult", "run_closed_loop", "spawn_streams", "Recorder", "MemoryRecorder", "SAMPLE_FIELDS"]
+__all__ = ["RunResult", "run_closed_loop", "spawn_streams", "PlantLoop", "Recorder", "MemoryRecorder",
+           "SAMPLE_FIELDS"]
 
 SAMPLE_FIELDS = ("t", "y", *TRUTH_FIELDS)
 
@@ -133,6 +135,47 @@ def spawn_streams(seed: int) -> dict[str, np.random.Generator]:
     return {n: np.random.default_rng(c) for n, c in zip(names, children)}
 
 
+class PlantLoop:
+    """The plant side of one closed-loop run: the true plant, its noise and its command path.
+
+    Built from the run's seed exactly as :func:`run_closed_loop` needs it (the four generators
+    of :func:`spawn_streams`; x5(0) drawn from N(0, VAR(x5)) unless given; the sensor noise
+    w1(0..n_measurements-1) drawn at once). ``measure()`` is y(n) at the current instant,
+    ``advance(command)`` the interval to the next one (:meth:`PlantFamily.delayed_step`, the
+    pending command carried over). The runner and the Gymnasium environment (:mod:`bench.gym_env`)
+    both step a plant through this one class.
+    """
+
+    def __init__(self, family: PlantFamily, params: PlantParams, *, seed: int, n_measurements: int,
+                 noise: bool, options: SimOptions, x5_initial: float | None = None) -> None:
+        self.family, self.params, self.options = family, params, options
+        self.streams = spawn_streams(seed)
+        if x5_initial is None:
+            x5_initial = self.streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
+        self.state = family.initial_state(params, x5_initial)
+        self.plant_noise = NoiseStream(self.streams["plant"]) if noise else None
+        self.sensor = self.streams["sensor"].standard_normal(n_measurements) * params.measurement_noise_std \
+            if noise else np.zeros(n_measurements)
+        self.pending: DriveCommand | None = None    # the compute delay's carry-over
+        self.n = 0                                  # index of the current sample instant
+
+    def measure(self) -> float:
+        """y(n) [rad]: the family's sensor at the current instant with w1(n)."""
+        return self.family.observe(self.params, self.state, self.sensor[self.n])
+
+    def truth(self) -> dict[str, float]:
+        """The family's truth at the current instant (:data:`~plant.protocol.TRUTH_FIELDS` and its own)."""
+        return self.family.truth(self.params, self.state)
+
+    def advance(self, command: DriveCommand, *, record: bool = False) -> IntervalResult:
+        """The interval [n·τs, (n+1)·τs) under ``command`` (after the compute delay); the state moves on."""
+        step, self.pending = self.family.delayed_step(self.state, self.pending, command, self.params,
+                                                      self.plant_noise, self.options, record=record)
+        self.state = step.state
+        self.n += 1
+        return step
+
+
 def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: float,
                     warmup_s: float = 0.0, seed: int = 0, noise: bool = True, record: bool = False,
                     options: SimOptions | None = None, x5_initial: float | None = None,
@@ -197,13 +240,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         opts = dataclasses.replace(opts, noise=False)
     if x5_initial is not None and not math.isfinite(x5_initial):
         raise ValueError(f"x5_initial must be a finite friction [ozf·in], got {x5_initial!r}")
-    streams = spawn_streams(seed)
-    if x5_initial is None:
-        x5_initial = streams["initial"].normal(0.0, params.correlated_friction_std) if noise else 0.0
-    state = fam.initial_state(params, x5_initial)
-    plant_noise = NoiseStream(streams["plant"]) if noise else None
-    sensor = streams["sensor"].standard_normal(n_samples) * params.measurement_noise_std if noise \
-        else np.zeros(n_samples)
+    loop = PlantLoop(fam, params, seed=seed, n_measurements=n_samples, noise=noise, options=opts,
+                     x5_initial=x5_initial)
+    state = loop.state
     memory = MemoryRecorder() if record else None
     rec = memory if record else recorder
     totals = WindowTotals()
@@ -213,33 +252,31 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     wall0 = time.perf_counter()
     privileged = controller.privileged
     truth = TruePlant(fam, params) if privileged else None
-    pending = None          # the command path's carry-over (compute delay), see PlantFamily.delayed_step
     try:
-        controller.reset(model, streams["controller"])
+        controller.reset(model, loop.streams["controller"])
         fast = fam.law_loop(params)
         law = controller.linear_law() if (rec is None and not privileged and compiled and fast) else None
         if law is not None:
-            state, sums, window, status, message = fast(law, params, opts, state, sensor, n_warm, plant_noise,
-                                                        deadline)
+            state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
+                                                        loop.plant_noise, deadline)
             totals = WindowTotals(**sums)
             n_window = window.shape[0]
             x1_window[:n_window] = window
             if status is Status.ERROR:
                 message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
         for n in range(n_samples if law is None else 0):
-            y = fam.observe(params, state, sensor[n])
+            y = loop.measure()
             if n >= n_warm:
                 x1_window[n_window] = state.x[X1]
                 n_window += 1
             if rec is not None:
-                rec.sample({"t": state.t, "y": y, **fam.truth(params, state)})
+                rec.sample({"t": state.t, "y": y, **loop.truth()})
             if privileged:
                 controller.observe_truth(state, truth)
             command = controller.step(y)
             if rec is not None:
                 rec.internals(controller.internals())
-            step, pending = fam.delayed_step(state, pending, command, params, plant_noise, opts,
-                                             record=rec is not None)
+            step = loop.advance(command, record=rec is not None)
             if rec is not None:
                 rec.events(step.events)
             if n >= n_warm:
