@@ -14,6 +14,7 @@ from controllers import solnic as _solnic  # noqa: E402,F401  (registers "solnic
 from controllers import pulse_width as _pulse_width  # noqa: E402,F401  (registers "pulse-width")
 from controllers import reset_pid as _reset_pid  # noqa: E402,F401  (registers "reset-pid")
 from controllers import observer_pid as _observer_pid  # noqa: E402,F401  (registers "observer-pid")
+from controllers import friction_ff_pid as _friction_ff_pid  # noqa: E402,F401  (registers "friction-ff-pid")
 from controllers import oracle_pulse as _oracle_pulse  # noqa: E402,F401  (registers the "oracle-pulse" bound)
 
 __all__ = ["Controller", "register", "get_controller", "available_controllers", "make_controller"]
