@@ -3,7 +3,8 @@
 Built in: ``linear`` (lag-compensated, Bohacek–Tuteur limit), ``dithered`` (the same plus
 square-wave dither) and ``solnic`` (Acker's semi-open-loop identification and control); today's
 peers ``pulse-width`` (Yang & Tomizuka 1988), ``reset-pid`` (Beerens et al. 2019) and
-``observer-pid`` (disturbance observer and adaptive Coulomb estimate, Friedland & Park 1992).
+``observer-pid`` (disturbance observer and adaptive Coulomb estimate, Friedland & Park 1992);
+the deployed baseline ``friction-ff-pid`` (PID + static friction feedforward from the told model).
 """
 
 from controllers.base import Controller, available_controllers, get_controller, make_controller, register
