@@ -33,7 +33,8 @@ velocity x4(0) (``command_velocity_initial``: a servo's trajectory generator kno
 by the stuck-sample average x̂4 of ``reset-pid``; e_db = ``error_deadband``·σ̄1, σ̄1 the model's
 sensor noise. u = clip(u_pid + u_ff, ±u_max) on the linear amplifier.
 
-Knob: the compensation fraction κ [–] (``compensation``). Default from the sweep in
+Knob: the compensation fraction κ [–] (``compensation``). Default κ = 1.5 (k̄s fed forward for
+Acker's model), the lowest mean peak of the sweep in
 docs/tuning.md (thesis, tuning seeds 0–4 only).
 """
 

@@ -129,10 +129,11 @@ def test_same_seed_same_bits():
 
 
 def test_thesis_beats_the_linear_design():
-    """Seeds 5–7 (not the tuning seeds), 20 s scored from 5 s: every run ok and the median peak
-    error below ``linear``'s on the same seeds (measured: see the docstring of the module)."""
-    ff = [_thesis("friction-ff-pid", s) for s in (5, 6, 7)]
-    lin = [_thesis("linear", s) for s in (5, 6, 7)]
+    """Thesis (100 s scored from 20 s), seeds 5–7 (not the tuning seeds): every run ok and the
+    median peak error below 0.8 × ``linear``'s on the same seeds (measured 769 against 1347 µrad;
+    over seeds 0–9 the medians are 739 and 1227 µrad)."""
+    ff = [_thesis("friction-ff-pid", s, 100.0, 20.0) for s in (5, 6, 7)]
+    lin = [_thesis("linear", s, 100.0, 20.0) for s in (5, 6, 7)]
     assert all(r.status == "ok" for r in ff)
     peak = lambda rs: float(np.median([r.metrics["peak_error_rad"] for r in rs]))  # noqa: E731
-    assert peak(ff) < peak(lin)
+    assert peak(ff) < 0.8 * peak(lin)
