@@ -29,7 +29,7 @@ from reports.browser import (dump_dom, find_chromium, netlog_requests, page_netw
 from reports.screenshot import render_screenshot
 from reports.synthetic import write_synthetic_run
 
-EXPECTED_FIGURES = {"fig-peak-vs-current", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
+EXPECTED_FIGURES = {"fig-peak-vs-current", "fig-peak-intervals", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
                     "fig-bound-omega", "fig-bound-lag", "fig-hunting", "fig-speed"}
 
 
