@@ -661,7 +661,7 @@ CLAIMS: tuple[ClaimSpec, ...] = (
               "linear controller's peak error is at least the classical limit",
               "(2-6), §2.2", "peak / limit ≥ 1", "× limit", at_least(1.0), _m_linear_vs_limit),
     ClaimSpec("bound_sweep", "θ ≥ θb = (ks−kc)/(2Jωc²) for every stable LTI design",
-              "(2-6), §2.2; SPEC §6", "θ/θb ≥ 1", "", at_least(1.0), _m_bound_sweep),
+              "(2-6), §2.2", "θ/θb ≥ 1", "", at_least(1.0), _m_bound_sweep),
     ClaimSpec("hunting_onset", "Lag networks with L > Lmax hunt (stick-slip limit cycles); "
               "onset at L = Lmax", "(2-1), §2.2 (Bohacek and Tuteur)", "onset L = Lmax",
               "", at_most(0.3), _m_hunting),
@@ -682,7 +682,7 @@ CLAIMS: tuple[ClaimSpec, ...] = (
               _m_ten_times_linear),
     ClaimSpec("vs_peers", "Solnic is more accurate than every other controller in the run, "
               "today's peers included (mean peak error on the thesis plant)",
-              "§8.1 (against 1967's baselines); SPEC §10 peers", "best other / solnic > 1", "×",
+              "§8.1 (against 1967's baselines; modern peers added here)", "best other / solnic > 1", "×",
               above(1.0), _m_vs_peers),
     ClaimSpec("less_current", "Solnic operates at a lower average current than the linear "
               "controller", "abstract; §8.1", "solnic/linear < 1", "", below(1.0),
