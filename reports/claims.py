@@ -313,11 +313,17 @@ def _series_values(ctx: _Context, fn: Callable[[SeriesRun], float], what: str,
     agg = {"median": np.median, "max": np.max, "min": np.min}[how](x)
     u = f" {unit}" if unit else ""
     label = {"median": "median", "max": "worst (max)", "min": "worst (min)"}[how]
-    if len(x) == 1:
+    never = int(np.isposinf(x).sum())          # +inf: the event never happened within the run
+
+    def g(v: float) -> str:
+        return "never within the run" if v == math.inf else _g(v, digits) + u
+    if never == len(x):
+        text = f"never within the run ({len(x)} seed{'s' if len(x) > 1 else ''})"
+    elif len(x) == 1:
         text = f"{_g(agg, digits)}{u} (1 seed)"
     else:
-        text = (f"{label} {_g(agg, digits)}{u} (range {_g(x.min(), digits)}–{_g(x.max(), digits)}"
-                f", {len(x)} seeds)")
+        text = (f"{label} {g(agg)} (range {g(x.min())} to {g(x.max())}, {len(x)} seeds"
+                + (f", {never} never" if never else "") + ")")
     basis = f"series of {ctx.selection.solnic}/{ctx.selection.thesis_scenario}, seeds " \
             f"{sorted(s for s, _ in vals)}; {label} over seeds"
     return Measurement(float(agg), text, basis)
