@@ -10,7 +10,9 @@ nothing from the network: no CDN, no web fonts, no images by URL.
 
 from __future__ import annotations
 
+import base64
 import datetime as _dt
+import gzip
 import json
 import math
 import platform
@@ -308,10 +310,19 @@ def _bundle_version(js: str) -> str:
 
 
 @lru_cache(maxsize=1)
+def _plotly_bundle_b64() -> str:
+    """The bundle gzip-compressed (level 9, mtime 0: reproducible) and base64-encoded; the page
+    unpacks it with the browser's DecompressionStream (0.53 MB instead of 1.19 MB)."""
+    return base64.b64encode(gzip.compress(_plotly_js().encode("utf-8"), compresslevel=9,
+                                          mtime=0)).decode("ascii")
+
+
+@lru_cache(maxsize=1)
 def _plotly_js_version() -> str:
     js = _plotly_js()
     kind = "basic partial bundle" if "(basic" in js[:200] else "full bundle"
-    return f"{_bundle_version(js)} ({kind}, {len(js.encode()) / 1e6:.2f} MB)"
+    return (f"{_bundle_version(js)} ({kind}, {len(js.encode()) / 1e6:.2f} MB, inlined gzip+base64 "
+            f"{len(_plotly_bundle_b64()) / 1e6:.2f} MB)")
 
 
 # --------------------------------------------------------------------------- rendering
@@ -428,7 +439,8 @@ def render_html(inputs: ReportInputs) -> str:
 
     context = {
         "title": "solnic-bench report",
-        "plotly_js": _plotly_js(),
+        "plotly_b64": _plotly_bundle_b64(),
+        "deferred_script": _fig.DEFERRED_SCRIPT,
         "synthetic": bool(meta.get("synthetic", False)),
         "meta": meta,
         "meta_items": sorted((str(k), v) for k, v in meta.items()),

@@ -9,6 +9,7 @@ in headless browsers without a GPU.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -32,6 +33,7 @@ _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#
 _SERIES_COLOUR = "#2ca02c"
 _SYMBOLS = ("circle", "square", "diamond", "triangle-up", "cross", "x", "star", "hexagon")
 _TEMPLATE = "plotly_white"
+DEFERRED_SCRIPT = "text/x-plotly-deferred"   # a figure's script type: run after plotly.js loads
 _CONFIG = {"displaylogo": False, "responsive": True,
            "modeBarButtonsToRemove": ["sendDataToCloud"]}
 
@@ -46,9 +48,11 @@ def controller_colour(name: str, known: Sequence[str] = ()) -> str:
 def figure_div(fig: go.Figure, div_id: str, height: int = 440) -> str:
     """The figure as an HTML ``<div>`` plus a ``Plotly.newPlot`` script; plotly.js not included."""
     fig.update_layout(height=height, template=_TEMPLATE, margin=dict(l=70, r=30, t=50, b=60))
-    return fig.to_html(full_html=False, include_plotlyjs=False, include_mathjax=False,
+    html = fig.to_html(full_html=False, include_plotlyjs=False, include_mathjax=False,
                        div_id=div_id, config=_CONFIG, default_width="100%",
                        default_height=f"{height}px")
+    # Deferred: the page runs these once its compressed plotly.js is unpacked (report.html.j2).
+    return re.sub(r'<script(\s+type="text/javascript")?>', f'<script type="{DEFERRED_SCRIPT}">', html)
 
 
 def _hline_log(fig: go.Figure, y: float, text: str, *, colour: str = "#b00", dash: str = "dash",
