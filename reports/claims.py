@@ -627,8 +627,13 @@ def _m_speedup(ctx: _Context) -> Measurement:
     if v is None or math.isnan(v):
         return _not_measured("no speed.json or no speedup_vs_fixed_step_at_1e-6")
     metric = sp.get("error_metric", "error")
-    return Measurement(float(v), f"{_g(v)}× at equal accuracy 1e-6 (relative Δc error)",
-                       f"speed.json ({metric}); work-precision interpolation")
+    how = str((((sp.get("equal_accuracy") or {}).get("fixed_step")) or {}).get("how") or "interpolated")
+    lower = sp.get("speedup_vs_fixed_step_at_1e-6_lower_bound")
+    extra = (f"; measured lower bound without extrapolation ≥ {_g(lower)}×"
+             if isinstance(lower, (int, float)) and math.isfinite(lower) else "")
+    return Measurement(float(v), f"{_g(v)}× at equal accuracy 1e-6 (relative Δc error), {how}{extra}",
+                       f"speed.json ({metric}); fixed-step cost at the needed step {how} along its "
+                       f"measured error curve")
 
 
 def _m_noisy_speedup(ctx: _Context) -> Measurement:

@@ -349,7 +349,7 @@ def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
         fig.add_trace(go.Scatter(x=d["wall_s"], y=d["error"], mode="lines+markers+text",
                                  name=method_label(m), text=d["setting"], textposition="top center",
                                  marker=dict(size=9, symbol=_SYMBOLS[i % len(_SYMBOLS)]),
-                                 hovertemplate=(f"<b>{m}</b> %{{text}}<br>wall %{{x:.3g}} s"
+                                 hovertemplate=(f"<b>{method_label(m)}</b> %{{text}}<br>wall %{{x:.3g}} s"
                                                 "<br>error %{y:.3g} (relative)<extra></extra>")))
     _hline_log(fig, 1e-6, "1e-6 relative (speed-up reference)", colour="#888", dash="dot", width=1,
                right=True)
