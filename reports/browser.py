@@ -162,7 +162,8 @@ class _RefParser(HTMLParser):
             if name in _URL_ATTRS:
                 urls = ([p.strip().split()[0] for p in value.split(",") if p.strip()]
                         if name == "srcset" else [value.strip()])
-                self.refs += [f"<{tag} {name}={u!r}>" for u in urls if _is_remote(u)]
+                self.refs += [f"<{tag} {name}={u!r}>" for u in urls if _is_remote(u)
+                              and not (tag == "a" and name == "href" and _is_sibling(u))]
             elif name == "style":
                 self.refs += [f"<{tag} style> {u}" for u in _css_urls(value) if _is_remote(u)]
             elif name == "http-equiv" and value.lower() == "refresh":
@@ -188,6 +189,13 @@ def _css_urls(css: str) -> list[str]:
         out.append(css[j + 4:k].strip().strip("'\""))
         i = k + 1
     return out
+
+
+def _is_sibling(url: str) -> bool:
+    """A relative path inside the run directory (``results.csv``, ``traces/x.rrd``): an ``<a>``
+    to it is a link the reader may follow, not a load, and it never leaves the machine."""
+    u = url.strip()
+    return bool(u) and ":" not in u.split("/")[0] and not u.startswith(("/", "\\")) and ".." not in u.split("/")
 
 
 def _is_remote(url: str) -> bool:

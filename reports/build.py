@@ -10,7 +10,9 @@ nothing from the network: no CDN, no web fonts, no images by URL.
 
 from __future__ import annotations
 
+import base64
 import datetime as _dt
+import gzip
 import json
 import math
 import platform
@@ -25,6 +27,7 @@ import pandas as pd
 import plotly
 import plotly.offline
 
+from reports import answer as _answer
 from reports import claims as _claims
 from reports import figures as _fig
 from reports import frontier as _frontier
@@ -33,7 +36,8 @@ from reports.plants import plants_context
 from reports.inputs import (ReportInputs, SeriesRun, attribute_series,
                             load_inputs, normalise_bound, normalise_hunting, normalise_results,
                             normalise_speed)
-from reports.limits import PlantLimits, limits_from_config
+from reports.limits import PlantLimits, limits_from_config, scenario_limits
+from reports.settings import settings_rows
 from reports.stats import METHOD_TEXT, median_ci
 from bench.store import write_atomic
 
@@ -119,8 +123,9 @@ def _results_table(results: pd.DataFrame) -> dict[str, Any]:
     present = [(c, lbl, k) for c, lbl, k in _RESULT_COLUMNS if c in results.columns]
     missing = [c for c, _, _ in _RESULT_COLUMNS if c not in results.columns]
     header = ["controller", "scenario", "seed", "status", "message"] + [l for _, l, _ in present]
-    rows = []
+    rows, ids = [], []
     for _, r in results.sort_values(["scenario", "controller", "seed"]).iterrows():
+        ids.append(str(r["cell"]) if "cell" in results.columns and pd.notna(r["cell"]) else "")
         cells = [_cell(r["controller"]), _cell(r["scenario"]), _cell(r["seed"], float(r["seed"])),
                  _cell(r["status"], cls="ok" if r["status"] == "ok" else "bad"),
                  _cell(r["message"], cls="msg")]
@@ -128,7 +133,7 @@ def _results_table(results: pd.DataFrame) -> dict[str, Any]:
             v = r[col] * k if pd.notna(r[col]) else math.nan
             cells.append(_cell(_num(v), v, "num"))
         rows.append(cells)
-    return {"header": header, "rows": rows, "missing": missing,
+    return {"header": header, "rows": rows, "missing": missing, "ids": ids,
             "numeric_from": 5}
 
 
@@ -167,7 +172,7 @@ def _aggregate_table(results: pd.DataFrame) -> dict[str, Any]:
 def _speed_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
     if not speed:
         return []
-    return [[_cell(r["method"]), _cell(r["setting"]), _cell(_num(r["error"]), r["error"], "num"),
+    return [[_cell(_fig.method_label(r["method"])), _cell(r["setting"]), _cell(_num(r["error"]), r["error"], "num"),
              _cell(_num(r["wall_s"]), r["wall_s"], "num"),
              _cell(_num(r["realtime_factor"]), r["realtime_factor"], "num")]
             for r in speed["rows"]]
@@ -212,11 +217,19 @@ def _hunting_table(hunting: pd.DataFrame | None) -> list[list[dict[str, str]]]:
 
 
 def _bound_summary(bound: pd.DataFrame | None) -> dict[str, Any] | None:
+    """Counts of the (2-6) check that agree with its claim row: runs, stable designs, scored
+    (stable with a measured θ/θb), and the stable ones not scored by status (skipped = did not
+    fit the sweep's time cap, unsteady = no breakaway in the scoring window)."""
     if bound is None:
         return None
     st = bound[bound["stable"]]
+    scored = st[st["ratio"].notna()]
+    status = (st.loc[st["ratio"].isna(), "status"].fillna("unknown").astype(str)
+              if "status" in st.columns else pd.Series(["not scored"] * int(st["ratio"].isna().sum())))
     return {"n": len(bound), "n_stable": len(st), "n_unstable": len(bound) - len(st),
-            "n_violations": int((st["ratio"] < 1.0).sum()),
+            "n_scored": len(scored),
+            "not_scored": sorted(status.value_counts().items()),
+            "n_violations": int((scored["ratio"] < 1.0).sum()),
             "omega_range": f"{_num(bound['omega_c'].min())}–{_num(bound['omega_c'].max())}",
             "lag_values": ", ".join(_num(x) for x in sorted(bound["lag_ratio"].dropna().unique())),
             "ratios": ", ".join(_num(x) for x in sorted(bound["ks_over_kc"].dropna().unique())),
@@ -270,21 +283,47 @@ def _build_info() -> dict[str, str]:
     }
 
 
+# The partial "basic" plotly.js bundle (scatter, bar, pie; the report draws scatter traces only),
+# vendored from npm plotly.js-basic-dist-min at the plotly.js version of the installed plotly
+# package: 1.2 MB instead of the full 4.8 MB bundle. The full bundle is the fallback when the
+# versions differ.
+_BASIC_BUNDLE = Path(__file__).resolve().parent / "vendor" / "plotly-basic.min.js"
+
+
 @lru_cache(maxsize=1)
 def _plotly_js() -> str:
-    js = plotly.offline.get_plotlyjs()
+    full = plotly.offline.get_plotlyjs()
+    js = full
+    if _BASIC_BUNDLE.exists():
+        basic = _BASIC_BUNDLE.read_text(encoding="utf-8")
+        if _bundle_version(basic) == _bundle_version(full):
+            js = basic
     if "</script" in js.lower():  # cannot happen with plotly's bundle; guard the inlining
         raise RuntimeError("plotly.js bundle contains '</script' and cannot be inlined")
     return js
 
 
-@lru_cache(maxsize=1)
-def _plotly_js_version() -> str:
-    head = _plotly_js()[:200]
-    for token in head.split():
+def _bundle_version(js: str) -> str:
+    for token in js[:200].split():
         if token.startswith("v") and token[1:2].isdigit():
             return token
     return "unknown"
+
+
+@lru_cache(maxsize=1)
+def _plotly_bundle_b64() -> str:
+    """The bundle gzip-compressed (level 9, mtime 0: reproducible) and base64-encoded; the page
+    unpacks it with the browser's DecompressionStream (0.53 MB instead of 1.19 MB)."""
+    return base64.b64encode(gzip.compress(_plotly_js().encode("utf-8"), compresslevel=9,
+                                          mtime=0)).decode("ascii")
+
+
+@lru_cache(maxsize=1)
+def _plotly_js_version() -> str:
+    js = _plotly_js()
+    kind = "basic partial bundle" if "(basic" in js[:200] else "full bundle"
+    return (f"{_bundle_version(js)} ({kind}, {len(js.encode()) / 1e6:.2f} MB, inlined gzip+base64 "
+            f"{len(_plotly_bundle_b64()) / 1e6:.2f} MB)")
 
 
 # --------------------------------------------------------------------------- rendering
@@ -296,7 +335,8 @@ def _environment() -> jinja2.Environment:
         autoescape=jinja2.select_autoescape(["html", "j2"], default=True),
         undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     env.filters["num"] = _num
-    env.filters["tojson_pretty"] = lambda v: json.dumps(v, indent=2, sort_keys=True, default=str)
+    env.filters["tojson_pretty"] = lambda v: json.dumps(v, indent=2, sort_keys=True, default=str,
+                                                        ensure_ascii=False)
     return env
 
 
@@ -346,7 +386,13 @@ def render_html(inputs: ReportInputs) -> str:
     def add(name: str, fig: Any, height: int = 440) -> None:
         figs[name] = None if fig is None else _fig.figure_div(fig, f"fig-{name}", height)
 
-    add("peak-vs-current", _fig.peak_vs_current(inputs.results, limits), 480)
+    scen_limits = scenario_limits(config)
+    n_scen = inputs.results["scenario"].nunique() if len(inputs.results) else 0
+    add("peak-vs-current", _fig.accuracy_vs_current(inputs.results, scen_limits, limits),
+        460 + 300 * max(0, math.ceil(n_scen / 3) - 1))
+    n_ctrl = inputs.results["controller"].nunique() if len(inputs.results) else 0
+    add("peak-intervals", _fig.peak_intervals(inputs.results, scen_limits, limits),
+        160 + 28 * n_ctrl)
     add("7-2", _fig.error_vs_time(typical, limits, 1))
     add("7-3", _fig.error_vs_time(typical, limits, 2))
     add("7-4", _fig.friction_estimates(typical))
@@ -369,10 +415,38 @@ def render_html(inputs: ReportInputs) -> str:
             ("7-5", "Figure 7-5 — cost and Δc ratio versus time",
              "series columns cost_small, cost_medium, cost_large, dc_ratio"))]
     speedup = inputs.speed.get("speedup_vs_fixed_step_at_1e-6") if inputs.speed else None
+    sp = inputs.speed or {}
+    fixed_need = ((sp.get("equal_accuracy") or {}).get("fixed_step")) or {}
+    speed_lower = sp.get("speedup_vs_fixed_step_at_1e-6_lower_bound")
+    answers = _answer.scenario_answers(inputs.results)
+    picks = _answer.budget_picks(inputs.results)
+    limit_of = {k: v.classical_limit_rad * 1e6 for k, v in scen_limits.items()}
+    budget_groups = [(scen, [p for p in picks if p.scenario == scen])
+                     for scen in dict.fromkeys(p.scenario for p in picks)]
+    modes = {"matrix": ((config.get("matrix") or {}).get("description") or "not recorded"),
+             "bound": inputs.modes.get("bound", "not recorded"),
+             "speed": str(sp.get("mode", "not recorded"))}
+    sections = [("answer", "The answer"), ("plots", "Accuracy and current")]
+    if frontier:
+        sections.append(("frontier", "Frontier"))
+    if robustness is not None:
+        sections.append(("robustness", "Robustness"))
+    sections += [("claims", "Claims"), ("figures", "Figures 7-2…7-5"), ("inequality", "Inequality (2-6)"),
+                 ("speed", "Speed"), ("controllers", "Controllers"), ("plants", "Plants"),
+                 ("results", "Per-cell results"), ("glossary", "Glossary"), ("provenance", "Provenance")]
+    controller_settings = settings_rows(inputs.results)
+    for row in controller_settings:
+        spec = (config.get("controllers") or {}).get(row["controller"]) or {}
+        opts = dict(spec.get("options") or {})
+        row["configured"] = ", ".join(
+            [f"design {spec['base']}" if spec.get("base") and spec.get("base") != row["controller"] else ""]
+            + [f"preset {spec['preset']}" if spec.get("preset") else ""]
+            + [f"{k} = {v}" for k, v in sorted(opts.items())]).strip(", ").replace(", , ", ", ") or "defaults"
 
     context = {
         "title": "solnic-bench report",
-        "plotly_js": _plotly_js(),
+        "plotly_b64": _plotly_bundle_b64(),
+        "deferred_script": _fig.DEFERRED_SCRIPT,
         "synthetic": bool(meta.get("synthetic", False)),
         "meta": meta,
         "meta_items": sorted((str(k), v) for k, v in meta.items()),
@@ -404,6 +478,19 @@ def render_html(inputs: ReportInputs) -> str:
         "speed_rows": _speed_table(inputs.speed),
         "weak_rows": _weak_table(inputs.speed),
         "speedup": None if speedup is None or math.isnan(speedup) else speedup,
+        "speed_how": fixed_need,
+        "speed_lower": speed_lower,
+        "method_label": _fig.method_label,
+        "answers": answers,
+        "budget_groups": budget_groups,
+        "limit_of": limit_of,
+        "modes": modes,
+        "sections": sections,
+        "controller_settings": controller_settings,
+        "n_controllers": n_ctrl,
+        "n_scenarios": n_scen,
+        "config_shown": {k: v for k, v in config.items() if k != "cells"},
+        "n_config_cells": len(config.get("cells") or ()),
     }
     return _environment().get_template("report.html.j2").render(**context)
 

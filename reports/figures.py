@@ -9,6 +9,7 @@ in headless browsers without a GPU.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -23,7 +24,8 @@ from reports.limits import PlantLimits, lag_ratio_limit
 __all__ = [
     "controller_colour", "figure_div", "peak_vs_current", "error_vs_time",
     "friction_estimates", "cost_and_ratio", "bound_vs_crossover", "bound_vs_lag",
-    "hunting_onset", "work_precision", "decimate_minmax",
+    "hunting_onset", "work_precision", "decimate_minmax", "accuracy_vs_current", "peak_intervals",
+    "method_label",
 ]
 
 _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
@@ -31,6 +33,7 @@ _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#
 _SERIES_COLOUR = "#2ca02c"
 _SYMBOLS = ("circle", "square", "diamond", "triangle-up", "cross", "x", "star", "hexagon")
 _TEMPLATE = "plotly_white"
+DEFERRED_SCRIPT = "text/x-plotly-deferred"   # a figure's script type: run after plotly.js loads
 _CONFIG = {"displaylogo": False, "responsive": True,
            "modeBarButtonsToRemove": ["sendDataToCloud"]}
 
@@ -45,9 +48,11 @@ def controller_colour(name: str, known: Sequence[str] = ()) -> str:
 def figure_div(fig: go.Figure, div_id: str, height: int = 440) -> str:
     """The figure as an HTML ``<div>`` plus a ``Plotly.newPlot`` script; plotly.js not included."""
     fig.update_layout(height=height, template=_TEMPLATE, margin=dict(l=70, r=30, t=50, b=60))
-    return fig.to_html(full_html=False, include_plotlyjs=False, include_mathjax=False,
+    html = fig.to_html(full_html=False, include_plotlyjs=False, include_mathjax=False,
                        div_id=div_id, config=_CONFIG, default_width="100%",
                        default_height=f"{height}px")
+    # Deferred: the page runs these once its compressed plotly.js is unpacked (report.html.j2).
+    return re.sub(r'<script(\s+type="text/javascript")?>', f'<script type="{DEFERRED_SCRIPT}">', html)
 
 
 def _hline_log(fig: go.Figure, y: float, text: str, *, colour: str = "#b00", dash: str = "dash",
@@ -124,6 +129,13 @@ def peak_vs_current(results: pd.DataFrame, limits: PlantLimits) -> go.Figure | N
     return fig
 
 
+def _run_label(run: SeriesRun) -> str:
+    """A trace's plain name: controller, scenario and seed (the cell id only when unknown)."""
+    if run.controller and run.scenario is not None:
+        return f"{run.controller}, scenario {run.scenario}, seed {run.seed}"
+    return str(run.cell)
+
+
 def _need(run: SeriesRun | None, cols: Sequence[str]) -> bool:
     return run is not None and all(c in run.frame.columns and run.frame[c].notna().any()
                                    for c in cols)
@@ -147,7 +159,7 @@ def error_vs_time(run: SeriesRun | None, limits: PlantLimits, part: int) -> go.F
                        showarrow=False, xanchor="right", yanchor="bottom",
                        font=dict(color="#b00"))
     fig.update_layout(title=f"Figure 7-{2 if part == 1 else 3}: error versus time"
-                            f"{'' if part == 1 else ', continued'} — {run.cell}",
+                            f"{'' if part == 1 else ', continued'} — {_run_label(run)}",
                       xaxis_title="time [s]", yaxis_title="x1 = c − r [µrad]", showlegend=False)
     return fig
 
@@ -171,7 +183,7 @@ def friction_estimates(run: SeriesRun | None) -> go.Figure | None:
                              marker=dict(symbol="x", size=11, color="#000"),
                              text=["k̂s 71 %", "k̂s 95 %", "k̂c 102 %", "k̂c 101.4 %"],
                              hovertemplate="%{text} at %{x} s<extra>thesis</extra>"))
-    fig.update_layout(title=f"Figure 7-4: friction estimates versus time — {run.cell}",
+    fig.update_layout(title=f"Figure 7-4: friction estimates versus time — {_run_label(run)}",
                       xaxis_title="time [s]", yaxis_title="estimate / truth [%]")
     return fig
 
@@ -199,7 +211,7 @@ def cost_and_ratio(run: SeriesRun | None) -> go.Figure | None:
         fig.add_trace(go.Scatter(x=[54], y=[2.1], mode="markers", name="thesis: 2.1 at 54 s",
                                  marker=dict(symbol="x", size=11, color="#000")),
                       secondary_y=True)
-    fig.update_layout(title=f"Figure 7-5: cost and Δc ratio versus time — {run.cell}",
+    fig.update_layout(title=f"Figure 7-5: cost and Δc ratio versus time — {_run_label(run)}",
                       xaxis_title="time [s]")
     fig.update_yaxes(title_text="cost J (6-5)", secondary_y=False)
     fig.update_yaxes(title_text="Δc ratio [–]", secondary_y=True)
@@ -310,6 +322,18 @@ def hunting_onset(hunting: pd.DataFrame | None) -> go.Figure | None:
     return fig
 
 
+from bench.exact import EXACT_METHOD as _EXACT  # noqa: E402  (the exact simulator's label)
+
+_METHOD_LABELS = {_EXACT: "multimode linearization (exact)", "fixed_step": "fixed-step Euler (compiled)",
+                  "fixed_step_python": "fixed-step Euler (plain Python)", "solve_ivp": "scipy solve_ivp",
+                  "solve_ivp_reference": "scipy solve_ivp (reference)"}
+
+
+def method_label(method: str) -> str:
+    """Plain name of a speed-study method (the stored id when unknown)."""
+    return _METHOD_LABELS.get(method, str(method).replace("_", " "))
+
+
 def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
     """Work-precision diagram: error against wall time, per method."""
     if not speed or not speed.get("rows"):
@@ -323,14 +347,132 @@ def work_precision(speed: Mapping[str, Any] | None) -> go.Figure | None:
     for i, m in enumerate(methods):
         d = df[df["method"] == m].sort_values("wall_s")
         fig.add_trace(go.Scatter(x=d["wall_s"], y=d["error"], mode="lines+markers+text",
-                                 name=m, text=d["setting"], textposition="top center",
+                                 name=method_label(m), text=d["setting"], textposition="top center",
                                  marker=dict(size=9, symbol=_SYMBOLS[i % len(_SYMBOLS)]),
-                                 hovertemplate=(f"<b>{m}</b> %{{text}}<br>wall %{{x:.3g}} s"
-                                                "<br>error %{y:.3g} rad<extra></extra>")))
+                                 hovertemplate=(f"<b>{method_label(m)}</b> %{{text}}<br>wall %{{x:.3g}} s"
+                                                "<br>error %{y:.3g} (relative)<extra></extra>")))
     _hline_log(fig, 1e-6, "1e-6 relative (speed-up reference)", colour="#888", dash="dot", width=1,
                right=True)
     fig.update_layout(title="Work-precision: error vs wall time (same command sequence)",
                       xaxis_title="wall time [s]", xaxis_type="log",
                       yaxis_title=f"error (relative) — {speed.get('error_metric', 'error')}",
                       yaxis_type="log")
+    return fig
+
+
+def _scenario_limit_urad(limits: Mapping[str, PlantLimits], scenario: str,
+                         default: PlantLimits) -> float:
+    return (limits.get(scenario) or default).classical_limit_rad * 1e6
+
+
+def accuracy_vs_current(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
+                        default: PlantLimits) -> go.Figure | None:
+    """Median peak |x1| against median mean |i| on log–log axes, one panel per scenario: per
+    controller the median with its 95 % bootstrap CI as whiskers (both axes), every ok cell as a
+    faint point, and the scenario's own classical limit (2-6) as a dashed line."""
+    from reports.answer import eligible_rows
+    from reports.stats import median_ci
+
+    need = {"peak_error_rad", "mean_abs_current"}
+    if results.empty or not need <= set(results.columns):
+        return None
+    ok = results[(results["status"] == "ok") & results["peak_error_rad"].gt(0)
+                 & results["mean_abs_current"].gt(0)]
+    if ok.empty:
+        return None
+    scenarios = sorted(ok["scenario"].unique())
+    controllers = list(dict.fromkeys(results["controller"]))
+    n = len(scenarios)
+    cols = min(n, 3)
+    rows = math.ceil(n / cols)
+    fig = make_subplots(rows=rows, cols=cols, subplot_titles=[f"scenario {s}" for s in scenarios],
+                        shared_yaxes=True, horizontal_spacing=0.04, vertical_spacing=0.12)
+    bounds = set(ok.index) - set(eligible_rows(ok).index)
+    for k, scen in enumerate(scenarios):
+        r, c = k // cols + 1, k % cols + 1
+        d_s = ok[ok["scenario"] == scen]
+        for ctrl in controllers:
+            d = d_s[d_s["controller"] == ctrl]
+            if d.empty:
+                continue
+            colour = controller_colour(ctrl, controllers)
+            first = k == 0
+            fig.add_trace(go.Scatter(
+                x=d["mean_abs_current"], y=d["peak_error_rad"] * 1e6, mode="markers",
+                marker=dict(color=colour, size=5, opacity=0.25), legendgroup=ctrl, showlegend=False,
+                customdata=d["seed"].astype(str),
+                hovertemplate=(f"<b>{ctrl}</b>, {scen}, seed %{{customdata}}<br>peak %{{y:.3g}} µrad"
+                               "<br>mean |i| %{x:.3g} ozf·in<extra></extra>")), row=r, col=c)
+            py = median_ci(d["peak_error_rad"].to_numpy() * 1e6)
+            px = median_ci(d["mean_abs_current"].to_numpy())
+            label = ctrl + (" (bound)" if set(d.index) & bounds else "")
+            fig.add_trace(go.Scatter(
+                x=[px.median], y=[py.median], mode="markers", name=label, legendgroup=ctrl,
+                showlegend=first or ctrl not in set(ok[ok["scenario"].isin(scenarios[:k])]["controller"]),
+                marker=dict(color=colour, size=11, symbol=_SYMBOLS[controllers.index(ctrl) % len(_SYMBOLS)],
+                            line=dict(width=1, color="#222")),
+                error_y=dict(type="data", symmetric=False, array=[py.high - py.median],
+                             arrayminus=[py.median - py.low], color=colour, thickness=1.5),
+                error_x=dict(type="data", symmetric=False, array=[px.high - px.median],
+                             arrayminus=[px.median - px.low], color=colour, thickness=1),
+                hovertemplate=(f"<b>{ctrl}</b>, {scen}: median over {py.n} seeds<br>peak %{{y:.3g}} µrad "
+                               f"[{py.low:.3g}, {py.high:.3g}]<br>mean |i| %{{x:.3g}} ozf·in "
+                               f"[{px.low:.3g}, {px.high:.3g}]<extra></extra>")), row=r, col=c)
+        lim = _scenario_limit_urad(limits, scen, default)
+        fig.add_hline(y=lim, line=dict(color="#b00", dash="dash", width=1.5), row=r, col=c)
+        xref = "x domain" if k == 0 else f"x{k + 1} domain"
+        yref = "y" if k == 0 else f"y{k + 1}"
+        fig.add_annotation(x=0.02, xref=xref, y=math.log10(lim), yref=yref, showarrow=False,
+                           text=f"(2-6) limit {lim:.3g} µrad", xanchor="left", yanchor="bottom",
+                           font=dict(color="#b00", size=11))
+    fig.update_xaxes(type="log", title_text="mean |current| [ozf·in]")
+    fig.update_yaxes(type="log")
+    for r in range(1, rows + 1):
+        fig.update_yaxes(title_text="peak |error| [µrad]", row=r, col=1)
+    fig.update_layout(title="Accuracy vs current: median over seeds with 95 % CI (faint: each seed)",
+                      legend=dict(orientation="h", yanchor="top", y=-0.18, x=0),
+                      legend_title_text="controller")
+    return fig
+
+
+def peak_intervals(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
+                   default: PlantLimits) -> go.Figure | None:
+    """Median peak |x1| per controller with its 95 % bootstrap CI, one panel per scenario,
+    controllers sorted by their median in the first scenario; the scenario's limit (2-6) dashed."""
+    from reports.stats import median_ci
+
+    if results.empty or "peak_error_rad" not in results.columns:
+        return None
+    ok = results[(results["status"] == "ok") & results["peak_error_rad"].gt(0)]
+    if ok.empty:
+        return None
+    scenarios = sorted(ok["scenario"].unique())
+    controllers = list(dict.fromkeys(results["controller"]))
+    fig = make_subplots(rows=1, cols=len(scenarios), shared_yaxes=True, horizontal_spacing=0.03,
+                        subplot_titles=[f"scenario {s}" for s in scenarios])
+    order = ok[ok["scenario"] == scenarios[0]].groupby("controller")["peak_error_rad"].median()
+    cats = sorted(set(ok["controller"]), key=lambda c: (-order.get(c, -math.inf), c))
+    for k, scen in enumerate(scenarios):
+        d_s = ok[ok["scenario"] == scen]
+        for ctrl in cats:
+            v = d_s.loc[d_s["controller"] == ctrl, "peak_error_rad"].to_numpy() * 1e6
+            if v.size == 0:
+                continue
+            ci = median_ci(v)
+            colour = controller_colour(ctrl, controllers)
+            fig.add_trace(go.Scatter(
+                x=[ci.median], y=[ctrl], mode="markers", showlegend=False,
+                marker=dict(color=colour, size=10, line=dict(width=1, color="#222")),
+                error_x=dict(type="data", symmetric=False, array=[ci.high - ci.median],
+                             arrayminus=[ci.median - ci.low], color=colour, thickness=2, width=6),
+                hovertemplate=(f"<b>{ctrl}</b>, {scen}<br>median %{{x:.3g}} µrad [{ci.low:.3g}, "
+                               f"{ci.high:.3g}] over {ci.n} seeds<extra></extra>")), row=1, col=k + 1)
+        lim = _scenario_limit_urad(limits, scen, default)
+        fig.add_vline(x=lim, line=dict(color="#b00", dash="dash", width=1.5), row=1, col=k + 1)
+        xref = "x" if k == 0 else f"x{k + 1}"
+        fig.add_annotation(x=math.log10(lim), xref=xref, y=1, yref="paper", showarrow=False,
+                           text=f"(2-6) {lim:.3g}", yanchor="bottom", font=dict(color="#b00", size=10))
+    fig.update_xaxes(type="log", title_text="peak |error| [µrad]")
+    fig.update_yaxes(categoryorder="array", categoryarray=cats)
+    fig.update_layout(title="Peak error per controller: median over seeds and its 95 % CI")
     return fig

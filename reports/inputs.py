@@ -151,6 +151,7 @@ class ReportInputs:
     config: dict[str, Any] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    modes: dict[str, str] = field(default_factory=dict)    # "bound": the check's --quick/full mode
 
 
 def _missing(columns: set[str], required: tuple[str, ...], what: str) -> None:
@@ -426,7 +427,18 @@ def load_inputs(out_dir: Path | str) -> ReportInputs:
         config=config,
         meta=meta,
         notes=tuple(notes),
+        modes=_modes(out_dir),
     )
+
+
+def _modes(out_dir: Path) -> dict[str, str]:
+    """The (2-6) check's sweep mode (``quick``/``full``) from ``bound_verdict.json``, if stored."""
+    path = out_dir / "bound_verdict.json"
+    try:
+        mode = _read_json(path).get("mode") if path.exists() else None
+    except (ValueError, AttributeError):
+        mode = None
+    return {"bound": str(mode)} if mode else {}
 
 
 def write_series(out_dir: Path | str, cell: str, frame: pd.DataFrame) -> Path:

@@ -18,7 +18,7 @@ from typing import Any
 
 from plant.params import bohacek_tuteur_limit, lti_peak_bound
 
-__all__ = ["PlantLimits", "limits_from_config", "lag_ratio_limit"]
+__all__ = ["PlantLimits", "limits_from_config", "lag_ratio_limit", "scenario_limits"]
 
 # Table 2-1 values, used only when a configuration carries no plant section.
 _TABLE_2_1 = {"stiction": 2.1, "coulomb": 1.4, "inertia": 0.5, "sample_period": 0.01}
@@ -102,3 +102,22 @@ def limits_from_config(config: Mapping[str, Any] | None) -> PlantLimits:
             return PlantLimits(**values, source=note)
     return PlantLimits(**_TABLE_2_1,
                        source="PlantParams defaults (Table 2-1): no plant section in config")
+
+
+def scenario_limits(config: Mapping[str, Any] | None) -> dict[str, PlantLimits]:
+    """Each scenario's own limits, from ``config["scenarios"][name]["plant"]`` (Table 2-1 for
+    missing fields); empty when the configuration records no scenarios. The classical limit
+    (2-6) of a scenario is its ``classical_limit_rad``."""
+    out: dict[str, PlantLimits] = {}
+    scenarios = (config or {}).get("scenarios")
+    if not isinstance(scenarios, Mapping):
+        return out
+    for name, spec in scenarios.items():
+        plant = spec.get("plant") if isinstance(spec, Mapping) else None
+        plant = plant if isinstance(plant, Mapping) else {}
+        try:
+            out[str(name)] = PlantLimits(**{k: float(plant.get(k, _TABLE_2_1[k])) for k in _TABLE_2_1},
+                                         source=f"config.scenarios.{name}.plant")
+        except (TypeError, ValueError):
+            continue
+    return out

@@ -29,7 +29,7 @@ from reports.browser import (dump_dom, find_chromium, netlog_requests, page_netw
 from reports.screenshot import render_screenshot
 from reports.synthetic import write_synthetic_run
 
-EXPECTED_FIGURES = {"fig-peak-vs-current", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
+EXPECTED_FIGURES = {"fig-peak-vs-current", "fig-peak-intervals", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
                     "fig-bound-omega", "fig-bound-lag", "fig-hunting", "fig-speed"}
 
 
@@ -123,3 +123,25 @@ def test_tables_sort_on_header_click(chromium, report, tmp_path):
     desc = [float(v) for v in re.findall(
         r'<tr>(?:<td[^>]*>.*?</td>){3}<td data-v="([^"]+)"', table.group(1))]
     assert desc == sorted(asc, reverse=True)
+
+
+def test_answer_block_names_the_lowest_median_of_results_csv(rendered, report):
+    """The rendered answer (after the browser ran the page's scripts) names, per scenario, the
+    controller with the lowest median peak error in the run's results.csv."""
+    import pandas as pd
+
+    dom, _ = rendered
+    csv = report.parent / "results.csv"
+    res = pd.read_csv(csv) if csv.exists() else pd.read_parquet(report.parent / "results.parquet")
+    ok = res[res["status"] == "ok"]
+    if "privileged" in ok.columns:
+        ok = ok[~ok["privileged"].astype(str).str.lower().eq("true")]
+    assert not ok.empty
+    for scen, g in ok.groupby("scenario"):
+        medians = g.groupby("controller")["peak_error_rad"].median()
+        row = re.search(rf'<tr id="answer-{re.escape(scen)}"[^>]*>(.*?)</tr>', dom, re.S)
+        assert row, scen
+        named = re.search(r'<td class="best">([^<(]*)', row.group(1)).group(1).strip()
+        assert medians.idxmin() in [n.strip() for n in named.split("=")], (scen, named)
+    # the sticky table of contents stays in view
+    assert re.search(r'<nav class="toc" id="toc">', dom)

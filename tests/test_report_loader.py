@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+import gzip
 import json
 import re
 
@@ -14,7 +16,7 @@ from reports.browser import plot_render_status, static_external_references
 from reports.inputs import SeriesRun, cell_id, load_inputs, write_series
 from reports.synthetic import synthetic_inputs, write_synthetic_run
 
-ALL_FIGURES = {"fig-peak-vs-current", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
+ALL_FIGURES = {"fig-peak-vs-current", "fig-peak-intervals", "fig-7-2", "fig-7-3", "fig-7-4", "fig-7-5",
                "fig-bound-omega", "fig-bound-lag", "fig-hunting", "fig-speed"}
 
 
@@ -36,7 +38,9 @@ def test_full_synthetic_run_renders_every_section(tmp_path):
     assert "Not measured in this run:</strong> the" not in html
     assert "SYNTHETIC DATA" in html
     # One plotly.js bundle, inline; each figure only calls Plotly.newPlot.
-    assert html.count("* plotly.js v") == 1
+    bundles = re.findall(r'<script id="plotly-bundle" type="application/gzip;base64">([^<]*)</script>', html)
+    assert len(bundles) == 1
+    assert gzip.decompress(base64.b64decode(bundles[0])).startswith(b"/**\n* plotly.js")
     assert html.count("Plotly.newPlot(") == len(ALL_FIGURES)
     for section in ("claims-table", "aggregate-table", "results-table", "hunting-table",
                     "speed-table", "bound-verdict", "config-json"):
@@ -93,7 +97,7 @@ def test_results_csv_only(tmp_path):
                                                               index=False)
     (tmp_path / "config.json").write_text(json.dumps(d["config"]))
     html = build_report_from_dir(tmp_path).read_text(encoding="utf-8")
-    assert _figure_ids(html) == {"fig-peak-vs-current"}
+    assert _figure_ids(html) == {"fig-peak-vs-current", "fig-peak-intervals"}
     assert "<strong>Not measured in this run:</strong> rms_current" in html
     assert "<strong>Not measured in this run:</strong> Figure 7-4" in html
     assert _claim_verdict(html, "less_current") == "reproduced"
