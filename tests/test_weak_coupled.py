@@ -57,3 +57,30 @@ def test_config_rejects_bad_fields(field, value):
 def test_factors_must_be_integers():
     with pytest.raises(ValueError, match="factors"):
         coupled_step_pulses(PlantParams(), DT_U, 1e-6, (1, 2.5), 2, seed=0)
+
+
+def test_tiny_study_is_consistent_and_reaches_the_report(tmp_path):
+    # A tiny run of the whole study: the weak error at the coarsest step is the anchor itself,
+    # the errors at finer steps are the anchor plus the coupled differences, and the report's
+    # speed section shows the resolved table with one row per step.
+    from bench.weak_coupled import coupled_weak_error
+    from reports import build_report
+    from reports.synthetic import synthetic_inputs
+
+    cfg = CoupledConfig(dt_fine=1e-5, factors=(2, 4), n_coupled=200, n_anchor=200, n_boot=20, n_timing=20)
+    r = coupled_weak_error(PlantParams(), cfg, seed=3)
+    rows = r["rows"]
+    assert [row["step_s"] for row in rows] == pytest.approx([2e-5, 4e-5])
+    assert rows[-1]["mean_error_rad"] == pytest.approx(r["anchor_bias_rad"], abs=1e-18)
+    for row in rows:
+        lo, hi = row["mean_error_ci_rad"]
+        assert lo <= row["mean_error_rad"] <= hi
+        assert row["vs_fine_w1_rad"] >= abs(row["vs_fine_mean_rad"]) - 1e-18    # W1 ≥ |Δ mean|
+    data = synthetic_inputs(0)
+    data["speed"] = {**data["speed"], "weak_error_coupled": r}
+    html = build_report(tmp_path, **data).read_text(encoding="utf-8")
+    assert 'id="coupled-table"' in html
+    table = html[html.index('id="coupled-table"'):]
+    table = table[:table.index("</table>")]
+    assert table.count("<tr") == 1 + len(rows)                 # header and one row per step
+    assert "h = 2e−05 s" in table and "h = 4e−05 s" in table
