@@ -75,7 +75,7 @@ def test_tiny_study_is_consistent_and_reaches_the_report(tmp_path):
     for row in rows:
         lo, hi = row["mean_error_ci_rad"]
         assert lo <= row["mean_error_rad"] <= hi
-        assert row["vs_fine_w1_rad"] >= abs(row["vs_fine_mean_rad"]) - 1e-18    # W1 ≥ |Δ mean|
+        assert row["vs_fine_w1_raw_rad"] >= abs(row["vs_fine_mean_rad"]) - 1e-18    # W1 ≥ |Δ mean|
     data = synthetic_inputs(0)
     data["speed"] = {**data["speed"], "weak_error_coupled": r}
     html = build_report(tmp_path, **data).read_text(encoding="utf-8")
