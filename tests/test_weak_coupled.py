@@ -84,3 +84,14 @@ def test_tiny_study_is_consistent_and_reaches_the_report(tmp_path):
     table = table[:table.index("</table>")]
     assert table.count("<tr") == 1 + len(rows)                 # header and one row per step
     assert "h = 2e−05 s" in table and "h = 4e−05 s" in table
+
+    from rich.console import Console
+
+    from bench.speed.tables import _print_table
+
+    console = Console(record=True, width=200)
+    _print_table({"weak_error_coupled": r, "technology": {"caveat": "-"}, "error_definition": "-",
+                  "elapsed_s": 1.0, "load_average_1min": 1.0}, console)
+    text = console.export_text()
+    assert text.count("EM h=") == len(rows)
+    assert "tolerance 1.0% of the mean" in text and "tolerance 0.1% of the mean" in text
