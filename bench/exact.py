@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from plant.protocol import DEFAULT_FAMILY, get_family
 
-__all__ = ["EXACT_METHOD", "advance", "fixed_step", "fixed_step_pulses", "event_driven", "Schedule",
+__all__ = ["EXACT_METHOD", "advance", "fixed_step", "fixed_step_pulses", "coupled_step_pulses", "event_driven", "Schedule",
            "schedule_from_commands"]
 
 _REFERENCES = get_family(DEFAULT_FAMILY).references
@@ -17,6 +17,7 @@ EXACT_METHOD = DEFAULT_FAMILY       # the exact simulator's label in speed.json
 advance = _REFERENCES.exact_step
 fixed_step = _REFERENCES.fixed_step
 fixed_step_pulses = _REFERENCES.fixed_step_pulses
+coupled_step_pulses = _REFERENCES.coupled_step_pulses
 event_driven = _REFERENCES.event_driven
 Schedule = _REFERENCES.Schedule
 schedule_from_commands = _REFERENCES.schedule_from_commands

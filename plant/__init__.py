@@ -20,13 +20,30 @@ from plant import _jit_cache
 
 _jit_cache.refresh()
 
-from plant.drive import DriveCommand, DriveType  # noqa: E402
-from plant.params import PlantParams  # noqa: E402
-from plant.multimode.pulse import PulseResponse, pulse_response  # noqa: E402
-from plant.multimode.interval import advance  # noqa: E402
-from plant.protocol import PlantFamily, available_families, get_family, register_family  # noqa: E402
-from plant.randomness import NoiseStream  # noqa: E402
-from plant.state import EventKind, IntervalResult, PlantState, SimOptions, Status, initial_state  # noqa: E402
+# The names below load on first use (PEP 562): ``import plant.params`` (what a controller's
+# registry needs) does not compile-load numba and scipy; ``plant.advance`` does.
+_EXPORTS = {
+    "plant.drive": ("DriveCommand", "DriveType"),
+    "plant.params": ("PlantParams",),
+    "plant.multimode.pulse": ("PulseResponse", "pulse_response"),
+    "plant.multimode.interval": ("advance",),
+    "plant.protocol": ("PlantFamily", "available_families", "get_family", "register_family"),
+    "plant.randomness": ("NoiseStream",),
+    "plant.state": ("EventKind", "IntervalResult", "PlantState", "SimOptions", "Status", "initial_state"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str) -> object:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    if name not in _WHERE:
+        raise AttributeError(f"module 'plant' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_WHERE[name]), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "PlantParams", "DriveCommand", "DriveType", "PulseResponse", "pulse_response",

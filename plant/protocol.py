@@ -147,7 +147,7 @@ class PlantFamily(abc.ABC):
         moved. Raises ``RuntimeError`` when the shaft still moves after 1 s or the plant
         leaves ``ok``.
         """
-        p = params.replace(command_velocity_std=0.0) if params.command_velocity_std else params
+        p = _quiet_command(params)
         x = state.x.copy()
         x[X4] = 0.0
         x.flags.writeable = False
@@ -169,6 +169,21 @@ class PlantFamily(abc.ABC):
 
     def __repr__(self) -> str:
         return f"<plant family {self.name!r}>"
+
+
+def _quiet_command(params: Any) -> Any:
+    """``params`` with ``command_velocity_std = 0``, built once per parameter object and kept on it
+    (the key :mod:`plant.multimode.pulse` uses; an oracle asks for it at every sample)."""
+    if not params.command_velocity_std:
+        return params
+    cached = getattr(params, "__dict__", {}).get("_pulse_plant")
+    if cached is None:
+        cached = params.replace(command_velocity_std=0.0)
+        try:
+            object.__setattr__(params, "_pulse_plant", cached)
+        except (AttributeError, TypeError):      # a parameter class without a __dict__: no cache
+            pass
+    return cached
 
 
 def _checked(step: IntervalResult, t_stop: float) -> tuple[PlantState, float]:

@@ -202,6 +202,31 @@ def _weak_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
     return rows
 
 
+def _coupled_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
+    """Rows of the coupled weak-error study (speed.json ``weak_error_coupled``): errors in % of
+    the exact mean Δc with their 95 % CIs, and EM's wall per path [µs]."""
+    coupled = (speed or {}).get("weak_error_coupled")
+    if not isinstance(coupled, Mapping) or not coupled.get("exact_mean_rad"):
+        return []
+    m = float(coupled["exact_mean_rad"])
+
+    def pct(v: Any) -> float:
+        return math.nan if v is None else 100.0 * float(v) / m
+
+    def ci(c: Any) -> str:
+        return "—" if not c else f"[{_num(pct(c[0]))}, {_num(pct(c[1]))}]"
+
+    rows = []
+    for r in coupled.get("rows", []):
+        wall = float(r["wall_per_path_s"]) * 1e6
+        rows.append([_cell(f"h = {_num(r['step_s'])} s"),
+                     _cell(_num(pct(r["mean_error_rad"])), pct(r["mean_error_rad"]), "num"),
+                     _cell(ci(r["mean_error_ci_rad"])), _cell(ci(r["vs_fine_mean_ci_rad"])),
+                     _cell(ci(r["vs_fine_p95_ci_rad"])), _cell(ci(r["vs_fine_w1_ci_rad"])),
+                     _cell(_num(wall), wall, "num")])
+    return rows
+
+
 def _hunting_table(hunting: pd.DataFrame | None) -> list[list[dict[str, str]]]:
     if hunting is None:
         return []
@@ -477,6 +502,7 @@ def render_html(inputs: ReportInputs) -> str:
         "speed": inputs.speed,
         "speed_rows": _speed_table(inputs.speed),
         "weak_rows": _weak_table(inputs.speed),
+        "coupled_rows": _coupled_table(inputs.speed),
         "speedup": None if speedup is None or math.isnan(speedup) else speedup,
         "speed_how": fixed_need,
         "speed_lower": speed_lower,

@@ -53,12 +53,29 @@ verdicts), :mod:`~bench.bound.check` (all of it, written to files), :mod:`~bench
 and :mod:`~bench.bound.command` (``solnic-bench check-bound``).
 """
 
-from bench.bound.cells import BoundCell, HuntingCell, bound_cells, hunting_cells
-from bench.bound.check import BoundResult, check_bound
-from bench.bound.command import check_bound_command
-from bench.bound.plan import COULOMB, RAMP_VELOCITY, SweepPlan, highest_stable_crossover, sweep_plan
-from bench.bound.run import run_bound_cell, run_hunting_cell
-from bench.bound.verdict import BOUND_COLUMNS, HUNTING_COLUMNS, bound_verdict, hunting_onsets
+# The names below load on first use (PEP 562), so that ``solnic-bench --help`` and ``list`` do
+# not import numba, scipy and the plant to compose the ``check-bound`` command.
+_EXPORTS = {
+    "bench.bound.cells": ("BoundCell", "HuntingCell", "bound_cells", "hunting_cells"),
+    "bench.bound.check": ("BoundResult", "check_bound"),
+    "bench.bound.command": ("check_bound_command",),
+    "bench.bound.plan": ("COULOMB", "RAMP_VELOCITY", "SweepPlan", "highest_stable_crossover", "sweep_plan"),
+    "bench.bound.run": ("run_bound_cell", "run_hunting_cell"),
+    "bench.bound.verdict": ("BOUND_COLUMNS", "HUNTING_COLUMNS", "bound_verdict", "hunting_onsets"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str) -> object:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    if name not in _WHERE:
+        raise AttributeError(f"module 'bench.bound' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_WHERE[name]), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "RAMP_VELOCITY", "COULOMB", "BOUND_COLUMNS", "HUNTING_COLUMNS", "SweepPlan", "BoundCell",

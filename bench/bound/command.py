@@ -8,9 +8,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from bench.bound.check import check_bound
-from bench.bound.tables import _tables, _verdict_lines
-
 __all__ = ["check_bound_command"]
 
 
@@ -29,6 +26,9 @@ def check_bound_command(
     """
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from bench.bound.check import check_bound   # heavy (numba, scipy, the plant): only when run
+    from bench.bound.tables import _tables, _verdict_lines
 
     console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
     if workers is not None and workers < 1:

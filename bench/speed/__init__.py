@@ -78,10 +78,27 @@ and 4), :mod:`~bench.speed.compare` (one sequence), :mod:`~bench.speed.compariso
 comparison), :mod:`~bench.speed.tables` and :mod:`~bench.speed.command` (``solnic-bench speed``).
 """
 
-from bench.speed.command import speed_command
-from bench.speed.comparison import speed_comparison
-from bench.speed.config import FULL, QUICK, TARGET_ERROR, SpeedConfig
-from bench.speed.sequence import record_commands
+# The names below load on first use (PEP 562), so that ``solnic-bench --help`` and ``list`` do
+# not import numba, scipy and pandas to compose the ``speed`` command.
+_EXPORTS = {
+    "bench.speed.command": ("speed_command",),
+    "bench.speed.comparison": ("speed_comparison",),
+    "bench.speed.config": ("FULL", "QUICK", "TARGET_ERROR", "SpeedConfig"),
+    "bench.speed.sequence": ("record_commands",),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str) -> object:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    if name not in _WHERE:
+        raise AttributeError(f"module 'bench.speed' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_WHERE[name]), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = ["TARGET_ERROR", "SpeedConfig", "QUICK", "FULL", "speed_comparison", "speed_command",
            "record_commands"]

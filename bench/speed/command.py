@@ -9,9 +9,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from bench.speed.comparison import speed_comparison
-from bench.speed.tables import _print_table
-
 __all__ = ["speed_command"]
 
 
@@ -22,6 +19,9 @@ def speed_command(
 ) -> None:
     """Work-precision comparison: exact multimode vs fixed-step Euler vs solve_ivp (SPEC §8)."""
     from rich.console import Console
+
+    from bench.speed.comparison import speed_comparison   # heavy (numba, scipy): only when run
+    from bench.speed.tables import _print_table
 
     err = Console(stderr=True)
     result = speed_comparison(quick, progress=lambda msg: err.print(f"[dim]{msg}[/dim]"))

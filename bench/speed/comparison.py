@@ -15,6 +15,7 @@ from bench.speed.compare import _compare
 from bench.speed.config import FULL, QUICK, TARGET_ERROR, Progress, SpeedConfig
 from bench.speed.contestants import _warm_up_references
 from bench.speed.sequence import _window, record_commands, synthetic_pulse_train
+from bench.weak_coupled import coupled_weak_error
 from bench.weak_error import weak_error_comparison
 from bench.exact import EXACT_METHOD
 from controllers import roles
@@ -108,6 +109,11 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
         ratio = weak["equal_error"]["mean"]
         result["noisy_speedup_at_equal_weak_error"] = ratio["cost_ratio"]   # EM wall / exact wall per path
         result["noisy_speedup_is_lower_bound"] = ratio["lower_bound"]
+
+    if cfg.coupled is not None:
+        say(f"noisy weak error resolved: Euler–Maruyama ladder on shared Brownian paths "
+            f"({cfg.coupled.n_coupled} paths), anchored by {cfg.coupled.n_anchor} exact paths")
+        result["weak_error_coupled"] = coupled_weak_error(params, cfg.coupled, seed=seed)
 
     if cfg.linear_sequence:
         say(f"recording linear closed loop, noise-free, {cfg.record_s:g} s")

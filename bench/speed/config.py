@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from bench.weak_coupled import FULL_COUPLED, QUICK_COUPLED, CoupledConfig
 from bench.weak_error import FULL_WEAK, QUICK_WEAK, WeakErrorConfig
 
 __all__ = ["TARGET_ERROR", "SpeedConfig", "QUICK", "FULL", "Progress"]
@@ -46,6 +47,10 @@ class SpeedConfig:
         Fresh processes timing the exact simulator; the best cold time is kept.
     linear_sequence : bool
         Also compare on the linear controller's held levels.
+    weak : WeakErrorConfig or None
+        The uncoupled noisy weak-error comparison (:mod:`bench.weak_error`).
+    coupled : CoupledConfig or None
+        The coupled one that resolves EM's weak error (:mod:`bench.weak_coupled`).
     """
 
     record_s: float
@@ -60,6 +65,7 @@ class SpeedConfig:
     exact_processes: int = 1
     linear_sequence: bool = False
     weak: WeakErrorConfig | None = None
+    coupled: CoupledConfig | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.record_s):
@@ -75,8 +81,8 @@ class SpeedConfig:
 
 
 QUICK = SpeedConfig(record_s=50.0, window_s=10.0, rtols=(1e-3, 1e-5, 1e-7, 1e-9, 1e-12), probe_pulses=12,
-                    probe_steps=(1e-8, 1e-9), weak=QUICK_WEAK)
+                    probe_steps=(1e-8, 1e-9), weak=QUICK_WEAK, coupled=QUICK_COUPLED)
 
 FULL = SpeedConfig(record_s=100.0, window_s=100.0, rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12),
                    probe_pulses=40, probe_steps=(1e-8, 1e-9), exact_processes=3, linear_sequence=True,
-                   weak=FULL_WEAK)
+                   weak=FULL_WEAK, coupled=FULL_COUPLED)

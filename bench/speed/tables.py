@@ -67,6 +67,20 @@ def _print_table(result: dict[str, Any], console: Any) -> None:
         bound = "≥ " if result.get("noisy_speedup_is_lower_bound") else ""
         console.print(f"  exact vs EM at equal weak error (mean Δc): {bound}"
                       f"{_fmt(result['noisy_speedup_at_equal_weak_error'])}×")
+    coupled = result.get("weak_error_coupled")
+    if coupled:
+        m = coupled["exact_mean_rad"]
+        console.print(f"noisy, resolved: EM on shared Brownian paths ({coupled['n_coupled']} paths, fine step "
+                      f"{_fmt(coupled['dt_fine_s'])} s), anchored by {coupled['n_anchor']} exact paths; "
+                      f"mean Δc {_fmt(m * 1e6)} µrad; errors in % of it with 95 % CI")
+        for r in coupled["rows"]:
+            pct = [_fmt(100 * x / m) for x in r["mean_error_ci_rad"]]
+            fine = [_fmt(100 * x / m) for x in r["vs_fine_mean_ci_rad"]]
+            console.print(f"  EM h={_fmt(r['step_s'])}: weak error vs exact {_fmt(100 * r['mean_error_rad'] / m)} % "
+                          f"[{pct[0]}, {pct[1]}]; vs finest EM: mean [{fine[0]}, {fine[1]}] %, "
+                          f"W1 {_fmt(100 * r['vs_fine_w1_rad'] / m)} %; {_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
+        for tol, c in coupled["cost_at_tolerance"].items():
+            console.print(f"  tolerance {float(tol):.1%} of the mean: {c['verdict']}")
     console.print(f"[yellow]technology:[/yellow] {result['technology']['caveat']}")
     console.print(f"error: {result['error_definition']}; elapsed {_fmt(result['elapsed_s'])} s, "
                   f"load average {_fmt(result['load_average_1min'])}")

@@ -32,7 +32,8 @@ class Multimode(PlantFamily):
     description = "Acker's shaft: Coulomb friction and stiction, exact multimode linearization (ch. 3-4)"
     linear_law_loop = staticmethod(law_loop.run_law)
     references = SimpleNamespace(exact_step=advance, fixed_step=reference.fixed_step,
-                                 fixed_step_pulses=reference.fixed_step_pulses, event_driven=reference.event_driven,
+                                 fixed_step_pulses=reference.fixed_step_pulses,
+                                 coupled_step_pulses=reference.coupled_step_pulses, event_driven=reference.event_driven,
                                  Schedule=reference.Schedule, schedule_from_commands=reference.schedule_from_commands)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
