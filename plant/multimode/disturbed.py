@@ -8,9 +8,11 @@ d acts in every mode: ḋ = −d/τd + √(2/τd)·σd·w_d (σd = ``disturbance
 and a stuck shaft breaks away when |x3 + d| > ks. The state carries d as a seventh entry,
 x = [x1, x2, x3, x4, x5, u, d]. With d the plant is still linear per mode, so it stays exact:
 on the augmented vector Y = [x1, x2, x3, x4, x5, d, kc, u] each mode is Ẏ = A·Y + noise, and
-a step of width h is Y⁺ = Φ(h)·Y + N with Φ(h) = expm(A·h) and COV[N] by Van Loan (Van Loan,
-IEEE TAC 23(3), 1978: expm of [[−A, Qc], [0, Aᵀ]]·h), drawn through the minimal factor (4-20)
-of :mod:`plant.multimode.noise`; both are cached per (plant, mode, h).
+a step of width h is Y⁺ = Φ(h)·Y + N. Φ(h) and COV[N] are closed forms (d's column is x5's
+with s = +1 and β5 → 1/τd, its noise independent of the others; :func:`_closed_form`), checked
+against expm and Van Loan (IEEE TAC 23(3), 1978: expm of [[−A, Qc], [0, Aᵀ]]·h,
+:func:`van_loan`); the noise is drawn through the minimal factor (4-20) of
+:mod:`plant.multimode.noise`; all cached per (plant, mode, h).
 
 Events are located as the noisy velocity zero of :mod:`plant.multimode.zero_velocity` is:
 exact Gaussian sub-steps (long rungs h·2^k only while the barrier is 8.5σ away), a crossing
@@ -39,7 +41,8 @@ import numpy as np
 import scipy.linalg
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.moving import substep_peak
+from plant.expfun import e1, e2, e4
+from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.noise import noise_factor
 from plant.multimode.segments import torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
@@ -121,16 +124,79 @@ def _cache(params: PlantParams) -> dict:
     return {}
 
 
+def _records(params: PlantParams) -> tuple[np.ndarray, np.ndarray]:
+    """The plant's kernel record, and one that makes q_moving's x5 slot the disturbance d
+    (β5 → 1/τd, σ5² → 2σd²/τd, no w2, no w4), cached with the transitions."""
+    memo = _cache(params)
+    recs = memo.get("records")
+    if recs is None:
+        rec = params.kernel_record()
+        rd = rec.copy()
+        rd[0]["beta5"] = 1.0 / params.disturbance_torque_tau
+        rd[0]["sigma5_sq"] = 2.0 * params.disturbance_torque_std ** 2 / params.disturbance_torque_tau
+        rd[0]["sigma2_sq"] = 0.0
+        rd[0]["sigma4_sq"] = 0.0
+        recs = memo["records"] = (rec, rd)
+    return recs
+
+
+# Y-index of each slot of plant.multimode.moving's augmented vector [x1, x2, x3, x4, x5, kc, u].
+_FROM7 = np.array([Y1, Y2, Y3, Y4, Y5, YKC, YU])
+_BLOCK = np.array([Y1, Y2, Y4, Y5])
+
+
+def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ(h), Q(h)) in closed form. Moving: Φ of (3-20)/(3-21) (phi_moving) plus d's column,
+    which is x5's with s = +1 and β5 → βd (ẋ2 gets α·d, x5 enters as s·α·x5); Q = q_moving's
+    block plus d's share, q_moving's x5 share with the d record (the noises are independent).
+    Stuck: (3-22) and (4-11) as plant.multimode.stuck, d an Ornstein–Uhlenbeck step."""
+    rec, rd = _records(params)
+    p = params
+    bd = 1.0 / p.disturbance_torque_tau
+    sd2 = 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
+    phi = np.zeros((_N, _N))
+    Q = np.zeros((_N, _N))
+    if mode == 2:
+        b3, b4, s4 = p.beta3, p.beta4, p.sigma4_sq
+        y = b4 * h
+        E = e1(y)
+        for i in range(_N):
+            phi[i, i] = 1.0
+        phi[Y1, Y4] = -E / b4
+        phi[Y4, Y4] = 1.0 - E
+        phi[Y3, Y3] = math.exp(-b3 * h)
+        phi[Y3, YU] = e1(b3 * h)
+        phi[YD, YD] = math.exp(-bd * h)
+        Q[Y1, Y1] = s4 * e4(y) / b4 ** 3
+        Q[Y1, Y4] = Q[Y4, Y1] = -s4 * E * E / (2.0 * b4 * b4)
+        Q[Y4, Y4] = s4 * E * (2.0 - E) / (2.0 * b4)
+        Q[YD, YD] = sd2 * e1(2.0 * bd * h) / (2.0 * bd)
+        return phi, Q
+    P7 = np.empty((7, 7))
+    phi_moving(mode, h, rec[0], P7)
+    phi[np.ix_(_FROM7, _FROM7)] = P7
+    a = p.alpha
+    phi[Y1, YD] = a * e2(bd * h) / (bd * bd)
+    phi[Y2, YD] = a * e1(bd * h) / bd
+    phi[YD, YD] = math.exp(-bd * h)
+    Q4 = np.empty((4, 4))
+    q_moving(mode, h, rec[0], Q4)
+    Q[np.ix_(_BLOCK, _BLOCK)] = Q4
+    q_moving(1, h, rd[0], Q4)                      # d's share on (x1, x2, ·, d)
+    dblk = np.array([Y1, Y2, YD])
+    Q[np.ix_(dblk, dblk)] += Q4[np.ix_([0, 1, 3], [0, 1, 3])]
+    return phi, Q
+
+
 def transition(params: PlantParams, mode: int, h: float) -> _Step:
-    """The cached :class:`_Step` of ``mode`` over ``h`` [s]."""
+    """The cached :class:`_Step` of ``mode`` over ``h`` [s] (closed form; Van Loan is the tests' oracle)."""
     memo = _cache(params)
     key = (mode, h)
     step = memo.get(key)
     if step is None:
         if len(memo) > 4096:
             memo.clear()
-        A, Qc = drift_matrix(params, 2 if mode == 2 else mode)
-        step = memo[key] = _Step(*van_loan(A, Qc, h))
+        step = memo[key] = _Step(*_closed_form(params, mode, h))
     return step
 
 
