@@ -10,8 +10,8 @@ x = [x1, x2, x3, x4, x5, u, d]. With d the plant is still linear per mode, so it
 on the augmented vector Y = [x1, x2, x3, x4, x5, d, kc, u] each mode is Ẏ = A·Y + noise, and
 a step of width h is Y⁺ = Φ(h)·Y + N. Φ(h) and COV[N] are closed forms (d's column is x5's
 with s = +1 and β5 → 1/τd, its noise independent of the others; :func:`_closed_form`), checked
-against expm and Van Loan (IEEE TAC 23(3), 1978: expm of [[−A, Qc], [0, Aᵀ]]·h,
-:func:`van_loan`); the noise is drawn through the minimal factor (4-20) of
+against expm and Van Loan (IEEE TAC 23(3), 1978: expm of [[−A, Qc], [0, Aᵀ]]·h) in
+tests/test_disturbance_torque.py; the noise is drawn through the minimal factor (4-20) of
 :mod:`plant.multimode.noise`; all cached per (plant, mode, h).
 
 Events are located as the noisy velocity zero of :mod:`plant.multimode.zero_velocity` is:
@@ -38,7 +38,6 @@ import math
 from functools import lru_cache
 
 import numpy as np
-import scipy.linalg
 
 from plant.drive import DriveCommand, DriveType
 from plant.expfun import e1, e2, e4
@@ -50,7 +49,7 @@ from plant.params import PlantParams
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 
-__all__ = ["N_X", "D", "advance", "drift_matrix", "van_loan", "transition", "initial_state"]
+__all__ = ["N_X", "D", "advance", "transition", "initial_state"]
 
 N_X = 7     # x1, x2, x3, x4, x5, u, d
 D = 6       # index of d in the state vector
@@ -65,47 +64,6 @@ def initial_state(params: PlantParams, x5: float) -> PlantState:
     x[4] = x5
     x.flags.writeable = False
     return PlantState(0.0, x, 2, False)
-
-
-def drift_matrix(params: PlantParams, mode: int) -> tuple[np.ndarray, np.ndarray]:
-    """(A, Qc): Ẏ = A·Y + w, E[w wᵀ] = Qc·δ(t), on Y = [x1, x2, x3, x4, x5, d, kc, u].
-
-    Mode 2 (stuck): x2 ≡ 0 and x5 frozen as in :mod:`plant.multimode.stuck`; modes 1 and 3
-    as (3-20)/(3-21) with s = +1 in mode 1, −1 in mode 3, plus α·d in ẋ2.
-    """
-    p = params
-    a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
-    bd = 1.0 / p.disturbance_torque_tau
-    sd2 = 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
-    A = np.zeros((_N, _N))
-    Qc = np.zeros((_N, _N))
-    A[Y1, Y4] = -1.0
-    A[Y3, Y3], A[Y3, YU] = -b3, b3
-    A[Y4, Y4] = -b4
-    A[YD, YD] = -bd
-    Qc[Y4, Y4] = p.sigma4_sq
-    Qc[YD, YD] = sd2
-    if mode != 2:
-        s = 1.0 if mode == 1 else -1.0
-        A[Y1, Y2] = 1.0
-        A[Y2, Y3], A[Y2, Y5], A[Y2, YD], A[Y2, YKC] = a, s * a, a, s * a
-        A[Y5, Y5] = -b5
-        Qc[Y2, Y2] = a * a * p.sigma2_sq
-        Qc[Y5, Y5] = p.sigma5_sq
-    return A, Qc
-
-
-def van_loan(A: np.ndarray, Qc: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Φ(h), ∫₀ʰ Φ(v)·Qc·Φ(v)ᵀ dv) from one expm (Van Loan 1978)."""
-    n = A.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -A
-    M[:n, n:] = Qc
-    M[n:, n:] = A.T
-    F = scipy.linalg.expm(M * h)
-    phi = F[n:, n:].T
-    Q = phi @ F[:n, n:]
-    return phi, 0.5 * (Q + Q.T)
 
 
 class _Step:
