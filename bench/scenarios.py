@@ -17,6 +17,9 @@ Built in:
 * ``ratio-2`` — k̄s/k̄c = 2 (stiction 2.8, Coulomb 1.4 ozf·in);
 * ``quantized`` — Table 2-1 read through a 1 µrad encoder (``quantization`` = 1e-6 rad);
 * ``delayed`` — Table 2-1 with a 2 ms compute delay (``command_delay`` = 2e-3 s, τs = 10 ms);
+* ``disturbed`` — Table 2-1 plus an Ornstein–Uhlenbeck torque on the load (SPEC §11), sd
+  0.28 ozf·in = 20 % of k̄c, correlation time 20 ms (two samples); the controllers are told
+  Table 2-1 (no controller models the disturbance);
 * ``mismatch`` — the controllers are told Table 2-1; the truth's k̄c, k̄s, J and τ3 are off
   by a lognormal factor of relative sd 20 % per seed.
 
@@ -202,6 +205,11 @@ def builtin_scenarios() -> dict[str, Scenario]:
                               "Table 2-1 read through a 1 µrad encoder (quantization 1e-6 rad)"),
         "delayed": Scenario("delayed", table.replace(command_delay=2e-3), 100.0, 20.0,
                             "Table 2-1 with a 2 ms compute delay: each command acts 2 ms after its sample (τs 10 ms)"),
+        "disturbed": Scenario("disturbed", table.replace(disturbance_torque_std=0.28, disturbance_torque_tau=0.02),
+                              100.0, 20.0,
+                              "a gimbal's cable and bearing torque noise: an Ornstein-Uhlenbeck load torque, "
+                              "sd 0.28 ozf·in (20 % of k̄c), correlation time 20 ms; controllers told Table 2-1",
+                              model=table),
         "mismatch": Scenario("mismatch", table, 100.0, 20.0,
                              "controllers told Table 2-1; the true k̄c, k̄s, J, τ3 off by lognormal 20 % per seed",
                              mismatch=(("coulomb", 0.2), ("stiction", 0.2), ("inertia", 0.2),

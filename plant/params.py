@@ -51,6 +51,8 @@ PLAUSIBLE = {
     "command_velocity_std": (0.0, 1e3, "rad/s"),
     "command_velocity_tau": (1e-6, 1e12, "s"),
     "command_velocity_initial": (-1e3, 1e3, "rad/s"),
+    "disturbance_torque_std": (0.0, 1e6, "ozf·in"),
+    "disturbance_torque_tau": (0.0, 1e12, "s"),
 }
 
 
@@ -99,9 +101,17 @@ class PlantParams:
         previous one holds until then [s], 0 ≤ δ < τs (:mod:`plant.delay`); 0 (default) is
         section 2 (SPEC §11).
 
-    The last two are options of every family's observation and command path, so a controller
-    is told them through its model. Their ``omit_default`` metadata keeps them out of
-    :func:`as_definition` while off, so a run defined before they existed keeps its hash.
+    disturbance_torque_std : float
+        Stationary std of the Ornstein–Uhlenbeck torque d on the load [ozf·in], acting in every
+        mode: ḋ = −d/τd + √(2/τd)·std·w (SPEC §11; :mod:`plant.multimode.disturbed`); 0
+        (default) is section 2.
+    disturbance_torque_tau : float
+        τd, correlation time of d [s]; > 0 when ``disturbance_torque_std`` > 0 (0 = unset).
+
+    Quantization and delay are options of every family's observation and command path, so a
+    controller is told them through its model (and the disturbance with them). The four
+    options' ``omit_default`` metadata keeps them out of :func:`as_definition` while off, so a
+    run defined before they existed keeps its hash.
     """
 
     inertia: float = 0.5
@@ -119,6 +129,8 @@ class PlantParams:
     command_velocity_initial: float = 30e-6
     quantization: float = field(default=0.0, metadata={"omit_default": True})
     command_delay: float = field(default=0.0, metadata={"omit_default": True})
+    disturbance_torque_std: float = field(default=0.0, metadata={"omit_default": True})
+    disturbance_torque_tau: float = field(default=0.0, metadata={"omit_default": True})
 
     def __post_init__(self) -> None:
         for name in _FIELD_NAMES:
@@ -146,6 +158,12 @@ class PlantParams:
         _require(0 <= self.command_delay < self.sample_period, "command_delay",
                  f"must be in [0, sample_period = {self.sample_period!r}) s (0 = no delay), "
                  f"got {self.command_delay!r}")
+        _require(self.disturbance_torque_std >= 0, "disturbance_torque_std",
+                 f"must be >= 0 ozf·in (0 = no disturbance torque), got {self.disturbance_torque_std!r}")
+        _require(self.disturbance_torque_tau >= 0, "disturbance_torque_tau",
+                 f"must be >= 0 s, got {self.disturbance_torque_tau!r}")
+        _require(self.disturbance_torque_std == 0 or self.disturbance_torque_tau >= 1e-6, "disturbance_torque_tau",
+                 f"must be in [1e-06, 1e+12] s when disturbance_torque_std > 0, got {self.disturbance_torque_tau!r}")
         for name, (low, high, unit) in PLAUSIBLE.items():
             value = getattr(self, name)
             _require(low <= value <= high, name, f"must be in [{low:g}, {high:g}] {unit} (a plausible "
@@ -253,7 +271,8 @@ class PlantParams:
 
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(PlantParams))
 # The allowed range of an option whose non-finite value is reported (SPEC §11).
-_RANGE_HINTS = {"quantization": " and >= 0 rad", "command_delay": " and in [0, sample_period) s"}
+_RANGE_HINTS = {"quantization": " and >= 0 rad", "command_delay": " and in [0, sample_period) s",
+                "disturbance_torque_std": " and >= 0 ozf·in", "disturbance_torque_tau": " and >= 0 s"}
 
 
 def as_definition(params: Any) -> dict[str, Any]:

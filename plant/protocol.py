@@ -34,8 +34,8 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     Optional fast path: a compiled closed loop of a fixed linear law (a
     :class:`plant.linear_drive.LawArrays`), bit-identical to calling :meth:`step` with the
     law's commands. ``None`` when the family has none; the runner then calls ``step``.
-    It models the ideal sensor and no delay, so :meth:`law_loop` offers it only when
-    ``quantization`` and ``command_delay`` are 0.
+    It models the ideal sensor, no delay and no disturbance torque, so :meth:`law_loop` offers
+    it only when ``quantization``, ``command_delay`` and ``disturbance_torque_std`` are 0.
 
 The runner, traces, series, metrics and the report reach a plant only through this protocol.
 A family registers itself with :func:`register_family`; the built-in ones are listed in
@@ -127,7 +127,7 @@ class PlantFamily(abc.ABC):
 
     def law_loop(self, params: PlantParams) -> Callable[..., Any] | None:
         """:attr:`linear_law_loop` when it applies to ``params`` (ideal sensor, no delay), else None."""
-        if params.quantization != 0.0 or params.command_delay != 0.0:
+        if params.quantization != 0.0 or params.command_delay != 0.0 or params.disturbance_torque_std != 0.0:
             return None
         return self.linear_law_loop
 

@@ -9,14 +9,16 @@ covariance as matrices: the test oracles' counterpart), ``noise`` (the minimal f
 ``segments`` (torque events and integrals), ``stuck`` (mode 2), ``moving`` (modes 1 and 3),
 ``zero_velocity`` (the noisy velocity-zero locators), ``interval`` (the pure step, compiled
 whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
-response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators).
+response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``disturbed``
+(the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when
+``disturbance_torque_std`` > 0).
 """
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-from plant.multimode import law_loop, reference
+from plant.multimode import disturbed, law_loop, reference
 from plant.multimode.interval import advance
 from plant.params import PlantParams
 from plant.protocol import PlantFamily, register_family
@@ -36,5 +38,20 @@ class Multimode(PlantFamily):
                                  coupled_step_pulses=reference.coupled_step_pulses, event_driven=reference.event_driven,
                                  Schedule=reference.Schedule, schedule_from_commands=reference.schedule_from_commands)
 
+    def initial_state(self, params, x5):
+        """As :meth:`PlantFamily.initial_state`; with the disturbance torque on, d(0) = 0 as well."""
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.initial_state(params, x5)
+        return super().initial_state(params, x5)
+
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.advance(state, command, params, noise, options, duration=duration, record=record)
         return advance(state, command, params, noise, options, duration=duration, record=record)
+
+    def truth(self, params, state):
+        """The shared truth; with the disturbance torque on, d [ozf·in] as ``disturbance_torque``."""
+        out = super().truth(params, state)
+        if params.disturbance_torque_std != 0.0:
+            out["disturbance_torque"] = float(state.x[disturbed.D]) if state.x.shape[0] > disturbed.D else 0.0
+        return out

@@ -31,7 +31,7 @@ from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_veloc
 from plant.randomness import normal, uniform, uniform_below
 
 __all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
-           "FAR_SIGMAS"]
+           "FAR_SIGMAS", "hitting_midpoint"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -285,6 +285,10 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
         accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
         if uniform(z, cursor) < accept:
             return m
+
+
+# The exact sampler of a bridge midpoint given a crossing, shared with plant.multimode.disturbed.
+hitting_midpoint = _hitting_midpoint
 
 
 @njit(cache=True)

@@ -1,0 +1,65 @@
+"""CPU per 100 s cell on ``disturbed``, ``quantized`` and ``delayed`` against the same controller on
+``thesis``, measured in the same run (issue #22 goal: ≤ 1.5×).
+
+Seed 0; compiled code warmed first by a 1 s cell of each, so the ratio is of simulation, not of
+compilation. ``make benchmark`` runs it (skipped under ``--benchmark-disable``). Pairs known to
+miss the goal are marked xfail with the reason (the assertion stays the goal):
+
+* ``disturbed``: the disturbance path (plant/multimode/disturbed.py) is Python over numpy, with
+  no compiled interval and no compiled linear-law loop yet;
+* ``quantized``/``delayed`` with ``linear``: the compiled linear-law loop models the ideal sensor
+  and no delay, so linear falls back to the per-sample Python path.
+
+Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
+solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
+1.39. ``disturbed`` was not benchmarked here; from a matrix run (same machine, seeds 0-2, CPU per
+100 s cell): solnic-modern ~5x, pulse-width ~34x, linear ~900x (its thesis cell is the compiled loop).
+"""
+
+import time
+
+import pytest
+
+from bench.runner import run_closed_loop
+from bench.scenarios import builtin_scenarios
+from controllers import make_controller
+from plant.state import Status
+
+pytestmark = pytest.mark.slow
+
+_GOAL = 1.5
+_MISSES = {("disturbed", "linear"), ("disturbed", "solnic-modern"), ("disturbed", "pulse-width"),
+           ("quantized", "linear"), ("delayed", "linear")}
+
+
+def _cpu(scenario, controller, duration):
+    t0 = time.process_time()
+    res = run_closed_loop(scenario.params, make_controller(controller), duration_s=duration,
+                          warmup_s=min(scenario.warmup_s, duration / 5), seed=0, family=scenario.family,
+                          model=scenario.model)
+    assert res.status == Status.OK, res.message
+    return time.process_time() - t0
+
+
+_CASES = [pytest.param(s, c, marks=pytest.mark.xfail(reason="known miss, see module docstring", strict=False)
+                       if (s, c) in _MISSES else ())
+          for s in ("disturbed", "quantized", "delayed") for c in ("linear", "solnic-modern", "pulse-width")]
+
+
+@pytest.mark.parametrize("name, controller", _CASES)
+def test_real_plant_cell_cost_ratio(benchmark, name, controller):
+    if benchmark.disabled:   # `make test`: 100 s cells only to time them; `make benchmark` runs it
+        pytest.skip("a timing only (make benchmark)")
+    scen = builtin_scenarios()
+    thesis, other = scen["thesis"], scen[name]
+    for sc in (thesis, other):
+        _cpu(sc, controller, 1.0)
+
+    def both():
+        return _cpu(thesis, controller, thesis.duration_s), _cpu(other, controller, other.duration_s)
+
+    cpu_thesis, cpu_other = benchmark.pedantic(both, rounds=1, iterations=1, warmup_rounds=0)
+    ratio = cpu_other / cpu_thesis
+    benchmark.extra_info.update(cpu_thesis_s=cpu_thesis, cpu_other_s=cpu_other, ratio=ratio)
+    print(f"{controller} on {name}: thesis {cpu_thesis:.3f} s, {name} {cpu_other:.3f} s CPU, ratio {ratio:.2f}")
+    assert ratio <= _GOAL

@@ -1,0 +1,549 @@
+"""The multimode plant with an Ornstein–Uhlenbeck disturbance torque d on the load (SPEC §11).
+
+d acts in every mode: ḋ = −d/τd + √(2/τd)·σd·w_d (σd = ``disturbance_torque_std``, τd =
+``disturbance_torque_tau``, w_d unit white noise), added to the load's torque balance,
+
+    ẋ2 = α(x3 + d − s·kc − s·x5) + α·w2   (moving, s = +1 forward),
+
+and a stuck shaft breaks away when |x3 + d| > ks. The state carries d as a seventh entry,
+x = [x1, x2, x3, x4, x5, u, d]. With d the plant is still linear per mode, so it stays exact:
+on the augmented vector Y = [x1, x2, x3, x4, x5, d, kc, u] each mode is Ẏ = A·Y + noise, and
+a step of width h is Y⁺ = Φ(h)·Y + N. Φ(h) and COV[N] are closed forms (d's column is x5's
+with s = +1 and β5 → 1/τd, its noise independent of the others; :func:`_closed_form`), checked
+against expm and Van Loan (IEEE TAC 23(3), 1978: expm of [[−A, Qc], [0, Aᵀ]]·h) in
+tests/test_disturbance_torque.py; the noise is drawn through the minimal factor (4-20) of
+:mod:`plant.multimode.noise`; all cached per (plant, mode, h).
+
+Events are located as the noisy velocity zero of :mod:`plant.multimode.zero_velocity` is:
+exact Gaussian sub-steps (long rungs h·2^k only while the barrier is 8.5σ away), a crossing
+inside a sub-step with both ends on one side happens with the Brownian-bridge probability
+exp(−2·g_a·g_b/(σ²·h)), and it is located by bridge bisection (each midpoint drawn from its
+Gaussian law given both ends, accepted in proportion to the probability that a half holds a
+crossing, the first half chosen in proportion to its own) down to ``bisection_tol``:
+
+* stuck: the first passage of g = x3 + d through ±ks (σ² = σd²·2/τd, the intensity of d);
+* moving: the first zero of x2 (σ² = α²σ2²; with σ2 = 0, x2 is C¹ and a zero is a sign change
+  at a sub-step end or a bisection point). At a zero the switching table of SPEC §2 applies
+  with x3 + d in place of x3; while s·(x3 + d) ≥ ks at a sub-step's start the crossing is
+  reflected (Skorokhod push, as in zero_velocity), so the end of that regime is resolved to
+  ``reflect_substep`` rather than in closed form (d is random).
+
+With ``disturbance_torque_std`` = 0 the family runs :func:`plant.multimode.interval.advance`
+itself, bit for bit. This path is plain Python over numpy (no compiled loop yet).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from plant.drive import DriveCommand, DriveType
+from plant.expfun import e1, e2, e4
+from plant.multimode.moving import phi_moving, q_moving, substep_peak
+from plant.multimode.noise import noise_factor
+from plant.multimode.segments import torque_integrals
+from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
+from plant.params import PlantParams
+from plant.randomness import NoiseExhausted, NoiseStream
+from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
+
+__all__ = ["N_X", "D", "advance", "transition", "initial_state"]
+
+N_X = 7     # x1, x2, x3, x4, x5, u, d
+D = 6       # index of d in the state vector
+Y1, Y2, Y3, Y4, Y5, YD, YKC, YU = range(8)
+_N = 8
+
+
+def initial_state(params: PlantParams, x5: float) -> PlantState:
+    """Shaft stuck at zero error, no current, x4 = ``command_velocity_initial``, x5 given, d = 0."""
+    x = np.zeros(N_X)
+    x[3] = params.command_velocity_initial
+    x[4] = x5
+    x.flags.writeable = False
+    return PlantState(0.0, x, 2, False)
+
+
+class _Step:
+    """Φ(h), Q(h), its minimal factor, and the bridge law of the midpoint of a width-h step."""
+
+    __slots__ = ("phi", "Q", "factor", "_bridge")
+
+    def __init__(self, phi, Q):
+        self.phi, self.Q = phi, Q
+        self.factor = noise_factor(Q)
+        self._bridge = None
+
+
+@lru_cache(maxsize=16)
+def _cache(params: PlantParams) -> dict:
+    return {}
+
+
+def _records(params: PlantParams) -> tuple[np.ndarray, np.ndarray]:
+    """The plant's kernel record, and one that makes q_moving's x5 slot the disturbance d
+    (β5 → 1/τd, σ5² → 2σd²/τd, no w2, no w4), cached with the transitions."""
+    memo = _cache(params)
+    recs = memo.get("records")
+    if recs is None:
+        rec = params.kernel_record()
+        rd = rec.copy()
+        rd[0]["beta5"] = 1.0 / params.disturbance_torque_tau
+        rd[0]["sigma5_sq"] = 2.0 * params.disturbance_torque_std ** 2 / params.disturbance_torque_tau
+        rd[0]["sigma2_sq"] = 0.0
+        rd[0]["sigma4_sq"] = 0.0
+        recs = memo["records"] = (rec, rd)
+    return recs
+
+
+# Y-index of each slot of plant.multimode.moving's augmented vector [x1, x2, x3, x4, x5, kc, u].
+_FROM7 = np.array([Y1, Y2, Y3, Y4, Y5, YKC, YU])
+_BLOCK = np.array([Y1, Y2, Y4, Y5])
+
+
+def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ(h), Q(h)) in closed form. Moving: Φ of (3-20)/(3-21) (phi_moving) plus d's column,
+    which is x5's with s = +1 and β5 → βd (ẋ2 gets α·d, x5 enters as s·α·x5); Q = q_moving's
+    block plus d's share, q_moving's x5 share with the d record (the noises are independent).
+    Stuck: (3-22) and (4-11) as plant.multimode.stuck, d an Ornstein–Uhlenbeck step."""
+    rec, rd = _records(params)
+    p = params
+    bd = 1.0 / p.disturbance_torque_tau
+    sd2 = 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
+    phi = np.zeros((_N, _N))
+    Q = np.zeros((_N, _N))
+    if mode == 2:
+        b3, b4, s4 = p.beta3, p.beta4, p.sigma4_sq
+        y = b4 * h
+        E = e1(y)
+        for i in range(_N):
+            phi[i, i] = 1.0
+        phi[Y1, Y4] = -E / b4
+        phi[Y4, Y4] = 1.0 - E
+        phi[Y3, Y3] = math.exp(-b3 * h)
+        phi[Y3, YU] = e1(b3 * h)
+        phi[YD, YD] = math.exp(-bd * h)
+        Q[Y1, Y1] = s4 * e4(y) / b4 ** 3
+        Q[Y1, Y4] = Q[Y4, Y1] = -s4 * E * E / (2.0 * b4 * b4)
+        Q[Y4, Y4] = s4 * E * (2.0 - E) / (2.0 * b4)
+        Q[YD, YD] = sd2 * e1(2.0 * bd * h) / (2.0 * bd)
+        return phi, Q
+    P7 = np.empty((7, 7))
+    phi_moving(mode, h, rec[0], P7)
+    phi[np.ix_(_FROM7, _FROM7)] = P7
+    a = p.alpha
+    phi[Y1, YD] = a * e2(bd * h) / (bd * bd)
+    phi[Y2, YD] = a * e1(bd * h) / bd
+    phi[YD, YD] = math.exp(-bd * h)
+    Q4 = np.empty((4, 4))
+    q_moving(mode, h, rec[0], Q4)
+    Q[np.ix_(_BLOCK, _BLOCK)] = Q4
+    q_moving(1, h, rd[0], Q4)                      # d's share on (x1, x2, ·, d)
+    dblk = np.array([Y1, Y2, YD])
+    Q[np.ix_(dblk, dblk)] += Q4[np.ix_([0, 1, 3], [0, 1, 3])]
+    return phi, Q
+
+
+def transition(params: PlantParams, mode: int, h: float) -> _Step:
+    """The cached :class:`_Step` of ``mode`` over ``h`` [s] (closed form; Van Loan is the tests' oracle)."""
+    memo = _cache(params)
+    key = (mode, h)
+    step = memo.get(key)
+    if step is None:
+        if len(memo) > 4096:
+            memo.clear()
+        step = memo[key] = _Step(*_closed_form(params, mode, h))
+    return step
+
+
+def _bridge_law(params, mode, w):
+    """(Φ(w/2), G, factor of Σ): X_m = Φ(w/2)X_a + G·(X_b − Φ(w)X_a) + N(0, Σ), Matheron's rule."""
+    full = transition(params, mode, w)
+    if full._bridge is None:
+        half = transition(params, mode, w / 2)
+        Qh, Qw, Ph = half.Q, full.Q, half.phi
+        rows = np.flatnonzero(np.diag(Qw) > 0.0)
+        M = Qh @ Ph.T                                  # COV[X_m, X_b | X_a]
+        G = np.zeros((_N, _N))
+        if rows.size:
+            sc = np.sqrt(np.diag(Qw)[rows])
+            inv = np.linalg.pinv(Qw[np.ix_(rows, rows)] / np.outer(sc, sc), rcond=1e-13, hermitian=True)
+            G[:, rows] = (M[:, rows] / sc) @ inv / sc
+        S = Qh - G @ M.T
+        S = 0.5 * (S + S.T)
+        lam, V = np.linalg.eigh(S)
+        B = V * np.sqrt(np.clip(lam, 0.0, None))
+        keep = np.flatnonzero(lam > 1e-14 * max(lam.max(initial=0.0), 1e-300))
+        full._bridge = (Ph, G, B[:, keep])
+    return full._bridge
+
+
+class _Draws:
+    """Unit normals (and uniforms U = Φ(Z)) read in order from the plant's :class:`NoiseStream`."""
+
+    def __init__(self, noise: NoiseStream):
+        self.noise = noise
+        self.z, self.pos = noise.window()
+
+    def normals(self, n: int) -> np.ndarray:
+        if self.pos + n > self.z.shape[0]:
+            self.z, self.pos = self.noise.grow(self.pos)
+        out = self.z[self.pos:self.pos + n]
+        self.pos += n
+        return out
+
+    def uniform(self) -> float:
+        return 0.5 * math.erfc(-float(self.normals(1)[0]) / math.sqrt(2.0))
+
+    def done(self) -> None:
+        self.noise.consumed(self.pos)
+
+
+def _gauss(step: _Step, Y: np.ndarray, draws: _Draws | None) -> np.ndarray:
+    out = step.phi @ Y
+    f = step.factor
+    if draws is not None and f.m:
+        out[f.rows] += f.B @ draws.normals(f.m)
+    return out
+
+
+class _Run:
+    """One interval's mutable bookkeeping (the counterpart of interval.py's work sheet)."""
+
+    def __init__(self, p, o, t, mode, flyback, record):
+        self.p, self.o = p, o
+        self.t, self.mode, self.fb = t, mode, flyback
+        self.peak = self.iabs = self.isq = self.chg = self.dur = 0.0
+        self.nev = self.nbrk = self.nstk = self.nsub = self.count = 0
+        self.status = Status.OK
+        self.events = [] if record else None
+        self.just_broke = False
+
+    def tick(self, n=1):
+        self.count += n
+        if self.count > self.o.max_events:
+            self.status = Status.CHATTER
+            return True
+        return False
+
+    def event(self, Y, kind):
+        self.nev += 1
+        if self.events is not None:
+            self.events.append((self.t, Y[Y1], Y[Y2], Y[Y3], float(self.mode), Y[YU], int(kind)))
+        return self.tick()
+
+    def torque(self, x3, u, h, bridge):
+        if h <= 0.0:
+            return
+        integral, absolute, square = torque_integrals(x3, u, h, self.p.motor_time_constant)
+        self.iabs += absolute
+        self.isq += square
+        self.chg += (u / self.p.u_max) * integral if bridge else absolute
+        self.dur += h
+
+
+def _apply_level(Y, run, level, bridge):
+    umax = run.p.u_max
+    if not bridge:
+        Y[YU] = min(max(level, -umax), umax)
+        run.fb = False
+        return True
+    if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
+        return False
+    if level > 0:
+        Y[YU], run.fb = umax, False
+    elif level < 0:
+        Y[YU], run.fb = -umax, False
+    elif Y[Y3] != 0.0:
+        Y[YU], run.fb = -math.copysign(umax, Y[Y3]), True
+    else:
+        Y[YU], run.fb = 0.0, False
+    return True
+
+
+def _ks(p, Y):
+    return max(p.stiction + Y[Y5], 0.0)
+
+
+def _ladder_width(room, sub, far):
+    """``room`` itself or the longest rung sub·2^k ≤ room for which ``far(w)`` holds, else
+    min(sub, room)."""
+    w = sub * 2.0 ** (LADDER - 1)
+    if sub < room <= w and far(room):
+        return room, True
+    while w > sub:
+        if w <= room and far(w):
+            return w, True
+        w /= 2.0
+    return min(sub, room), False
+
+
+def _x3_at(p, x3, u, w):
+    return u + (x3 - u) * math.exp(-w / p.motor_time_constant)
+
+
+def _stuck_far(p, Y, w, sig2):
+    """No passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is monotone)."""
+    ks = _ks(p, Y)
+    x3max = max(abs(Y[Y3]), abs(_x3_at(p, Y[Y3], Y[YU], w)))
+    return ks - x3max - abs(Y[YD]) > FAR_SIGMAS * math.sqrt(sig2 * w)
+
+
+def _moving_far(p, mode, Y, w, dirn):
+    """s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope is
+    α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
+    β5|x5|) (x3, the means of d and x5 are exponentials), so s·x̄2(τ) ≥ s·x2 + ṡ0·τ − M·τ²/2,
+    a concave bound whose minimum on [0, w] is at an end."""
+    a = p.alpha
+    v0 = dirn * Y[Y2]
+    slope = dirn * a * (Y[Y3] + Y[YD]) - a * (Y[YKC] + Y[Y5])
+    curv = a * (abs(Y[YU] - Y[Y3]) / p.motor_time_constant + abs(Y[YD]) / p.disturbance_torque_tau
+                + abs(Y[Y5]) / p.correlated_friction_tau)
+    low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
+    # x2's noise: α·∫w2 plus α·∫ of the zero-mean parts of d and x5, whose variances over w are
+    # at most those of the integrated Brownian motions of their intensities (w³/3 each)
+    sd = a * (math.sqrt(p.sigma2_sq * w) + math.sqrt(2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
+                                                    * w ** 3 / 3.0) + math.sqrt(p.sigma5_sq * w ** 3 / 3.0))
+    return low > FAR_SIGMAS * sd
+
+
+def _cross_prob(va, vb, w, sig2):
+    """P(a Brownian bridge from va > 0 to vb over w touches 0); 1 when vb ≤ 0."""
+    if vb <= 0.0 or va <= 0.0:
+        return 1.0
+    if sig2 <= 0.0:
+        return 0.0
+    return math.exp(-2.0 * va * vb / (sig2 * w))
+
+
+def _barrier(p, mode, dirn, Ya, Yb, w, sig2):
+    """(crossing probability over a sub-step from Ya to Yb, barrier functional (e, c0)): the
+    barrier distance is c = e·Y + c0 > 0 inside. Stuck: the nearer of ks ∓ (x3 + d) (the other
+    one's probability is counted too; it is below e^-35 unless ks < 6σ of d's step)."""
+    e = np.zeros(_N)
+    if mode == 2:
+        ks = _ks(p, Ya)
+        ga, gb = Ya[Y3] + Ya[YD], Yb[Y3] + Yb[YD]
+        up = _cross_prob(ks - ga, ks - gb, w, sig2)
+        dn = _cross_prob(ks + ga, ks + gb, w, sig2)
+        sgn = -1.0 if up >= dn else 1.0
+        e[Y3] = e[YD] = sgn
+        return 1.0 - (1.0 - up) * (1.0 - dn), e, ks
+    e[Y2] = dirn
+    return _cross_prob(dirn * Ya[Y2], dirn * Yb[Y2], w, sig2), e, 0.0
+
+
+def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
+    """Locate the first crossing of c = e·Y + c0 through 0 inside (0, w], given that there is one:
+    (offset, state there). Each midpoint is drawn from its Gaussian law given both ends
+    (Matheron's rule), c first and conditioned on a crossing (the exact sampler
+    :func:`plant.multimode.zero_velocity.hitting_midpoint`), then the rest given c."""
+    t0 = 0.0
+    cursor = np.zeros(1, dtype=np.int64)
+    while w > tol:
+        Ph, G, B = _bridge_law(p, mode, w)
+        mean = Ph @ Ya + G @ (Yb - transition(p, mode, w).phi @ Ya)
+        S = B @ B.T
+        Se = S @ e
+        var = float(e @ Se)
+        mu = float(e @ mean) + c0
+        a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
+        half = w / 2
+        if var > 0.0:
+            sd = math.sqrt(var)
+            if a > 0.0 and b > 0.0 and sig2 > 0.0:
+                while True:
+                    cursor[0] = draws.pos
+                    try:
+                        cm = hitting_midpoint(a, b, mu, sd, sig2 * half, draws.z, cursor)
+                        break
+                    except NoiseExhausted:
+                        draws.z, draws.pos = draws.noise.grow(draws.pos)
+                draws.pos = int(cursor[0])
+            else:
+                cm = mu + sd * float(draws.normals(1)[0])
+            k = Se / var
+            R = S - np.outer(Se, Se) / var
+            lam, V = np.linalg.eigh(0.5 * (R + R.T))
+            keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
+            Ym = mean + k * (cm - mu)
+            if keep.any():
+                Ym += (V[:, keep] * np.sqrt(lam[keep])) @ draws.normals(int(keep.sum()))
+        else:
+            Ym = mean + (B @ draws.normals(B.shape[1]) if draws is not None and B.shape[1] else 0.0)
+            cm = float(e @ Ym) + c0
+        pl = _cross_prob(a, cm, half, sig2)
+        pr = _cross_prob(cm, b, half, sig2)
+        pc = 1.0 - (1.0 - pl) * (1.0 - pr)
+        run.nsub += 1
+        if pl >= 1.0 or (pl > 0.0 and draws.uniform() * pc < pl):
+            Yb = Ym
+        else:
+            Ya, t0 = Ym, t0 + half
+        w = half
+    return t0 + w, Yb
+
+
+def _flyback_time(p, Y, run):
+    if not run.fb:
+        return math.inf
+    return p.motor_time_constant * math.log1p(abs(Y[Y3]) / p.u_max)
+
+
+def _segment(Y, run, t_end, bridge, draws, sig_d2):
+    """Advance by one sub-step (or to the next event); True when the interval must stop."""
+    p, o = run.p, run.o
+    mode = run.mode
+    room = t_end - run.t
+    h_fb = _flyback_time(p, Y, run)
+    room_fb = min(room, h_fb)
+    x3, u = Y[Y3], Y[YU]
+    if mode == 2:
+        dirn = 0.0
+        ks = _ks(p, Y)
+        g = x3 + Y[YD]
+        if abs(g) > ks:                             # at (or past) stiction: breaks away now
+            return _breakaway(Y, run, g)
+        sig2 = sig_d2
+        w, far = _ladder_width(room_fb, o.substep, lambda w: _stuck_far(p, Y, w, sig2))
+        rungs = False
+    else:
+        dirn = 1.0 if mode == 3 else -1.0
+        Y[YKC] = p.coulomb if p.coulomb + Y[Y5] >= 0.0 else -Y[Y5]
+        ks = _ks(p, Y)
+        reflecting = dirn * (x3 + Y[YD]) >= ks
+        sig2 = p.alpha ** 2 * p.sigma2_sq if draws is not None else 0.0
+        if run.just_broke:
+            reflecting, run.just_broke = True, False      # at ±ks exactly: the push starts the motion
+        w, far = _ladder_width(room_fb, o.substep, lambda w: _moving_far(p, mode, Y, w, dirn))
+        if reflecting and not far:
+            w = min(o.reflect_substep, room_fb)
+        rungs = reflecting and not far
+    step = transition(p, mode, w)
+    Yb = _gauss(step, Y, draws)
+    run.nsub += 1
+    if run.tick():
+        return True
+    crossed = False
+    if mode != 2 and rungs:                         # reflected: the Skorokhod push of zero_velocity
+        va, vb = dirn * Y[Y2], dirn * Yb[Y2]
+        if sig2 > 0.0:
+            m = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig2 * w * math.log(draws.uniform())))
+        else:
+            m = min(va, vb)
+        if m < 0.0:
+            Yb[Y2] -= dirn * m
+            Yb[Y1] -= dirn * m * w / 2.0
+    else:
+        prob, e, c0 = _barrier(p, mode, dirn, Y, Yb, w, sig2)
+        if prob >= 1.0 or (prob > 0.0 and not far and draws.uniform() < prob):
+            crossed = True
+    if crossed:
+        tc, Yb = _bisect(p, mode, e, c0, Y.copy(), Yb, w, o.bisection_tol, sig2, draws, run)
+        if run.status is not Status.OK:
+            return True
+        w = tc
+    run.torque(x3, u, w, bridge)
+    run.peak = substep_peak(Y, Yb, w, run.peak) if mode != 2 else max(run.peak, abs(Y[Y1]), abs(Yb[Y1]))
+    Y[:] = Yb
+    Y[Y3] = _x3_at(p, x3, u, w)                     # x3 is deterministic: the closed form
+    run.t += w
+    if crossed:
+        if mode == 2:
+            return _breakaway(Y, run, Y[Y3] + Y[YD])
+        return _velocity_zero(Y, run, dirn)
+    if w == h_fb and h_fb <= room:
+        Y[Y3] = Y[YU] = 0.0
+        run.fb = False
+        return run.event(Y, EventKind.FLYBACK_END)
+    if w == room:
+        run.t = t_end
+    return False
+
+
+def _breakaway(Y, run, g):
+    Y[Y2] = 0.0
+    run.mode = 3 if g > 0 else 1
+    run.nbrk += 1
+    run.just_broke = True
+    return run.event(Y, EventKind.BREAKAWAY)
+
+
+def _velocity_zero(Y, run, dirn):
+    """x2 = 0 in a moving mode: reflect, reverse or stick (SPEC §2 with x3 + d)."""
+    g = Y[Y3] + Y[YD]
+    ks = _ks(run.p, Y)
+    Y[Y2] = 0.0
+    if dirn * g > ks:
+        kind = EventKind.REFLECTION
+    elif -dirn * g > ks:
+        run.mode = 1 if run.mode == 3 else 3
+        run.nbrk += 1
+        kind = EventKind.REVERSAL
+    else:
+        run.mode = 2
+        run.nstk += 1
+        kind = EventKind.STICK
+    return run.event(Y, kind)
+
+
+def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise: NoiseStream | None,
+            options: SimOptions = SimOptions(), *, duration: float | None = None,
+            record: bool = False) -> IntervalResult:
+    """One interval of the disturbed plant; the contract of :func:`plant.multimode.interval.advance`."""
+    h = params.sample_period if duration is None else duration
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")
+    offsets, levels = command.arrays()
+    if offsets[-1] >= h:
+        raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
+    bridge = command.drive is DriveType.BRIDGE
+    noisy = options.noise and noise is not None
+    draws = _Draws(noise) if noisy else None
+    p = params
+    x = state.x
+    d0 = float(x[D]) if x.shape[0] > D else 0.0
+    Y = np.array([x[0], x[1], x[2], x[3], x[4], d0, params.coulomb, x[5]], dtype=float)
+    run = _Run(p, options, state.t, state.mode, state.flyback, record)
+    sig_d2 = 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau if noisy else 0.0
+    t0 = state.t
+    stop = False
+    for seg in range(len(offsets)):
+        t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < len(offsets) else h)
+        if not _apply_level(Y, run, float(levels[seg]), bridge):
+            raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
+        if seg > 0 and run.event(Y, EventKind.LEVEL):
+            break
+        while run.t < t_seg_end:
+            stop = _segment(Y, run, t_seg_end, bridge, draws, sig_d2)
+            if stop or run.status is not Status.OK:
+                stop = True
+                break
+            if not (abs(Y[Y1]) <= options.diverge_error):
+                run.status = Status.DIVERGED
+                stop = True
+                break
+        if stop:
+            break
+    if draws is not None:
+        draws.done()
+    if run.status is Status.OK:
+        run.t = t0 + h
+    xo = np.array([Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5], Y[YU], Y[YD]])
+    xo.flags.writeable = False
+    new = PlantState(run.t, xo, int(run.mode), bool(run.fb))
+    message = ""
+    if run.status is Status.CHATTER:
+        message = f"more than {options.max_events} events in one interval at t={run.t:.6f} s"
+    elif run.status is Status.DIVERGED:
+        message = f"|x1| = {abs(Y[Y1]):.3g} rad at t={run.t:.6f} s"
+    events = None
+    if record:
+        arr = np.array(run.events, dtype=float).reshape(-1, len(EVENT_FIELDS))
+        events = {name: arr[:, i].copy() for i, name in enumerate(EVENT_FIELDS)}
+        events["mode"] = events["mode"].astype(np.int8)
+        events["kind"] = events["kind"].astype(np.int8)
+    return IntervalResult(new, run.status, message, run.peak, run.iabs, run.isq, run.chg, run.dur, run.nev,
+                          run.nbrk, run.nstk, run.nsub, events)
