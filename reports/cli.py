@@ -12,7 +12,9 @@ Commands (one function each, defined beside what they run; a new command is one 
   :mod:`bench.bound`);
 * ``speed`` — the work-precision comparison behind the ≥ 1000× claim (SPEC §8, :mod:`bench.speed`);
 * ``frontier`` — every controller swept over its knob, the oracle floor and the noise sweeps
-  (:mod:`bench.frontier`).
+  (:mod:`bench.frontier`);
+* ``experiment`` / ``identify LOG`` — the identification plan for a real axis and the fit of a
+  plant family to its log, written as a matrix scenario (:mod:`reports.axis`).
 
 Exit codes: 0 done (cells with status ``error`` are results, not failures of the command — also a
 cell whose process died or hung); 1 the run directory could not be written (full disk ...) or the
@@ -38,6 +40,7 @@ from bench.frontier import make_frontier_command
 from bench.list_command import list_command
 from bench.run_command import make_run_command
 from bench.speed.command import speed_command
+from reports.axis import experiment_command, identify_command
 
 __all__ = ["app", "main"]
 
@@ -88,6 +91,8 @@ def _compose() -> typer.Typer:
     app.command("check-bound")(user_errors(check_bound_command))
     app.command("speed")(user_errors(speed_command))
     app.command("frontier")(make_frontier_command(run))
+    app.command("experiment")(experiment_command)
+    app.command("identify")(identify_command)
     return app
 
 

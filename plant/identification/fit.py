@@ -209,6 +209,7 @@ def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None):
     """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian)."""
     model = _Model(log, family, base)
     sigma1, dof = _sigma1(log, model.segs)
+    sigma1 = max(sigma1, 1e-12)   # a noise-free log: residuals in units of 1e-12 rad
     z = _start(model, sigma1) if z0 is None else z0
     scale = np.full(model.rows.size, sigma1)
     for _ in range(2):
@@ -281,7 +282,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         raise ValueError(f"bootstrap must be 0 or an integer in [5, 1000], got {bootstrap!r}")
     t0 = time.perf_counter()
     fam = get_family(family)
-    u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max) * 1.0001, fam.Params().u_max)
+    u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max), fam.Params().u_max)
     base = (base or fam.Params()).replace(u_max=u_max, sample_period=log.sample_period)
     z, model, sigma1, dof, r, jac = _point_fit(log, family, base)
     names = model.names
