@@ -22,7 +22,9 @@ from bench.cli import out_console, user_errors
 from bench.errors import UserError
 from plant.identification import (FAMILY_FREE, AxisFit, ExperimentOptions, LogError, choose_family,
                                   design_experiment, fit_log, read_log, write_log)
+from plant.drive import DriveType
 from plant.identification.experiment import WHY
+from plant.protocol import DEFAULT_FAMILY
 
 __all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page"]
 
@@ -33,7 +35,7 @@ _UNITS = {"coulomb": "ozf·in", "stiction": "ozf·in", "inertia": "ozf·in·s²"
 
 @user_errors
 def experiment_command(
-    drive: str = typer.Option("linear", "--drive", help="linear (amplifier) or bridge (switched, ±u_max)."),
+    drive: str = typer.Option(DriveType.LINEAR.value, "--drive", help="linear (amplifier) or bridge (switched, ±u_max)."),
     out: Path = typer.Option(Path("plan.csv"), "--out", help="Plan file (.csv or .parquet)."),
     max_torque: float = typer.Option(20.0, "--max-torque", help="Largest |u| [ozf·in]; the bridge's supply level."),
     ramp_fraction: float = typer.Option(0.15, "--ramp-fraction",
@@ -117,7 +119,7 @@ def fit_page(fit: AxisFit, log, log_name: str, bics: dict[str, float] | None) ->
 @user_errors
 def identify_command(
     log_path: Path = typer.Argument(..., metavar="LOG", help="The recorded log (CSV or Parquet, SPEC §11)."),
-    family: str = typer.Option("multimode", "--family", help=f"{'|'.join(FAMILY_FREE)}|auto (auto: least BIC)."),
+    family: str = typer.Option(DEFAULT_FAMILY, "--family", help=f"{'|'.join(FAMILY_FREE)}|auto (auto: least BIC)."),
     out: Path = typer.Option(Path("axis.toml"), "--out", help="Matrix file with the scenario 'axis'."),
     html: Path = typer.Option(None, "--html", help="Fit page (default: OUT with .html)."),
     bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),
