@@ -165,3 +165,22 @@ def test_axis_loop_cli(tmp_path):
     assert "plotly" in (tmp_path / "axis.html").read_text()[:2_000_000].lower()
     listed = _inproc("list", "--matrix", tmp_path / "axis.toml")
     assert listed.returncode == 0 and "axis" in listed.stdout, listed.stderr
+
+
+@pytest.mark.slow
+def test_axis_loop_runs_the_fitted_matrix_as_is(tmp_path):
+    """The whole loop in real processes: experiment → log from hidden parameters → identify →
+    `run --matrix axis.toml` on the file exactly as written; every cell ends ok."""
+    import pandas as pd
+
+    assert cli("experiment", "--out", tmp_path / "plan.csv").returncode == 0
+    plan = read_log(tmp_path / "plan.csv", want_y=False)
+    hidden = get_family("multimode").Params().replace(coulomb=1.3, stiction=1.85, inertia=0.55,
+                                                      motor_time_constant=0.009)
+    log, _ = simulate_log(plan, "multimode", hidden, 5150)
+    write_log(log, tmp_path / "log.csv")
+    assert cli("identify", tmp_path / "log.csv", "--out", tmp_path / "axis.toml", "--bootstrap", "0").returncode == 0
+    out = cli("run", "--matrix", tmp_path / "axis.toml", "--out", tmp_path / "run", "--traces", "none", timeout=900)
+    assert out.returncode == 0, out.stderr
+    rows = pd.read_parquet(tmp_path / "run" / "results.parquet")
+    assert set(rows["scenario"]) == {"axis"} and (rows["status"] == "ok").all() and len(rows) == 14
