@@ -15,6 +15,8 @@ Commands (one function each, defined beside what they run; a new command is one 
   (:mod:`bench.frontier`);
 * ``robustness`` — every controller at its default and best thesis point, told Table 2-1, on every
   real plant (:mod:`bench.robustness`).
+* ``experiment`` / ``identify LOG`` — the identification plan for a real axis and the fit of a
+  plant family to its log, written as a matrix scenario (:mod:`reports.axis`).
 
 Exit codes: 0 done (cells with status ``error`` are results, not failures of the command — also a
 cell whose process died or hung); 1 the run directory could not be written (full disk ...) or the
@@ -41,6 +43,7 @@ from bench.list_command import list_command
 from bench.robustness import make_robustness_command
 from bench.run_command import make_run_command
 from bench.speed.command import speed_command
+from reports.axis import experiment_command, identify_command
 
 __all__ = ["app", "main"]
 
@@ -92,6 +95,8 @@ def _compose() -> typer.Typer:
     app.command("speed")(user_errors(speed_command))
     app.command("frontier")(make_frontier_command(run))
     app.command("robustness")(make_robustness_command(run))
+    app.command("experiment")(experiment_command)
+    app.command("identify")(identify_command)
     return app
 
 

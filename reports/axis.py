@@ -1,0 +1,173 @@
+"""``solnic-bench experiment`` and ``solnic-bench identify``: the axis loop (SPEC §11).
+
+``experiment`` writes the plan a user plays on the hardware (:mod:`plant.identification.experiment`);
+``identify LOG`` fits a plant family to the recorded log (:mod:`plant.identification.fit`), prints
+the estimates ± sd (rich), and writes a matrix TOML with the scenario ``axis`` (truth = the fit)
+plus an HTML page with measured against simulated y (plotly, offline).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import typer
+from rich.table import Table
+
+import bench
+from bench.cli import out_console, user_errors
+from bench.errors import UserError
+from plant.identification.experiment import ExperimentOptions, design_experiment
+from plant.identification.families import FAMILY_FREE
+from plant.identification.log import LogError, read_log, write_log
+from plant.drive import DriveType
+from plant.identification.experiment import WHY
+
+if TYPE_CHECKING:
+    from plant.identification.fit import AxisFit
+
+__all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page"]
+
+_UNITS = {"coulomb": "ozf·in", "stiction": "ozf·in", "inertia": "ozf·in·s²", "motor_time_constant": "s",
+          "measurement_noise_std": "rad", "stribeck_velocity": "rad/s", "viscous": "ozf·in·s/rad",
+          "bristle_stiffness": "ozf·in/rad", "shaft_stiffness": "ozf·in/rad"}
+
+
+@user_errors
+def experiment_command(
+    drive: str = typer.Option(DriveType.LINEAR.value, "--drive", help="linear (amplifier) or bridge (switched, ±u_max)."),
+    out: Path = typer.Option(Path("plan.csv"), "--out", help="Plan file (.csv or .parquet)."),
+    max_torque: float = typer.Option(20.0, "--max-torque", help="Largest |u| [ozf·in]; the bridge's supply level."),
+    ramp_fraction: float = typer.Option(0.15, "--ramp-fraction",
+                                        help="Ramp peak / max torque: about 1.2-1.5x the stiction you expect."),
+    ramp_time: float = typer.Option(0.15, "--ramp-time", help="Seconds from 0 to the ramp peak."),
+    repeats: int = typer.Option(6, "--repeats", help="Pulses per width and direction (the plan's length)."),
+    max_angle: float = typer.Option(0.2, "--max-angle", help="|y - y(0)| [rad] at which the player must abort."),
+    sample_period: float = typer.Option(0.01, "--sample-period", help="τs [s]."),
+) -> None:
+    """Write the identification plan: u at each sample instant, to be played on the axis.
+
+    Rests measure the noise σ1; slow torque ramps both ways show the breakaway level (stiction) and,
+    by the slide after it, Coulomb friction against inertia; pulse trains of several widths both
+    ways give the pulse law (its onset: stiction and the motor lag τ3; its slope: inertia and
+    Coulomb friction). Record y at every t and run `solnic-bench identify LOG`.
+    """
+    try:
+        opts = ExperimentOptions(drive=drive, sample_period=sample_period, max_torque=max_torque,
+                                 ramp_fraction=ramp_fraction, ramp_time=ramp_time, repeats=repeats,
+                                 max_angle=max_angle)
+    except ValueError as exc:
+        raise UserError(str(exc).replace("ExperimentOptions.", "--").replace("_", "-")) from None
+    plan = design_experiment(opts)
+    try:
+        write_log(plan, out)
+    except OSError as exc:
+        raise UserError(f"{out}: cannot write: {exc.strerror or exc}") from None
+    out_console.print(f"plan: {out} ({plan.n} samples, {plan.n * plan.sample_period:.1f} s, {drive} drive)")
+    out_console.print(" ".join(WHY.split()))
+
+
+def _default_controllers() -> list[str]:
+    with open(Path(bench.__file__).parent / "matrices" / "quick.toml", "rb") as fh:
+        return list(tomllib.load(fh)["matrix"]["controllers"])
+
+
+def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
+    """A matrix file with the scenario ``axis``: truth = the fit (``run``/``frontier`` accept it)."""
+    p = fit.params
+    fields = list(fit.estimates)
+    if p.sample_period != 0.01:
+        fields.append("sample_period")
+    if p.u_max != 20.0:
+        fields.append("u_max")
+    lines = [f"# Fitted by `solnic-bench identify {log_name} --family {fit.family}`: {fit.method}.",
+             "# Not identified by the experiment, kept at Table 2-1: friction noise, correlated friction, reference.",
+             "[matrix]",
+             f'description = "the identified axis ({fit.family}) from {log_name}"',
+             f"controllers = {_default_controllers()!r}".replace("'", '"'),
+             'scenarios = ["axis"]', "seeds = [0, 1]", "duration_s = 100", "warmup_s = 20", "",
+             "[scenarios.axis]", 'base = "thesis"', f'plant = "{fit.family}"',
+             f'description = "the identified axis from {log_name}"']
+    for name in fields:
+        sd = fit.std.get(name)
+        note = f"   # ± {sd:.3g} (1 sd)" if sd is not None else ""
+        lines.append(f"{name} = {float(getattr(p, name))!r}{note}")
+    return "\n".join(lines) + "\n"
+
+
+def fit_page(fit: AxisFit, log, log_name: str, bics: dict[str, float] | None) -> str:
+    """Self-contained HTML: the estimates and measured against simulated y."""
+    t = log.t
+    import plotly
+    import plotly.graph_objects as go
+
+    fig = go.Figure()
+    fig.add_trace(go.Scattergl(x=t, y=log.y * 1e6, mode="lines", name="measured y"))
+    fig.add_trace(go.Scattergl(x=t, y=fit.y_model * 1e6, mode="lines", name=f"simulated y ({fit.family})"))
+    fig.update_layout(xaxis_title="t [s]", yaxis_title="y [µrad]", height=520,
+                      title=f"{log_name}: measured against the fitted {fit.family} plant (noise-free, per move)")
+    rows = "".join(f"<tr><td>{n}</td><td>{fit.estimates[n]:.6g}</td><td>{fit.std[n]:.3g}</td>"
+                   f"<td>[{fit.interval[n][0]:.6g}, {fit.interval[n][1]:.6g}]</td><td>{_UNITS.get(n, '')}</td></tr>"
+                   for n in fit.estimates)
+    bic = "" if not bics else "<h2>Family choice (BIC, lower is better)</h2><ul>" + "".join(
+        f"<li>{f}: {b:.1f}</li>" for f, b in sorted(bics.items(), key=lambda kv: kv[1])) + "</ul>"
+    return (f"<!doctype html><html><head><meta charset='utf-8'><title>identify {log_name}</title>"
+            f"<script>{plotly.offline.get_plotlyjs()}</script></head><body>"
+            f"<h1>Identified axis: {fit.family}</h1><p>{fit.method}; {fit.n_moves} moves, {fit.n_samples} samples, "
+            f"{fit.seconds:.1f} s.</p><table border='1'><tr><th>field</th><th>estimate</th><th>sd</th>"
+            f"<th>95 % interval</th><th>unit</th></tr>{rows}</table>{bic}"
+            f"{fig.to_html(full_html=False, include_plotlyjs=False)}</body></html>")
+
+
+@user_errors
+def identify_command(
+    log_path: Path = typer.Argument(..., metavar="LOG", help="The recorded log (CSV or Parquet, SPEC §11)."),
+    family: str = typer.Option(None, "--family", show_default=False,
+                               help=f"{'|'.join(FAMILY_FREE)}|auto (auto: least BIC); default: Acker's exact plant."),
+    out: Path = typer.Option(Path("axis.toml"), "--out", help="Matrix file with the scenario 'axis'."),
+    html: Path = typer.Option(None, "--html", help="Fit page (default: OUT with .html)."),
+    bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),
+    seed: int = typer.Option(0, "--seed", help="Root seed of the bootstrap."),
+) -> None:
+    """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
+    from plant.identification.fit import choose_family, fit_log
+    from plant.protocol import DEFAULT_FAMILY
+
+    family = DEFAULT_FAMILY if family is None else family
+
+    if family != "auto" and family not in FAMILY_FREE:
+        raise UserError(f"--family: {family!r} is not one of {', '.join(FAMILY_FREE)}, auto")
+    if not (bootstrap == 0 or 5 <= bootstrap <= 1000):
+        raise UserError(f"--bootstrap: must be 0 or in [5, 1000], got {bootstrap}")
+    try:
+        log = read_log(log_path)
+    except LogError as exc:
+        raise UserError(str(exc)) from None
+    bics = None
+    try:
+        if family == "auto":
+            fit, bics = choose_family(log, bootstrap=bootstrap, seed=seed)
+        else:
+            fit = fit_log(log, family, bootstrap=bootstrap, seed=seed)
+    except (ValueError, RuntimeError) as exc:
+        raise UserError(f"{log_path}: {exc}") from None
+    table = Table(title=f"{log_path.name}: {fit.family} ({fit.method})")
+    for col in ("field", "estimate", "± sd", "95 % interval", "unit"):
+        table.add_column(col)
+    for n in fit.estimates:
+        lo, hi = fit.interval[n]
+        table.add_row(n, f"{fit.estimates[n]:.6g}", f"{fit.std[n]:.2g}", f"[{lo:.5g}, {hi:.5g}]", _UNITS.get(n, ""))
+    out_console.print(table)
+    if bics:
+        out_console.print("BIC: " + ", ".join(f"{f} {b:.1f}" for f, b in sorted(bics.items(), key=lambda kv: kv[1])))
+    html = html or out.with_suffix(".html")
+    try:
+        out.write_text(fitted_matrix_toml(fit, log_path.name))
+        html.write_text(fit_page(fit, log, log_path.name, bics))
+    except OSError as exc:
+        raise UserError(f"{out}: cannot write: {exc.strerror or exc}") from None
+    out_console.print(f"matrix: {out} (scenario 'axis'; fit in {fit.seconds:.1f} s)\nfit page: {html}")
+    if not all(math.isfinite(v) for v in fit.std.values()):
+        out_console.print("warning: some uncertainties are not finite")
