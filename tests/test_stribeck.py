@@ -231,10 +231,10 @@ def test_bad_input_is_exit_2_through_a_matrix_file(tmp_path):
 @pytest.mark.parametrize("controller", ["linear", "dithered"])
 def test_compiled_linear_law_loop_is_bit_identical(controller):
     p = StribeckParams()
-    runs = [run_closed_loop(p, make_controller(controller), duration_s=3.0, warmup_s=1.0, seed=2, record=True,
+    runs = [run_closed_loop(p, make_controller(controller), duration_s=3.0, warmup_s=1.0, seed=2,
                             family="stribeck", compiled=compiled) for compiled in (True, False)]
     assert runs[0].status == runs[1].status == "ok"
-    assert np.array_equal(np.asarray(runs[0].samples["x1"]), np.asarray(runs[1].samples["x1"]))
+    assert runs[0].summary == runs[1].summary
     timing = {"runtime_s", "realtime_factor"}
     assert {k: v for k, v in runs[0].metrics.items() if k not in timing} == \
         {k: v for k, v in runs[1].metrics.items() if k not in timing}
