@@ -27,7 +27,7 @@ from plant.dopri import A, B, C as C_NODES, E
 from plant.lugre.law import C_P0, C_TH0, C_U, C_X30, C_X50, L_BETA3, L_BETA4, L_BETA5, rhs
 from plant.multimode.segments import hermite_peak
 
-__all__ = ["rk_segment", "TOLERANCES"]
+__all__ = ["rk_segment", "segment", "scratch", "TOLERANCES"]
 
 # [RTOL, ATOL_v [rad/s], ATOL_z [rad], ATOL_D [rad]]
 TOLERANCES = np.array([1e-10, 1e-13, 1e-18, 1e-18])
@@ -38,10 +38,10 @@ A1, A2, A3, A4, A5, AKC, AU, ATH, AZ = range(9)
 
 
 @njit(cache=True)
-def _step(t, y, f1, h, C, L, K, yn):
-    """One Dormand–Prince step: yn, K (7 × 3 stage slopes, K[6] at yn) and the error vector in K[7]."""
+def _step(t, y, f1, h, C, L, K, yn, tmp):
+    """One Dormand–Prince step: yn, K (7 × 3 stage slopes, K[6] at yn) and the error vector in K[7];
+    ``tmp`` (3) is scratch."""
     K[0, 0], K[0, 1], K[0, 2] = f1[0], f1[1], f1[2]
-    tmp = np.empty(3)
     for i in range(1, 6):
         for c in range(3):
             acc = 0.0
@@ -72,17 +72,31 @@ def _mode_of(v, vth):
 
 
 @njit(cache=True)
+def scratch():
+    """The work arrays of :func:`segment` (allocate once, reuse for every segment)."""
+    return np.empty(17), np.empty((8, 3))
+
+
+@njit(cache=True)
 def rk_segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol):
     """Integrate noise-free for up to H [s] at constant u, stopping early where the mode (x2
     beyond ±vth) changes at a step end: (advanced, new mode, peak, steps)."""
+    W, K = scratch()
+    return segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol, W, K)
+
+
+@njit(cache=True)
+def segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol, W, K):
+    """:func:`rk_segment` with its work arrays (W, K) = :func:`scratch` passed in: the same
+    arithmetic, without the allocations (the caller runs it ~100 times per sample)."""
     u, x30, x40, x50, th0, x10 = X[AU], X[A3], X[A4], X[A5], X[ATH], X[A1]
-    C = np.empty(5)
+    C = W[0:5]
     C[C_U], C[C_X30], C[C_X50], C[C_TH0], C[C_P0] = u, x30, x50, th0, spring_p0
-    y = np.empty(3)
+    y = W[5:8]
     y[0], y[1], y[2] = X[A2], X[AZ], 0.0
-    yn = np.empty(3)
-    f1 = np.empty(3)
-    K = np.empty((8, 3))
+    yn = W[8:11]
+    f1 = W[11:14]
+    tmp = W[14:17]
     f1[0], f1[1], f1[2], _ = rhs(0.0, y[0], y[1], y[2], C, L)
     b4 = L[L_BETA4]
     t = 0.0
@@ -92,7 +106,7 @@ def rk_segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol):
     while t < H:
         last = h >= H - t
         hh = H - t if last else h
-        _step(t, y, f1, hh, C, L, K, yn)
+        _step(t, y, f1, hh, C, L, K, yn, tmp)
         steps += 1
         acc = 0.0
         for c in range(3):

@@ -30,7 +30,7 @@ from numba import njit
 from plant.drive import DriveCommand, DriveType
 from plant.lugre.law import L_ALPHA, L_BETA5, L_SIGMA2_SQ, L_SIGMA5_SQ, L_VS
 from plant.lugre import integrate
-from plant.lugre.integrate import rk_segment
+from plant.lugre.integrate import scratch, segment
 from plant.multimode.segments import torque_integrals
 from plant.multimode.stuck import stuck_propagate
 from plant.randomness import NoiseExhausted, NoiseStream, normal
@@ -150,6 +150,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5], x[6], x[7]
     work = np.zeros(7)
     hbox = np.zeros(1)
+    W, K = scratch()
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
@@ -172,7 +173,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
                 h = min(h, o[_O_SUB])
             x3, u = X[A3], X[AU]
             old = int(S[_MODE])
-            advanced, new, peak, steps = rk_segment(X, h, L, S[_PEAK], hbox, VELOCITY_THRESHOLD, old, 0.0, tol)
+            advanced, new, peak, steps = segment(X, h, L, S[_PEAK], hbox, VELOCITY_THRESHOLD, old, 0.0, tol, W, K)
             S[_PEAK] = peak
             S[_NSUB] += steps
             _torque_metrics(S, x3, u, advanced, bridge, p.u_max, p.tau3)
