@@ -217,14 +217,16 @@ def test_bad_input_names_the_field(field, value):
 
 
 @pytest.mark.slow
-def test_bad_input_is_exit_2_through_a_matrix_file(tmp_path):
+@pytest.mark.parametrize("field, value", [("stribeck_exponent", "-1.0"), ("stribeck_velocity", "-4e-3"),
+                                          ("viscous", "-0.2"), ("friction_ripple", "1.2")])
+def test_bad_input_is_exit_2_through_a_matrix_file(tmp_path, field, value):
     path = tmp_path / "m.toml"
     path.write_text('[matrix]\ncontrollers = ["linear"]\nscenarios = ["x"]\nseeds = [0]\nduration_s = 1\n'
-                    'warmup_s = 0.2\n\n[scenarios.x]\nbase = "thesis"\nplant = "stribeck"\nstribeck_exponent = -1.0\n')
+                    f'warmup_s = 0.2\n\n[scenarios.x]\nbase = "thesis"\nplant = "stribeck"\n{field} = {value}\n')
     proc = cli("run", "--matrix", path, "--out", tmp_path / "out")
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "stribeck_exponent" in lines[0] and str(path) in lines[0], proc.stderr
+    assert len(lines) == 1 and field in lines[0] and str(path) in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
 
 
