@@ -340,3 +340,43 @@ def test_step_is_accuracy_bound_except_while_sliding_fast():
     fine, coarse = _steps(p, 10e-3, 1.0), _steps(p, 10e-3, 1e4)
     assert fine[0] > 1.8 * coarse[0] and abs(fine[1] / coarse[1] - 1) < 0.05, (fine, coarse)
     assert fine[1] > 1000          # ~17 µs per step over the 20 ms: √(σ0/J) alone would allow 2.3 ms
+
+
+# --- passivity of the map v ↦ F beyond the local rule ---------------------------------------------
+
+def _cycle_work(s0, s1, s2, kc, ks, vs, V):
+    """∫F·v [ozf·in·rad] over one velocity cycle, by solve_ivp (Radau) on z alone: creep at v_s/100
+    over 5·ks/σ0 (bristles loaded from kc/σ0 to ≈ ks/σ0), then slide at V over the bristle
+    relaxation length (kc/σ0)·ln(σ1(ks − kc)/(σ2·kc)) (or kc/σ0 when that is < 1). Returns
+    (work of the creep, work of the slide, σ0·z at the end)."""
+    def rate(t, y, v):
+        g = kc + (ks - kc) * math.exp(-(v / vs) ** 2)
+        zd = v - s0 * abs(v) * y[0] / g
+        return [zd, (s0 * y[0] + s1 * zd + s2 * v) * v]
+    kw = dict(method="Radau", rtol=1e-10, atol=[1e-16, 1e-16])
+    from scipy.integrate import solve_ivp
+    creep = solve_ivp(rate, (0.0, 5 * ks / s0 / (vs / 100)), [kc / s0, 0.0], args=(vs / 100,), **kw)
+    length = kc / s0 * max(1.0, math.log(s1 * (ks - kc) / (s2 * kc)))
+    slide = solve_ivp(rate, (0.0, length / V), [creep.y[0, -1], 0.0], args=(V,), **kw)
+    return creep.y[1, -1], slide.y[1, -1], s0 * slide.y[0, -1]
+
+
+def test_default_set_is_not_passive_beyond_the_local_rule():
+    """Loading the bristles to ks/σ0 at creep speed, then sliding fast, the σ1·ż term returns
+    ≈ σ1·V·(ks − kc)/σ0 of energy while the bristles relax: more than the cycle costs once V is
+    a pulse speed (0.1 rad/s; a full 10 ms pulse reaches 0.15). The cycle ends where it began
+    (σ0·z ≈ kc), so repeating it extracts energy without bound: the default set is not passive,
+    nor is Table I of the 1995 paper (at 1 m/s). Sliding faster makes it worse, linearly in V, unless
+    σ2 ≥ σ1·(ks − kc)/kc (Åström & Canudas de Wit 2008, eq. (7)): with σ2 10 % above that
+    bound the slide dissipates at every speed. The family keeps the local rule (params.py)."""
+    p = LuGreParams()
+    a = dict(s0=p.bristle_stiffness, s1=p.bristle_damping, kc=p.coulomb, ks=p.stiction, vs=p.stribeck_velocity)
+    creep, slide, f_end = _cycle_work(s2=p.viscous, V=0.1, **a)
+    assert creep > 0 and creep + slide < -0.5 * creep, (creep, slide)
+    assert abs(f_end - p.coulomb) < 0.05 * p.coulomb
+    fast = _cycle_work(s2=p.viscous, V=1.0, **a)[1]
+    assert fast < 8 * slide < 0                                   # ∝ V: unbounded per cycle
+    bound = p.bristle_damping * (p.stiction - p.coulomb) / p.coulomb
+    assert all(_cycle_work(s2=1.1 * bound, V=V, **a)[1] > 0 for V in (0.01, 0.1, 1.0, 10.0))
+    table_i = _cycle_work(1e5, math.sqrt(1e5), 0.4, 1.0, 1.5, 1e-3, V=1.0)     # [N, m, s]
+    assert table_i[0] + table_i[1] < 0
