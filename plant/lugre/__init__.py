@@ -7,13 +7,15 @@ default); at the accuracy required the step is accuracy-bound, so an explicit Do
 carries θ (index 6) and z (index 7) after the shared six.
 
 Modules: ``params`` (LuGreParams), ``law`` (right-hand side and Jacobian), ``integrate``
-(the integrator), ``interval`` (the pure step, compiled whole), ``reference`` (solve_ivp).
+(the integrator), ``interval`` (the pure step, compiled whole), ``law_loop`` (the compiled closed loop of a
+fixed linear law), ``reference`` (solve_ivp).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from plant.lugre import law_loop
 from plant.lugre.interval import N_STATE, advance
 from plant.lugre.params import LuGreParams
 from plant.protocol import PlantFamily, register_family
@@ -30,6 +32,7 @@ class LuGre(PlantFamily):
     """LuGre friction (bristle state), no stuck mode; step = plant.lugre.interval.advance."""
 
     Params = LuGreParams
+    linear_law_loop = staticmethod(law_loop.run_law)
     description = "LuGre dynamic friction (Canudas de Wit et al. 1995): pre-sliding, lag, Stribeck; error-controlled RK"
     scenarios = {
         "lugre": ({}, "Table 2-1's levels in the LuGre law: 2.1 µrad of bristle compliance at breakaway, "

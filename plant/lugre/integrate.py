@@ -5,15 +5,34 @@ e_i/(ATOL_i + RTOL·max|y_i|), with the displacement's error measured against th
 increment (D accumulates over a segment): RTOL = 1e-10, ATOL = (1e-13 rad/s, 1e-18 rad,
 1e-18 rad). Order 5 (local extrapolation), error estimate order 4.
 
-Why explicit although the law is stiff: at the accuracy this benchmark demands (x1 to 1e-8 of
-its largest value, SPEC §11) the step is bound by accuracy, h ≈ 10 µs, while the stability
-bound of Dormand–Prince (|h·λ| ≲ 3.3) is h ≲ 0.2 ms at the default σ0 (the largest |λ| ≈
-σ0·|v|/g ≈ 2e4 /s at pulse speeds; √(σ0/J) = 1414 rad/s). An implicit method pays for its
-stability with order: ROS3P (order 3, tried) needed ~1900 steps per ms of sliding at this
-tolerance (20× Dormand–Prince) and, not being L-stable with this non-normal Jacobian
-(∂v̇/∂z ≈ 2e7), settled 1e-6 off in coasting. The explicit step only becomes stability-bound
-for σ0 ≳ 1e9 ozf·in/rad (the step then shrinks like 1/σ0, which the error control does by
-itself: slower, not wrong).
+Why explicit (issue 23 asked for an implicit scheme where stiff; measured at the default gimbal
+parameters, α = 1/J = 2, σ0 = 1e6, σ1 = 707, σ2 = 0.2, kc = 1.4, ks = 2.1, v_s = 4e-3):
+
+- Jacobian of (v, z) (tests/test_lugre.py checks these against finite differences of ``rhs``).
+  Pre-sliding (v ≈ 0): the bristle oscillator, λ = −707 ± 1225i, |λ| = √(σ0/J) = 1414 /s, so
+  Dormand–Prince's stability limit (|hλ| ≲ 3.3) is h ≲ 2.3 ms. Steady sliding at v ≫ v_s:
+  λ = −σ0·|v|/g (bristles) and −α·σ2 = −0.4 /s; the fast one is 7.1e3 /s at 0.01 rad/s
+  (h ≲ 0.46 ms), 2.1e4 at 0.03 (0.15 ms), 7.1e4 at 0.1 (46 µs).
+- The step the accuracy needs (x1 to 1e-8 of its largest value: RTOL 1e-10) is 16 µs
+  (accelerating under a full pulse) to 160 µs (noise-free closed loops: 10 ms / 62–85 steps).
+  So the law is stiff only while sliding faster than ≈ 0.03–0.05 rad/s. A full 2 ms bridge pulse
+  peaks at 4.8 mrad/s: its drive and coast steps follow the tolerance (126 and 201 steps at
+  1e-10 against 21 and 112 at 1e-6, order-5 accuracy-bound). After a full 10 ms pulse
+  (0.15 rad/s) the 20 ms coast takes 1165 steps at every tolerance from 1e-6 to 1e-10:
+  stability-bound, there an L-stable implicit scheme would win.
+- In the benchmark's closed loops the shaft rarely slides that fast. At sample instants the
+  largest |λ| was 1675 /s for linear, 1421 for pulse-width and 2329 for solnic-modern (20 s,
+  seed 0). Noise-free, rtol 1e-6 → 1e-10 multiplies their steps by 4.1, 4.0 and 3.5: mostly
+  accuracy-bound. With noise (the scenarios), the sub-step ``SimOptions.substep`` = 100 µs
+  sets a floor of 100 steps per 10 ms sample whatever the integrator. Measured per sample over
+  100 s: 180 (linear), 129 (pulse-width), 131 (solnic-modern). So an implicit scheme could save
+  at most the 22–45 % above that floor, and each of its steps costs a Jacobian and a 3×3 solve.
+- ROS3P (order 3, tried earlier) needed ~1900 steps per ms of sliding at this tolerance (20×
+  Dormand–Prince). Not being L-stable with this non-normal Jacobian (∂v̇/∂z ≈ 2e7), it settled
+  1e-6 off in coasting.
+
+The explicit step becomes stability-bound everywhere only for σ0 ≳ 1e9 ozf·in/rad. The step
+then shrinks like 1/σ0, which the error control does by itself: slower, not wrong.
 """
 
 from __future__ import annotations
@@ -27,7 +46,7 @@ from plant.dopri import A, B, C as C_NODES, E
 from plant.lugre.law import C_P0, C_TH0, C_U, C_X30, C_X50, L_BETA3, L_BETA4, L_BETA5, rhs
 from plant.multimode.segments import hermite_peak
 
-__all__ = ["rk_segment", "TOLERANCES"]
+__all__ = ["rk_segment", "segment", "scratch", "TOLERANCES"]
 
 # [RTOL, ATOL_v [rad/s], ATOL_z [rad], ATOL_D [rad]]
 TOLERANCES = np.array([1e-10, 1e-13, 1e-18, 1e-18])
@@ -38,10 +57,10 @@ A1, A2, A3, A4, A5, AKC, AU, ATH, AZ = range(9)
 
 
 @njit(cache=True)
-def _step(t, y, f1, h, C, L, K, yn):
-    """One Dormand–Prince step: yn, K (7 × 3 stage slopes, K[6] at yn) and the error vector in K[7]."""
+def _step(t, y, f1, h, C, L, K, yn, tmp):
+    """One Dormand–Prince step: yn, K (7 × 3 stage slopes, K[6] at yn) and the error vector in K[7];
+    ``tmp`` (3) is scratch."""
     K[0, 0], K[0, 1], K[0, 2] = f1[0], f1[1], f1[2]
-    tmp = np.empty(3)
     for i in range(1, 6):
         for c in range(3):
             acc = 0.0
@@ -72,17 +91,31 @@ def _mode_of(v, vth):
 
 
 @njit(cache=True)
+def scratch():
+    """The work arrays of :func:`segment` (allocate once, reuse for every segment)."""
+    return np.empty(17), np.empty((8, 3))
+
+
+@njit(cache=True)
 def rk_segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol):
     """Integrate noise-free for up to H [s] at constant u, stopping early where the mode (x2
     beyond ±vth) changes at a step end: (advanced, new mode, peak, steps)."""
+    W, K = scratch()
+    return segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol, W, K)
+
+
+@njit(cache=True)
+def segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol, W, K):
+    """:func:`rk_segment` with its work arrays (W, K) = :func:`scratch` passed in: the same
+    arithmetic, without the allocations (the caller runs it ~100 times per sample)."""
     u, x30, x40, x50, th0, x10 = X[AU], X[A3], X[A4], X[A5], X[ATH], X[A1]
-    C = np.empty(5)
+    C = W[0:5]
     C[C_U], C[C_X30], C[C_X50], C[C_TH0], C[C_P0] = u, x30, x50, th0, spring_p0
-    y = np.empty(3)
+    y = W[5:8]
     y[0], y[1], y[2] = X[A2], X[AZ], 0.0
-    yn = np.empty(3)
-    f1 = np.empty(3)
-    K = np.empty((8, 3))
+    yn = W[8:11]
+    f1 = W[11:14]
+    tmp = W[14:17]
     f1[0], f1[1], f1[2], _ = rhs(0.0, y[0], y[1], y[2], C, L)
     b4 = L[L_BETA4]
     t = 0.0
@@ -92,7 +125,7 @@ def rk_segment(X, H, L, peak, hbox, vth, mode, spring_p0, tol):
     while t < H:
         last = h >= H - t
         hh = H - t if last else h
-        _step(t, y, f1, hh, C, L, K, yn)
+        _step(t, y, f1, hh, C, L, K, yn, tmp)
         steps += 1
         acc = 0.0
         for c in range(3):

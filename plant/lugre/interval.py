@@ -30,13 +30,13 @@ from numba import njit
 from plant.drive import DriveCommand, DriveType
 from plant.lugre.law import L_ALPHA, L_BETA5, L_SIGMA2_SQ, L_SIGMA5_SQ, L_VS
 from plant.lugre import integrate
-from plant.lugre.integrate import rk_segment
+from plant.lugre.integrate import scratch, segment
 from plant.multimode.segments import torque_integrals
 from plant.multimode.stuck import stuck_propagate
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
 
-__all__ = ["advance", "N_STATE", "VELOCITY_THRESHOLD"]
+__all__ = ["advance", "interval_status", "interval_kernel", "N_STATE", "VELOCITY_THRESHOLD"]
 
 N_STATE = 8
 VELOCITY_THRESHOLD = 1e-6     # rad/s: |x2| below it counts as stuck (mode 2) in traces and counts
@@ -150,6 +150,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5], x[6], x[7]
     work = np.zeros(7)
     hbox = np.zeros(1)
+    W, K = scratch()
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
@@ -172,7 +173,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
                 h = min(h, o[_O_SUB])
             x3, u = X[A3], X[AU]
             old = int(S[_MODE])
-            advanced, new, peak, steps = rk_segment(X, h, L, S[_PEAK], hbox, VELOCITY_THRESHOLD, old, 0.0, tol)
+            advanced, new, peak, steps = segment(X, h, L, S[_PEAK], hbox, VELOCITY_THRESHOLD, old, 0.0, tol, W, K)
             S[_PEAK] = peak
             S[_NSUB] += steps
             _torque_metrics(S, x3, u, advanced, bridge, p.u_max, p.tau3)
@@ -272,12 +273,7 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
     x_out.flags.writeable = False
     new = PlantState(t, x_out, int(mode), flyback != 0.0)
-    if code == _OK:
-        status, message = Status.OK, ""
-    elif code == _CHATTER:
-        status, message = Status.CHATTER, f"integrator or event budget exhausted in one interval at t={t:.6f} s"
-    else:
-        status, message = Status.DIVERGED, f"|x1| = {abs(x_out[X1]):.3g} rad at t={t:.6f} s"
+    status, message = interval_status(int(code), new, options)
     events = None
     if record:
         n = int(nrec)
@@ -286,3 +282,20 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
         events["kind"] = events["kind"].astype(np.int8)
     return IntervalResult(new, status, message, peak, iabs, isq, chg, dur, int(nev), int(nbrk), int(nstk),
                           int(nsub), events)
+
+
+def interval_status(code: int, state: PlantState, options: SimOptions) -> tuple[Status, str]:
+    """The :class:`Status` and message of a kernel status code (for :func:`advance` and the
+    compiled loop, plant.lugre.law_loop)."""
+    if code == _OK:
+        return Status.OK, ""
+    if code == _CHATTER:
+        return Status.CHATTER, f"integrator or event budget exhausted in one interval at t={state.t:.6f} s"
+    return Status.DIVERGED, f"|x1| = {abs(state.x[X1]):.3g} rad at t={state.t:.6f} s"
+
+
+# --- for compiled callers (plant.lugre.law_loop) ------------------------------------------------
+SHEET_SIZE, STATUS_OK, NO_EVENTS = _SHEET, _OK, _NO_EVENTS
+SHEET_T, SHEET_MODE, SHEET_FLYBACK, SHEET_PEAK = _T, _MODE, _FB, _PEAK
+SHEET_ABS, SHEET_SQ, SHEET_CHARGE, SHEET_DURATION = _IABS, _ISQ, _CHG, _DUR
+SHEET_EVENTS, SHEET_BREAKAWAYS, SHEET_SUBSTEPS, SHEET_STATUS = _NEV, _NBRK, _NSUB, _STATUS

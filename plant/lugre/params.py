@@ -43,8 +43,16 @@ class LuGreParams(RippleParams):
     map v ↦ F is dissipative for every reachable z at those speeds iff
     σ1²·|v| ≤ 4·(σ1 + σ2)·g(v) on 0 ≤ |v| ≤ 2·ks/σ1. A set that violates it (at the lowest
     ripple levels) is rejected, naming ``bristle_damping``. This is the local condition of the
-    pre-sliding and Stribeck range; Barabanov & Ortega (IEEE TAC 45(4), 2000) give the exact
-    one for all speeds.
+    pre-sliding and Stribeck range, not Barabanov & Ortega's necessary and sufficient one (IEEE
+    TAC 45(4), 2000), whose exact statement could not be consulted here.
+
+    Beyond it: passivity for all speeds needs σ2 ≥ σ1·(ks − kc)/kc. This is Åström & Canudas
+    de Wit 2008, eq. (7), seen second-hand. It is necessary: load the bristles to ks/σ0 at creep
+    speed, then slide at V. While they relax, σ1·ż gives back ≈ σ1·V·(ks − kc)/σ0, which grows
+    with V. The defaults fail it (σ1·(ks − kc)/kc = 354 against σ2 = 0.2), and so does the
+    1995 paper's Table I (158 against 0.4). tests/test_lugre.py shows a cycle at 0.1 rad/s that
+    extracts energy. So the default set is not passive at pulse speeds of ≳ 0.1 rad/s, and it
+    is kept all the same: rejecting it would reject the published parameters.
     """
 
     bristle_stiffness: float = 1e6

@@ -1,0 +1,88 @@
+"""The lugre family's fast path: the closed loop of a fixed linear law, compiled whole.
+
+The stribeck family's loop (plant.stribeck.law_loop) around this family's interval kernel
+(plant.lugre.interval, with the integrator's tolerances as one more argument); the
+compensator and the dither are :mod:`plant.linear_drive`'s compiled functions (the very code
+the controllers' ``step`` calls), the window sums are the runner's
+(``bench.metrics.WindowTotals.add``) in the same order and the plant noise is read at the same
+positions, so the results are bit-identical to the runner's Python loop over ``step``
+(tests/test_lugre.py). :func:`plant.law_driver.run_chunks` drives it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from plant.law_driver import NEED_NOISE, run_chunks
+from plant.linear_drive import compensator_step, square_wave_segments
+from plant.lugre import integrate
+from plant.lugre.interval import (N_STATE, NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION,
+                                  SHEET_EVENTS, SHEET_FLYBACK, SHEET_MODE, SHEET_PEAK, SHEET_SIZE, SHEET_SQ,
+                                  SHEET_STATUS, SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel, interval_status)
+from plant.randomness import NoiseStream
+from plant.state import PlantState, SimOptions, Status
+
+__all__ = ["run_law"]
+
+# totals vector: plant.law_driver.TOTAL_FIELDS
+_DUR, _PEAK, _IABS, _ISQ, _CHG, _NEV, _NBRK, _NSUB = range(8)
+
+
+@njit(cache=True)
+def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, L, o,
+           tol, z, zpos, margin, ev, out, totals, x1_window, prog):
+    """Samples n0 ≤ n < n1. ``prog`` gets (samples done, noise position); returns a kernel status
+    code, or NEED_NOISE when fewer than ``margin`` normals are left before an interval.
+    """
+    n_c = cx.shape[0]
+    cxn = np.empty(n_c)
+    n_max = int(2.0 * freq * tau) + 4 if amp != 0.0 else 1
+    offs = np.empty(n_max)
+    levs = np.empty(n_max)
+    prog[0], prog[1] = n0, zpos
+    for n in range(n0, n1):
+        if z.shape[0] > 0 and z.shape[0] - zpos < margin:
+            return NEED_NOISE
+        x1 = x[0]
+        y = x1 + sensor[n]
+        v = compensator_step(A, B, C, D, cx, cxn, y)
+        level = min(max(-v, -u_max), u_max)
+        k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
+        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
+                              levs[:k].copy(), bridge, prm, L, o, z, zpos, ev, out, tol)
+        S = out[N_STATE:]
+        if n >= n_warm:
+            x1_window[n - n_warm] = x1
+            totals[_DUR] += S[SHEET_DURATION]
+            if S[SHEET_PEAK] > totals[_PEAK]:
+                totals[_PEAK] = S[SHEET_PEAK]
+            totals[_IABS] += S[SHEET_ABS]
+            totals[_ISQ] += S[SHEET_SQ]
+            totals[_CHG] += S[SHEET_CHARGE]
+            totals[_NEV] += S[SHEET_EVENTS]
+            totals[_NBRK] += S[SHEET_BREAKAWAYS]
+            totals[_NSUB] += S[SHEET_SUBSTEPS]
+        for i in range(N_STATE):
+            x[i] = out[i]
+        sheet[0], sheet[1], sheet[2] = S[SHEET_T], S[SHEET_MODE], S[SHEET_FLYBACK]
+        for i in range(n_c):
+            cx[i] = cxn[i]
+        zpos = pos
+        prog[0], prog[1] = n + 1, zpos
+        if S[SHEET_STATUS] != STATUS_OK:
+            return int(S[SHEET_STATUS])
+    return STATUS_OK
+
+
+def run_law(law, params, options: SimOptions, state: PlantState, sensor: np.ndarray,
+            n_warm: int, noise: NoiseStream | None, deadline: float
+            ) -> tuple[PlantState, dict[str, float], np.ndarray, Status, str]:
+    """:func:`plant.law_driver.run_chunks` around this family's compiled chunk."""
+    noisy = options.noise and noise is not None
+    o = options.kernel_vector().copy()
+    if not noisy:
+        o[0] = 0.0
+    return run_chunks(_chunk, (params.law_vector(), o, integrate.TOLERANCES), law, params, options, state, sensor,
+                      n_warm, noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
+                      status_ok=STATUS_OK, interval_status=interval_status)
