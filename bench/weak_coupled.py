@@ -95,10 +95,12 @@ def _boot_ci(rng: np.random.Generator, a: np.ndarray, b: np.ndarray, stat, n_boo
 def _w1_corrected(rng: np.random.Generator, a: np.ndarray, b: np.ndarray, n_boot: int) -> tuple[float, list[float]]:
     """W1 between the two empirical laws, bias-corrected (2·Ŵ − mean of the bootstrap Ŵ*: the
     empirical W1 overstates the true one by noise), and the basic-bootstrap 95 % interval
-    [2Ŵ − q97.5, 2Ŵ − q2.5] (Davison & Hinkley 1997, §5.2)."""
+    [2Ŵ − q97.5, 2Ŵ − q2.5] (Davison & Hinkley 1997, §5.2), both clipped at 0 (W1 ≥ 0; the raw
+    Ŵ is stored beside them)."""
     w = _w1(a, b)
     reps = _boot(rng, a, b, _w1, n_boot)
-    return 2 * w - float(reps.mean()), [2 * w - float(np.quantile(reps, 0.975)), 2 * w - float(np.quantile(reps, 0.025))]
+    lo, hi = 2 * w - float(np.quantile(reps, 0.975)), 2 * w - float(np.quantile(reps, 0.025))
+    return max(2 * w - float(reps.mean()), 0.0), [max(lo, 0.0), max(hi, 0.0)]
 
 
 def _p95_diff(a: np.ndarray, b: np.ndarray) -> float:

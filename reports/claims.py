@@ -144,6 +144,7 @@ class Measurement:
     text: str
     basis: str = ""
     ci: tuple[float, float] | None = None
+    undecided: bool = False     # measured, but the data cannot decide the claim: inconclusive
 
 
 @dataclass(frozen=True)
@@ -636,13 +637,19 @@ def _m_speedup(ctx: _Context) -> Measurement:
                        f"measured error curve")
 
 
-def _m_noisy_speedup_coupled(coupled: Mapping[str, Any]) -> Measurement | None:
+def _m_noisy_speedup_coupled(coupled: Mapping[str, Any]) -> Measurement:
     """The claim at a stated tolerance from the coupled study (speed.json ``weak_error_coupled``):
-    the speed-up at the tightest tolerance the study decides; None when it decides none."""
+    the speed-up at the tightest tolerance the study decides; inconclusive when it decides none
+    (the uncoupled ratio cannot decide either, so it is not used in its place)."""
     cost = coupled.get("cost_at_tolerance") or {}
     decided = {float(k): v for k, v in cost.items() if isinstance(v, Mapping) and v.get("speedup")}
+    basis = (f"speed.json weak_error_coupled ({coupled.get('n_coupled', '?')} coupled paths, "
+             f"{coupled.get('n_anchor', '?')} anchor paths per method)")
     if not decided:
-        return None
+        tols = ", ".join(f"±{_g(100 * float(k))} %" for k in sorted(cost, key=lambda k: -float(k)))
+        return Measurement(None, f"not decided at {tols or 'any tolerance'} of the mean Δc: the 95 % CI of "
+                                 f"every measured EM step's weak error is wider than the tolerance "
+                                 f"(more anchor paths needed)", basis, undecided=True)
     tol = min(decided)
     best = decided[tol]
     parts = [f"EM step {_g(best['step_s'])} s is the coarsest certified within ±{_g(100 * tol)} % of the "
@@ -651,18 +658,14 @@ def _m_noisy_speedup_coupled(coupled: Mapping[str, Any]) -> Measurement | None:
     for k, v in sorted(cost.items(), key=lambda kv: -float(kv[0])):
         if float(k) < tol and isinstance(v, Mapping) and not v.get("speedup"):
             parts.append(f"at ±{_g(100 * float(k))} % not decided (the CI of every measured step is wider)")
-    return Measurement(float(best["speedup"]), "; ".join(parts),
-                       f"speed.json weak_error_coupled ({coupled.get('n_coupled', '?')} coupled paths, "
-                       f"{coupled.get('n_anchor', '?')} anchor paths per method)")
+    return Measurement(float(best["speedup"]), "; ".join(parts), basis)
 
 
 def _m_noisy_speedup(ctx: _Context) -> Measurement:
     sp = ctx.speed
     coupled = None if sp is None else sp.get("weak_error_coupled")
     if isinstance(coupled, Mapping):
-        m = _m_noisy_speedup_coupled(coupled)
-        if m is not None:
-            return m
+        return _m_noisy_speedup_coupled(coupled)
     v = math.nan if sp is None else sp.get("noisy_speedup_at_equal_weak_error", math.nan)
     if v is None or math.isnan(v):
         return _not_measured("no speed.json or no noisy_speedup_at_equal_weak_error")
@@ -821,5 +824,6 @@ def evaluate_claims(*, results: pd.DataFrame, limits: PlantLimits,
         rows.append(ClaimRow(
             key=spec.key, claim=spec.claim, source=spec.source, claimed=spec.claimed,
             measured=m.text, criterion=spec.criterion.describe(spec.unit),
-            verdict=verdict(m.value, spec.criterion, m.ci), value=m.value, basis=m.basis))
+            verdict=INCONCLUSIVE if m.undecided else verdict(m.value, spec.criterion, m.ci),
+            value=m.value, basis=m.basis))
     return rows

@@ -203,8 +203,8 @@ def test_speedup_claim(speedup, expected):
 
 def test_noisy_speedup_claim_reads_the_tightest_decided_tolerance():
     """The coupled study decides 1 % (EM 2.1× the exact cost) but not 0.1 %: the claim is measured
-    at 1 %, says 0.1 % is undecided, and is not reproduced (2.1 < 1000); without the coupled study
-    the uncoupled ratio is used."""
+    at 1 %, says 0.1 % is undecided, and is not reproduced (2.1 < 1000); deciding nothing, it is
+    inconclusive; without the coupled study the uncoupled ratio is used."""
     cost = {"0.01": {"step_s": 3e-6, "speedup": 2.1}, "0.001": {"step_s": None, "speedup": None}}
     speed = {"noisy_speedup_at_equal_weak_error": 0.9,
              "weak_error_coupled": {"cost_at_tolerance": cost, "n_coupled": 4000, "n_anchor": 300000}}
@@ -216,6 +216,11 @@ def test_noisy_speedup_claim_reads_the_tightest_decided_tolerance():
     r = _row(C.evaluate_claims(results=normalise_results(None), limits=TABLE_2_1, speed=speed),
              "noisy_speedup")
     assert r.value == pytest.approx(1500.0) and r.verdict == C.REPRODUCED
+    cost["0.01"] = {"step_s": None, "speedup": None}            # decides nothing: inconclusive,
+    cost["0.001"] = {"step_s": None, "speedup": None}           # never the uncoupled 0.9
+    r = _row(C.evaluate_claims(results=normalise_results(None), limits=TABLE_2_1, speed=speed),
+             "noisy_speedup")
+    assert r.verdict == C.INCONCLUSIVE and r.value is None and "not decided at ±1 %, ±0.1 %" in r.measured
     del speed["weak_error_coupled"]
     r = _row(C.evaluate_claims(results=normalise_results(None), limits=TABLE_2_1, speed=speed),
              "noisy_speedup")
