@@ -365,50 +365,77 @@ def _scenario_limit_urad(limits: Mapping[str, PlantLimits], scenario: str,
     return (limits.get(scenario) or default).classical_limit_rad * 1e6
 
 
+def _peak_rows(results: pd.DataFrame) -> pd.DataFrame:
+    """The rows every peak median of the report is taken over (answer block, aggregate table and
+    both accuracy figures): status ``ok`` with a finite peak error."""
+    peak = pd.to_numeric(results["peak_error_rad"], errors="coerce").astype(float)
+    return results[(results["status"] == "ok") & np.isfinite(peak)]
+
+
+def _not_ok_note(left: Mapping[str, Sequence[Any]], scen: str, ctrl: str) -> str:
+    """Hover text for a controller that was not ok on every seed of ``scen`` ("" when it was);
+    ``left`` is :func:`reports.answer.left_out` of the results."""
+    for o in left.get(scen, ()):
+        if o.controller == ctrl:
+            return (f"<br>{o.not_ok} of {o.n} seeds not ok: median over the ok ones; "
+                    "not a candidate in the answer")
+    return ""
+
+
 def accuracy_vs_current(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
                         default: PlantLimits) -> go.Figure | None:
     """Median peak |x1| against median mean |i| on log–log axes, one panel per scenario: per
     controller the median with its 95 % bootstrap CI as whiskers (both axes), every ok cell as a
-    faint point, and the scenario's own classical limit (2-6) as a dashed line."""
-    from reports.answer import eligible_rows
+    faint point, and the scenario's own classical limit (2-6) as a dashed line.
+
+    The peak median and its CI are over the same rows as the answer block and the aggregate
+    table (:func:`_peak_rows`); only the x position (median current) and the faint points leave
+    out the seeds with zero current, which a log axis cannot place (the hover says how many).
+    """
+    from reports.answer import left_out, privileged_mask
     from reports.stats import median_ci
 
     need = {"peak_error_rad", "mean_abs_current"}
     if results.empty or not need <= set(results.columns):
         return None
-    ok = results[(results["status"] == "ok") & results["peak_error_rad"].gt(0)
-                 & results["mean_abs_current"].gt(0)]
-    if ok.empty:
+    ok = _peak_rows(results)
+    cur = pd.to_numeric(ok["mean_abs_current"], errors="coerce").astype(float)
+    placeable = ok["peak_error_rad"].gt(0) & cur.gt(0) & np.isfinite(cur)
+    if not placeable.any():
         return None
-    scenarios = sorted(ok["scenario"].unique())
+    scenarios = sorted(ok.loc[placeable, "scenario"].unique())
     controllers = list(dict.fromkeys(results["controller"]))
     n = len(scenarios)
     cols = min(n, 3)
     rows = math.ceil(n / cols)
     fig = make_subplots(rows=rows, cols=cols, subplot_titles=[f"scenario {s}" for s in scenarios],
                         shared_yaxes=True, horizontal_spacing=0.04, vertical_spacing=0.12)
-    bounds = set(ok.index) - set(eligible_rows(ok).index)
+    bounds = set(ok.index[privileged_mask(ok)])
+    left = left_out(results)
+    shown: set[str] = set()
     for k, scen in enumerate(scenarios):
         r, c = k // cols + 1, k % cols + 1
         d_s = ok[ok["scenario"] == scen]
         for ctrl in controllers:
             d = d_s[d_s["controller"] == ctrl]
-            if d.empty:
+            dx = d[placeable[d.index]]
+            if dx.empty:
                 continue
             colour = controller_colour(ctrl, controllers)
-            first = k == 0
             fig.add_trace(go.Scatter(
-                x=d["mean_abs_current"], y=d["peak_error_rad"] * 1e6, mode="markers",
+                x=dx["mean_abs_current"], y=dx["peak_error_rad"] * 1e6, mode="markers",
                 marker=dict(color=colour, size=5, opacity=0.25), legendgroup=ctrl, showlegend=False,
-                customdata=d["seed"].astype(str),
+                customdata=dx["seed"].astype(str),
                 hovertemplate=(f"<b>{ctrl}</b>, {scen}, seed %{{customdata}}<br>peak %{{y:.3g}} µrad"
                                "<br>mean |i| %{x:.3g} ozf·in<extra></extra>")), row=r, col=c)
             py = median_ci(d["peak_error_rad"].to_numpy() * 1e6)
-            px = median_ci(d["mean_abs_current"].to_numpy())
+            px = median_ci(dx["mean_abs_current"].to_numpy())
+            zero = len(d) - len(dx)
+            x_note = (f" over the {px.n} of {len(d)} seeds with current > 0 (log axis)" if zero else "")
             label = ctrl + (" (bound)" if set(d.index) & bounds else "")
             fig.add_trace(go.Scatter(
                 x=[px.median], y=[py.median], mode="markers", name=label, legendgroup=ctrl,
-                showlegend=first or ctrl not in set(ok[ok["scenario"].isin(scenarios[:k])]["controller"]),
+                showlegend=ctrl not in shown,
                 marker=dict(color=colour, size=11, symbol=_SYMBOLS[controllers.index(ctrl) % len(_SYMBOLS)],
                             line=dict(width=1, color="#222")),
                 error_y=dict(type="data", symmetric=False, array=[py.high - py.median],
@@ -417,7 +444,9 @@ def accuracy_vs_current(results: pd.DataFrame, limits: Mapping[str, PlantLimits]
                              arrayminus=[px.median - px.low], color=colour, thickness=1),
                 hovertemplate=(f"<b>{ctrl}</b>, {scen}: median over {py.n} seeds<br>peak %{{y:.3g}} µrad "
                                f"[{py.low:.3g}, {py.high:.3g}]<br>mean |i| %{{x:.3g}} ozf·in "
-                               f"[{px.low:.3g}, {px.high:.3g}]<extra></extra>")), row=r, col=c)
+                               f"[{px.low:.3g}, {px.high:.3g}]{x_note}"
+                               f"{_not_ok_note(left, scen, ctrl)}<extra></extra>")), row=r, col=c)
+            shown.add(ctrl)
         lim = _scenario_limit_urad(limits, scen, default)
         fig.add_hline(y=lim, line=dict(color="#b00", dash="dash", width=1.5), row=r, col=c)
         xref = "x domain" if k == 0 else f"x{k + 1} domain"
@@ -439,13 +468,15 @@ def peak_intervals(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
                    default: PlantLimits) -> go.Figure | None:
     """Median peak |x1| per controller with its 95 % bootstrap CI, one panel per scenario,
     controllers sorted by their median in the first scenario; the scenario's limit (2-6) dashed."""
+    from reports.answer import left_out
     from reports.stats import median_ci
 
     if results.empty or "peak_error_rad" not in results.columns:
         return None
-    ok = results[(results["status"] == "ok") & results["peak_error_rad"].gt(0)]
-    if ok.empty:
+    ok = _peak_rows(results)          # the answer block's rows: its medians and CIs are these
+    if not ok["peak_error_rad"].gt(0).any():
         return None
+    left = left_out(results)
     scenarios = sorted(ok["scenario"].unique())
     controllers = list(dict.fromkeys(results["controller"]))
     fig = make_subplots(rows=1, cols=len(scenarios), shared_yaxes=True, horizontal_spacing=0.03,
@@ -459,6 +490,8 @@ def peak_intervals(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
             if v.size == 0:
                 continue
             ci = median_ci(v)
+            if not ci.median > 0:     # a log axis cannot place it
+                continue
             colour = controller_colour(ctrl, controllers)
             fig.add_trace(go.Scatter(
                 x=[ci.median], y=[ctrl], mode="markers", showlegend=False,
@@ -466,7 +499,8 @@ def peak_intervals(results: pd.DataFrame, limits: Mapping[str, PlantLimits],
                 error_x=dict(type="data", symmetric=False, array=[ci.high - ci.median],
                              arrayminus=[ci.median - ci.low], color=colour, thickness=2, width=6),
                 hovertemplate=(f"<b>{ctrl}</b>, {scen}<br>median %{{x:.3g}} µrad [{ci.low:.3g}, "
-                               f"{ci.high:.3g}] over {ci.n} seeds<extra></extra>")), row=1, col=k + 1)
+                               f"{ci.high:.3g}] over {ci.n} seeds{_not_ok_note(left, scen, ctrl)}"
+                               "<extra></extra>")), row=1, col=k + 1)
         lim = _scenario_limit_urad(limits, scen, default)
         fig.add_vline(x=lim, line=dict(color="#b00", dash="dash", width=1.5), row=1, col=k + 1)
         xref = "x" if k == 0 else f"x{k + 1}"
