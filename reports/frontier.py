@@ -266,9 +266,11 @@ def noise_figure(sweep: pd.DataFrame, field: str, label: str, limit_rad: float |
 def budget_table(points: pd.DataFrame, scenario: str, current: str = "mean_abs_current",
                  error: str = "peak_error_rad", n_budgets: int = 6) -> list[dict[str, Any]]:
     """For budgets spread over the real controllers' currents: the real controller point with the
-    lowest median error whose median current is within the budget, and the bound's best there."""
+    lowest median error whose median current is within the budget, and the bound's best there.
+    Only points ok on every seed are candidates: a median over the seeds that survived would let a
+    point that failed most seeds win."""
     d = points[(points["scenario"] == scenario) & points[f"{current}_median"].notna()
-               & points[f"{error}_median"].notna()]
+               & points[f"{error}_median"].notna() & (points["ok"] == points["cells"])]
     real = d[~d["bound"]]
     if real.empty:
         return []

@@ -259,3 +259,20 @@ def test_per_seed_values_stay_paired_when_a_controller_misses_a_seed():
     b = _per_seed(df, "b", ["thesis"], "peak_error_rad")[:, 0]
     assert a.tolist() == [1.0, 2.0, 3.0]
     assert b[0] == 1.0 and math.isnan(b[1]) and b[2] == 3.0
+
+
+def test_budget_table_skips_points_that_failed_a_seed():
+    """A point ok on 1 of 5 seeds (its surviving median 1 µrad) is never the pick within a budget;
+    the point ok on every seed is."""
+    from reports.frontier import budget_table
+
+    cols = ["mean_abs_current", "peak_error_rad"]
+    def point(name, cur, err, ok, cells=5, bound=False):
+        row = {"scenario": "thesis", "controller": name, "bound": bound, "ok": ok, "cells": cells}
+        for c, v in zip(cols, (cur, err)):
+            row.update({f"{c}_median": v, f"{c}_low": v, f"{c}_high": v})
+        return row
+    points = pd.DataFrame([point("flaky", 0.01, 1e-6, ok=1), point("good", 0.01, 1e-5, ok=5),
+                           point("costly", 0.05, 5e-6, ok=5)])
+    rows = budget_table(points, "thesis", n_budgets=2)
+    assert [r["best"]["controller"] for r in rows] == ["good", "costly"]
