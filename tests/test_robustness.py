@@ -293,6 +293,115 @@ def test_claims_on_each_real_plant_with_paired_ratios_and_verdicts():
     assert "18 seeds" in pw.measured and "diverged 2 of 20" in pw.measured
 
 
+def _fail_seeds(results: pd.DataFrame, ctrl: str, scen: str, seeds, status: str = "diverged") -> pd.DataFrame:
+    """``results`` with ``ctrl`` on ``scen`` failed (``status``, no peak) on ``seeds``."""
+    out = results.copy()
+    m = (out["controller"] == ctrl) & (out["scenario"] == scen) & out["seed"].isin(list(seeds))
+    out.loc[m, "status"], out.loc[m, "peak_error_rad"] = status, math.nan
+    return out
+
+
+def _claims(results: pd.DataFrame, config=None) -> dict:
+    from reports.robustness import cell_table, robustness_claims
+    from reports.selection import Selection
+
+    cells = cell_table(results, config or _CONFIG)
+    return {r.key: r for r in robustness_claims(results, cells, Selection(), "thesis")}
+
+
+def test_a_claim_whose_subject_failed_seeds_is_at_best_inconclusive():
+    """solnic diverged on 17 of 20 lugre seeds: its 3 ok seeds alone say 20× (reproduced), but the
+    17 failures count against the claim; failed on all 20 it is not reproduced (no pair exists)."""
+    some = _claims(_fail_seeds(_results(), "solnic", "lugre", range(3, 20)))
+    ten = some["robust_ten_times.lugre"]
+    assert ten.value == pytest.approx(20.0, rel=1e-12)                  # the 3 pairs, as before
+    assert ten.verdict == "inconclusive"
+    assert "3 seeds]" in ten.measured and "solnic not ok on 17 of 20 seeds (diverged 17 of 20)" in ten.measured
+    assert some["robust_less_current.lugre"].verdict == "inconclusive"
+    # the other claim: pulse-width (ok on every seed) beats solnic on the 3 pairs; solnic's failures
+    # do not weaken a claim against solnic
+    assert some["robust_pulse_width.lugre"].verdict == "reproduced"
+    every = _claims(_fail_seeds(_results(), "solnic", "lugre", SEEDS))
+    assert every["robust_ten_times.lugre"].value is None
+    assert every["robust_ten_times.lugre"].verdict == "not reproduced"
+    assert "solnic not ok on 20 of 20 seeds" in every["robust_ten_times.lugre"].measured
+    assert every["robust_less_current.lugre"].verdict == "not reproduced"
+    # pulse-width ok on all 20 seeds where solnic failed: not a pair, but not against the claim
+    assert every["robust_pulse_width.lugre"].verdict == "inconclusive"
+    # the other plant is untouched
+    assert every["robust_ten_times.compliant"].verdict == "not reproduced"
+
+
+def test_failed_seeds_of_the_other_row_lift_not_reproduced_to_inconclusive():
+    """On compliant pulse-width / solnic is 1.5 on the ok pairs (not reproduced); with solnic
+    failed on 5 seeds, where pulse-width may have won, the pairs cannot refute the claim."""
+    claims = _claims(_fail_seeds(_results(), "solnic", "compliant", range(5)))
+    pw = claims["robust_pulse_width.compliant"]
+    assert pw.value == pytest.approx(1.5, rel=1e-12) and "14 seeds]" in pw.measured    # 20 − seeds 0-4 − seed 11
+    assert pw.verdict == "inconclusive"
+    assert claims["robust_ten_times.compliant"].verdict == "not reproduced"            # the subject failed
+
+
+def test_the_lti_side_is_the_most_accurate_row_ok_on_every_seed():
+    """The best LTI point (800 µrad on lugre) failed a seed: the claim compares against the
+    default linear row (1100 µrad, ok on every seed): 1100/40 = 27.5."""
+    claims = _claims(_fail_seeds(_results(), "linear[crossover=48,lag_ratio=8]", "lugre", [7]))
+    ten = claims["robust_ten_times.lugre"]
+    assert ten.value == pytest.approx(1100 / 40, rel=1e-12) and ten.verdict == "reproduced"
+    assert ten.measured.startswith("linear / solnic peak")
+
+
+def test_claims_name_the_row_of_the_family_actually_tested():
+    """When the solnic family's best row on thesis is not solnic itself, the claim says which."""
+    results = _results()
+    extra = results[results["controller"] == "solnic"].copy()
+    extra["controller"], extra["controller_base"] = "solnic-modern[a_c=2e-06]", "solnic-modern"
+    scale = {"thesis": 0.5, "lugre": 0.5, "compliant": 0.5}         # 10, 20, 100 µrad: best on thesis
+    extra["peak_error_rad"] *= extra["scenario"].map(scale)
+    results = pd.concat([results, extra], ignore_index=True)
+    claims = _claims(results)
+    ten = claims["robust_ten_times.lugre"]
+    assert ten.claim == ("On lugre, the solnic design (here solnic-modern[a_c=2e-06], the family's best on "
+                         "thesis) is at least ten times more accurate than any LTI servo")
+    assert ten.value == pytest.approx(800 / 20, rel=1e-12)
+    assert "solnic-modern[a_c=2e-06]" in claims["robust_less_current.lugre"].claim
+    pw = claims["robust_pulse_width.lugre"].claim
+    assert "(here pulse-width, the pulse-width family's best on thesis)" in pw
+    assert pw.endswith("beats the solnic design (here solnic-modern[a_c=2e-06], the family's best on thesis)")
+    # solnic itself at its defaults is named plainly
+    assert _claims(_results())["robust_ten_times.lugre"].claim.startswith("On lugre, solnic is at least")
+
+
+def test_the_verdict_names_only_a_row_ok_on_every_seed_as_holding_the_axis_best():
+    from reports.robustness import cell_table, verdicts
+
+    results = _fail_seeds(_results(), "pulse-width", "lugre", [4])       # 27 µrad on 19 seeds
+    v = {d["scenario"]: d for d in verdicts(cell_table(results, _CONFIG))}["lugre"]
+    assert v["best"] == "solnic"                                          # 40 µrad, ok on all 20
+    assert v["text"].startswith("on lugre, solnic holds the axis best")
+    assert "left out for seeds not ok, though lower on their ok seeds: pulse-width (" in v["text"]
+    assert "over 19 of 20 seeds" in v["text"] and "not ok: pulse-width (diverged 1 of 20)" in v["text"]
+    every = _fail_seeds(results, "solnic", "lugre", SEEDS)
+    for ctrl in ("linear", "linear[crossover=48,lag_ratio=8]"):
+        every = _fail_seeds(every, ctrl, "lugre", [0])
+    v = {d["scenario"]: d for d in verdicts(cell_table(every, _CONFIG))}["lugre"]
+    assert "best" not in v and v["text"].startswith("on lugre, no controller finished every seed ok; not ok:")
+
+
+def test_most_robust_names_the_rows_its_ci_does_not_separate_it_from():
+    from reports.robustness import most_robust
+
+    def row(ctrl, ratio, low, high, ok=20):
+        return dict(controller=ctrl, scenario="lugre", bound=False, reference=False, ok=ok, cells=20,
+                    median=100.0, ratio=ratio, ratio_low=low, ratio_high=high)
+
+    cells = pd.DataFrame([row("a", 1.2, 1.0, 1.5), row("b", 1.3, 1.25, 1.4), row("c", 2.0, 1.6, 2.4),
+                          row("d", 1.25, 1.1, 1.45, ok=19)])              # d: a failed seed, not eligible
+    best = most_robust(cells)
+    assert best["controller"] == "a" and best["tied"] == ["b"]
+    assert (best["ratio"], best["low"], best["high"]) == (1.2, 1.0, 1.5)
+
+
 def test_report_has_a_robustness_section_only_with_a_robustness_table(tmp_path):
     from reports.build import build_report
 
@@ -300,6 +409,7 @@ def test_report_has_a_robustness_section_only_with_a_robustness_table(tmp_path):
     html = path.read_text(encoding="utf-8")
     assert 'id="robustness"' in html and "on lugre, pulse-width holds the axis best" in html
     assert "On lugre, solnic is at least ten times more accurate than any LTI servo" in html
+    assert "linear[crossover=48,lag_ratio=8], at worst" in html and "ranked by the point ratio" in html
     plain = build_report(tmp_path / "b", results=_results(), config={"matrix": {}}).read_text(encoding="utf-8")
     assert 'id="robustness"' not in plain
 
