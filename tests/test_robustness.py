@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -412,6 +413,40 @@ def test_report_has_a_robustness_section_only_with_a_robustness_table(tmp_path):
     assert "linear[crossover=48,lag_ratio=8], at worst" in html and "ranked by the point ratio" in html
     plain = build_report(tmp_path / "b", results=_results(), config={"matrix": {}}).read_text(encoding="utf-8")
     assert 'id="robustness"' not in plain
+
+
+@pytest.mark.parametrize("table, message", [
+    ("best = 3", r":7: robustness\.best: must be a table of controller row = parent name .*, got 3"),
+    ("refrence = 'thesis'", r":7: robustness\.refrence: unknown key; expected one of \['reference', "),
+    ("reference = 1", r":7: robustness\.reference: must be the name of a scenario of this matrix, got 1"),
+    ("reference = 'lugre'", r":7: robustness\.reference: .*got 'lugre'; scenarios: \['thesis'\]"),
+    ("bounds = 'no'", r":7: robustness\.bounds: must be true or false"),
+    ("best_source = ['x']", r":7: robustness\.best_source: must be a string"),
+    ("told_nominal = 'thesis'", r":7: robustness\.told_nominal: must be a table"),
+    ('[robustness.best]\n"linear[crossover=9]" = "linear"',
+     r":7: robustness\.best\.linear\[crossover=9\]: 'linear\[crossover=9\]' is not a controller row of this matrix"),
+    ("[robustness.best]\nlinear = 2", r":7: robustness\.best\.linear: must be a name, got 2"),
+])
+def test_the_robustness_table_of_a_matrix_is_validated_when_parsed(tmp_path, table, message):
+    """A bad ``[robustness]`` table is a MatrixError naming file:line (the key's line, 7) and the
+    key, at parse time (before, ``best = 3`` parsed and then raised a TypeError in the report)."""
+    from bench.matrix import MatrixError, load_matrix
+
+    path = tmp_path / "m.toml"
+    body = table
+    head = "" if body.startswith("[robustness.") else "[robustness]\n"
+    path.write_text('[matrix]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\nseeds = [0]\n\n'
+                    + head + body + "\n", encoding="utf-8")
+    with pytest.raises(MatrixError, match=re.escape(str(path)) + message):
+        load_matrix(path, check_resets=False)
+
+
+def test_a_valid_robustness_table_parses_and_reaches_the_run_config():
+    data = R.robustness_matrix_data(True, {"linear": {"crossover": 30.0}}, "hand-made")
+    m = parse_matrix(data, "robustness", check_resets=False)
+    assert m.robustness["best"] == {"linear[crossover=30]": "linear"} and m.robustness["bounds"] is False
+    assert m.to_json()["robustness"]["told_nominal"] == {"quantized-nominal": "quantized",
+                                                         "delayed-nominal": "delayed"}
 
 
 # --------------------------------------------------------------------------- the command
