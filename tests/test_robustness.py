@@ -530,6 +530,42 @@ def test_frontier_option_takes_the_best_points_from_a_frontier_run(tmp_path):
     assert data["robustness"]["best_source"] == source
 
 
+def _frontier_dir(tmp_path, config_text: str, knobs: dict) -> str:
+    run = tmp_path / "fr"
+    run.mkdir()
+    _frontier_rows({"linear": [3.0] * 20, "linear[crossuver=40]": [2.0] * 20}).to_parquet(run / "results.parquet")
+    (run / "config.json").write_text(config_text.replace("KNOBS", json.dumps(knobs)), encoding="utf-8")
+    return str(run)
+
+
+_POINT = '{"matrix": {"sweep": {"controllers": {"linear[crossuver=40]": {"parent": "linear", "knobs": KNOBS}}}}}'
+
+
+@pytest.mark.parametrize("config_text, knobs, message", [
+    (_POINT, {"crossuver": 40.0},                      # a knob the controller does not take (any more)
+     "the best point of linear {'crossuver': 40.0}: unknown option 'crossuver' of 'linear'"),
+    (_POINT, {"crossover": "fast"}, "the best point of linear {'crossover': 'fast'}: "),
+    ("[1, 2]", {}, "config.json: must be a JSON object, got list"),
+    ('{"matrix": {"sweep": 3}}', {}, "config.json: matrix.sweep: must be a JSON object, got int"),
+    ('{"matrix": {"sweep": {"controllers": {"linear[crossuver=40]": "linear"}}}}', {},
+     "config.json: matrix.sweep.controllers.linear[crossuver=40]: must be an object with parent"),
+])
+def test_a_bad_frontier_directory_is_exit_2_one_line(tmp_path, config_text, knobs, message):
+    """``--frontier DIR`` whose best point or config.json is bad: exit 2, one line naming it, no
+    traceback, nothing written (before: ValueError / AttributeError tracebacks)."""
+    from typer.testing import CliRunner
+
+    from reports.cli import app
+
+    run = _frontier_dir(tmp_path, config_text, knobs)
+    out = tmp_path / "never"
+    result = CliRunner().invoke(app, ["robustness", "--quick", "--out", str(out), "--frontier", run])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert f"--frontier {run}: {message}" in text and "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+
+
 @pytest.mark.slow
 def test_robustness_quick_end_to_end(tmp_path):
     """The real quick matrix through the CLI in a subprocess: every cell is a row, every real
