@@ -26,8 +26,8 @@ Schema (public API, documented in the README)::
     [frontier]                # optional settings of the report's frontier section (bench.frontier)
     crossing_family = "solnic"
 
-    [robustness]              # optional settings of the report's robustness section (bench.robustness)
-    reference = "thesis"
+    [robustness]              # optional settings of the report's robustness section (bench.robustness):
+    reference = "thesis"      # reference, best_source, best, told_nominal, bounds (see _ROBUSTNESS_KEYS)
 
 Every error is a :class:`MatrixError` whose message names the file, the key path and the field,
 e.g. ``matrix.toml: scenarios.heavy-load.inertia: PlantParams.inertia must be > 0, got -1.0`` or
@@ -286,6 +286,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     if not isinstance(robustness, dict):
         raise _fail(source, "robustness", "must be a table (settings of the report's robustness section)")
     _check_plan_names(source, plan, sweep_fail)
+    _check_robustness(source, text, robustness, [c.name for c in plan.controllers], [s.name for s in plan.scenarios])
     for scenario in plan.scenarios:
         _check_samples(source, scenario, duration is not None, warmup is not None)
     if check_resets:
@@ -293,6 +294,51 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     return Matrix(source, tuple(plan.controllers), tuple(plan.scenarios), tuple(seeds), limit,
                   tuple(plugins), plugin_dirs, duration, warmup, description, variants, plan.to_json(),
                   frontier, robustness)
+
+
+#: The ``[robustness]`` keys (written by ``bench.robustness.robustness_matrix_data``, read by
+#: ``reports.robustness``) and what each must be.
+_ROBUSTNESS_KEYS = {
+    "reference": "the name of a scenario of this matrix",
+    "best_source": "a string (where the best points come from)",
+    "best": "a table of controller row = parent name (the rows that are best points)",
+    "told_nominal": "a table of scenario = built-in scenario name (the scenarios told Table 2-1)",
+    "bounds": "true or false (whether the privileged bounds run)",
+}
+
+
+def _check_robustness(source: str, text: str | None, table: dict[str, Any], controllers: list[str],
+                      scenarios: list[str]) -> None:
+    """The ``[robustness]`` table: known keys only, each of its type (:data:`_ROBUSTNESS_KEYS`);
+    ``reference``, the rows of ``best`` and the scenarios of ``told_nominal`` are of this matrix."""
+    def fail(key: str, message: str, sub: str | None = None) -> MatrixError:
+        where = _at(source, text, ("robustness", key), sub) if sub is not None else None
+        if where is None or where == source:
+            where = _at(source, text, ("robustness",), key)
+        return _fail(where, f"robustness.{key}" + (f".{sub}" if sub is not None else ""), message)
+
+    for key in table:
+        if key not in _ROBUSTNESS_KEYS:
+            raise fail(key, f"unknown key; expected one of {list(_ROBUSTNESS_KEYS)}")
+    for key in ("reference", "best_source"):
+        if key in table and not isinstance(table[key], str):
+            raise fail(key, f"must be {_ROBUSTNESS_KEYS[key]}, got {table[key]!r}")
+    if "reference" in table and table["reference"] not in scenarios:
+        raise fail("reference", f"must be {_ROBUSTNESS_KEYS['reference']}, got {table['reference']!r}; "
+                                f"scenarios: {scenarios}")
+    if "bounds" in table and not isinstance(table["bounds"], bool):
+        raise fail("bounds", f"must be {_ROBUSTNESS_KEYS['bounds']}, got {table['bounds']!r}")
+    for key, known, kind in (("best", controllers, "controller row"), ("told_nominal", scenarios, "scenario")):
+        if key not in table:
+            continue
+        value = table[key]
+        if not isinstance(value, dict):
+            raise fail(key, f"must be {_ROBUSTNESS_KEYS[key]}, got {value!r}")
+        for name, target in value.items():
+            if name not in known:
+                raise fail(key, f"{name!r} is not a {kind} of this matrix; {kind}s: {known}", name)
+            if not isinstance(target, str) or not target:
+                raise fail(key, f"must be a name, got {target!r}", name)
 
 
 def _check_plan_names(source: str, plan: Any, sweep_fail: Any) -> None:

@@ -103,11 +103,12 @@ def best_points(results: Any, config: dict[str, Any], reference: str = REFERENCE
     (``config.json`` ``matrix.sweep.controllers``: parent, knobs) or the default with the lowest
     median ``peak_error_rad`` over its seeds, among those whose every cell on ``reference`` is
     ``ok``. Returns parent → knob values, only for parents whose best point is not the default
-    (ties go to the default, then to the first point)."""
+    (ties go to the default, then to the first point). Raises ``ValueError`` naming the entry for
+    a ``config`` of another shape, or a best point whose knobs its controller does not take."""
     from controllers.base import available_controllers
 
     registered = available_controllers()
-    points = (((config.get("matrix") or {}).get("sweep") or {}).get("controllers")) or {}
+    points = _sweep_points(config)
     r = results[results["scenario"] == reference]
     best: dict[str, tuple[float, int, dict[str, Any]]] = {}
     for order, (name, g) in enumerate(r.groupby("controller", sort=False)):
@@ -121,7 +122,35 @@ def best_points(results: Any, config: dict[str, Any], reference: str = REFERENCE
         key = (median, 0 if not knobs else 1 + order)
         if parent not in best or key < best[parent][:2]:
             best[parent] = (median, key[1], knobs)
-    return {p: k for p, (_, _, k) in sorted(best.items()) if k and not _is_default(registered[p], k)}
+    out = {}
+    for p, (_, _, k) in sorted(best.items()):
+        try:
+            if k and not _is_default(registered[p], k):
+                out[p] = k
+        except (ValueError, TypeError) as exc:    # a knob the controller does not take, or a bad value
+            raise ValueError(f"the best point of {p} {k}: {exc}") from None
+    return out
+
+
+def _sweep_points(config: Any) -> dict[str, Any]:
+    """``config["matrix"]["sweep"]["controllers"]`` (point → parent, knobs; empty when absent),
+    checked for its shape: ``ValueError`` naming the entry otherwise."""
+    node: Any = config
+    path = []
+    for key in ("matrix", "sweep", "controllers", None):
+        if not isinstance(node, dict):
+            where = "config.json" + (": " + ".".join(path) if path else "")
+            raise ValueError(f"{where}: must be a JSON object, got {type(node).__name__}")
+        if key is None:
+            break
+        node = node.get(key) or {}
+        path.append(key)
+    for name, info in node.items():
+        if (not isinstance(info, dict) or not isinstance(info.get("parent"), str)
+                or not isinstance(info.get("knobs") or {}, dict)):
+            raise ValueError(f"config.json: matrix.sweep.controllers.{name}: must be an object with parent "
+                             "(a name) and knobs (an object)")
+    return node
 
 
 def _is_default(cls: Any, knobs: dict[str, Any]) -> bool:
@@ -167,7 +196,10 @@ def frontier_best(run_dir: Path, reference: str = REFERENCE) -> tuple[dict[str, 
     seeds = sorted(int(s) for s in ref["seed"].unique())
     source = (f"best thesis points of the frontier run {run_dir.resolve()} ({len(ref)} {reference} cells, "
               f"seeds {_span(seeds)}, {_fmt(ref['duration_s'].iloc[0]) if 'duration_s' in ref else '?'} s runs)")
-    return best_points(results, config, reference), source
+    try:
+        return best_points(results, config, reference), source
+    except ValueError as exc:
+        raise UserError(f"{flag}: {exc}") from None
 
 
 def _span(seeds: list[int]) -> str:

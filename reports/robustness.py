@@ -11,12 +11,15 @@ written by ``solnic-bench robustness``, :mod:`bench.robustness`): its ``referenc
   both, BCa CI) and the count of every status other than ``ok``.
 * **Heatmap** (:func:`heatmap_figure`): rows × scenarios, colour log10 of the median peak [µrad],
   the CI, ratio and current in the hover, non-ok statuses marked ``⚠`` in the cell text.
-* **Verdicts** (:func:`verdicts`): per real-plant scenario, the real controller row with the
-  lowest median peak (ties within overlapping CIs said so), and the row that degrades most.
+* **Verdicts** (:func:`verdicts`): per real-plant scenario, among the real controller rows ok
+  on every seed, the one with the lowest median peak (ties within overlapping CIs said so, rows
+  left out for failed seeds named), and the row that degrades most.
 * **Claims** (:func:`robustness_claims`): on each real plant, the dissertation's "≥ 10× more
   accurate than any LTI servo" and "with less current", and "pulse-width beats solnic"
   (docs/results.md), each a paired ratio with its CI and a verdict from the CI
-  (:func:`reports.claims.verdict`). Which families these are comes from
+  (:func:`reports.claims.verdict`), bounded by the seeds either row failed (a failed seed of the
+  claim's subject caps it at inconclusive, all failed: not reproduced); the claim names the row
+  tested (:func:`_design`). Which families these are comes from
   :class:`reports.selection.Selection` (``controllers/roles.py``); nothing here names a controller.
 
 A privileged bound (the oracle) is shown as a floor and never ranked or claimed about.
@@ -32,7 +35,8 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from reports.claims import ClaimRow, at_least, below, verdict
+from reports.claims import (INCONCLUSIVE, NOT_MEASURED, NOT_REPRODUCED, REPRODUCED, ClaimRow, at_least,
+                            below, verdict)
 from reports.selection import Selection, family_of
 from reports.stats import METHOD_TEXT, median_ci, paired_ratio
 
@@ -177,17 +181,26 @@ def _overlap(a: pd.Series, b: pd.Series) -> bool:
 
 
 def verdicts(cells: pd.DataFrame) -> list[dict[str, Any]]:
-    """One plain-language verdict per non-reference scenario: the real controller row with the
-    lowest median peak (naming the rows whose CI overlaps its own as not separable from it), the
-    row with the largest paired degradation, and the rows not ok on every seed."""
+    """One plain-language verdict per non-reference scenario: among the real controller rows ok
+    on every seed, the one with the lowest median peak (naming the rows whose CI overlaps its own
+    as not separable from it, and the rows with a lower median on their ok seeds that are left out
+    for their failed seeds), the row with the largest paired degradation, and the rows not ok on
+    every seed."""
     out = []
     if cells.empty:
         return out
     real = cells[~cells["bound"]]
     for scen in dict.fromkeys(real.loc[~real["reference"], "scenario"]):
-        d = real[(real["scenario"] == scen) & real["median"].notna()].sort_values("median")
+        here = real[real["scenario"] == scen]
+        failing = here[here["ok"] < here["cells"]]
+        not_ok = ("; not ok: " + "; ".join(f"{r['controller']} ({_status_text(r['statuses'])} of {r['cells']})"
+                                           for _, r in failing.iterrows())) if len(failing) else ""
+        measured = here[here["median"].notna()].sort_values("median", kind="stable")
+        d = measured[measured["ok"] == measured["cells"]]
         if d.empty:
-            out.append({"scenario": scen, "text": f"on {scen}, no controller finished a seed ok."})
+            text = (f"on {scen}, no controller finished a seed ok" if measured.empty
+                    else f"on {scen}, no controller finished every seed ok")
+            out.append({"scenario": scen, "text": text + not_ok + "."})
             continue
         best = d.iloc[0]
         tied = [r["controller"] for _, r in d.iloc[1:].iterrows() if _overlap(best, r)]
@@ -196,16 +209,18 @@ def verdicts(cells: pd.DataFrame) -> list[dict[str, Any]]:
         if np.isfinite(best["ratio"]):
             text += f", ×{_g(best['ratio'], 2)} [{_g(best['ratio_low'], 2)}, {_g(best['ratio_high'], 2)}] of its reference peak"
         text += (f"; not separable from {', '.join(tied)} (overlapping CIs)" if tied else "")
-        deg = d[np.isfinite(d["ratio"])]
+        lower = measured[(measured["ok"] < measured["cells"]) & (measured["median"] < best["median"])]
+        if len(lower):
+            text += ("; left out for seeds not ok, though lower on their ok seeds: "
+                     + ", ".join(f"{r['controller']} ({_g(r['median'])} µrad over {r['ok']} of {r['cells']} seeds)"
+                                 for _, r in lower.iterrows()))
+        deg = measured[np.isfinite(measured["ratio"])]
         if len(deg):
             worst = deg.loc[deg["ratio"].idxmax()]
+            partial = f", over its {worst['ratio_n']} seeds ok on both" if worst["ok"] < worst["cells"] else ""
             text += (f"; {worst['controller']} degrades most: ×{_g(worst['ratio'], 2)} "
-                     f"[{_g(worst['ratio_low'], 2)}, {_g(worst['ratio_high'], 2)}] ({_g(worst['median'])} µrad)")
-        failing = real[(real["scenario"] == scen) & (real["ok"] < real["cells"])]
-        if len(failing):
-            text += "; not ok: " + "; ".join(f"{r['controller']} ({_status_text(r['statuses'])} of {r['cells']})"
-                                             for _, r in failing.iterrows())
-        out.append({"scenario": scen, "text": text + ".", "best": best["controller"]})
+                     f"[{_g(worst['ratio_low'], 2)}, {_g(worst['ratio_high'], 2)}] ({_g(worst['median'])} µrad{partial})")
+        out.append({"scenario": scen, "text": text + not_ok + ".", "best": best["controller"]})
     return out
 
 
@@ -229,9 +244,16 @@ def degradation_ranking(cells: pd.DataFrame) -> list[dict[str, Any]]:
 
 
 def most_robust(cells: pd.DataFrame) -> dict[str, Any] | None:
-    """The first eligible row of :func:`degradation_ranking` (None if there is none)."""
+    """The first eligible row of :func:`degradation_ranking` (None if there is none), ranked by
+    its point ratio; ``tied`` lists the other eligible rows whose worst-ratio CI overlaps its own
+    (not separable from it at 95 %)."""
     ranking = degradation_ranking(cells)
-    return ranking[0] if ranking and ranking[0]["eligible"] else None
+    if not ranking or not ranking[0]["eligible"]:
+        return None
+    first = ranking[0]
+    tied = [d["controller"] for d in ranking[1:] if d["eligible"] and d["low"] <= first["high"]
+            and first["low"] <= d["high"]]
+    return {**first, "tied": tied}
 
 
 def _representative(cells: pd.DataFrame, family: str, reference: str) -> str | None:
@@ -243,16 +265,58 @@ def _representative(cells: pd.DataFrame, family: str, reference: str) -> str | N
     return str(d.loc[d["median"].idxmin(), "controller"])
 
 
+def _design(family: str, row: str, reference: str) -> str:
+    """How a claim names the row it tests: the family's own name when the row is the family's
+    registered controller at its defaults, else the design and the row actually run."""
+    return family if row == family else f"the {family} design (here {row}, the family's best on {reference})"
+
+
 def _claim(key: str, claim: str, source: str, claimed: str, criterion, unit: str, value: float | None,
            text: str, basis: str, ci: tuple[float, float] | None) -> ClaimRow:
     return ClaimRow(key=key, claim=claim, source=source, claimed=claimed, measured=text,
                     criterion=criterion.describe(unit), verdict=verdict(value, criterion, ci), value=value, basis=basis)
 
 
-def _excluded(results: pd.DataFrame, ctrl: str, scen: str) -> str:
+def _failures(results: pd.DataFrame, ctrl: str, scen: str) -> tuple[int, int, dict[str, int]]:
+    """(seeds not ok, seeds, {status: count}) of one controller row × scenario."""
     g = results[(results["controller"] == ctrl) & (results["scenario"] == scen)]
     bad = g.loc[g["status"] != "ok", "status"].value_counts()
-    return "" if bad.empty else f"; {ctrl} not ok on {_status_text(dict(bad))} of {len(g)} seeds (excluded from the pairs)"
+    return int(bad.sum()), len(g), {str(k): int(v) for k, v in bad.items()}
+
+
+def _failure_text(ctrl: str, k: int, n: int, bad: Mapping[str, int]) -> str:
+    if not k:
+        return ""
+    each = ", ".join(f"{s} {c} of {n}" for s, c in sorted(bad.items()))
+    return f"; {ctrl} not ok on {k} of {n} seeds ({each}), excluded from the pairs"
+
+
+def _paired_claim(results: pd.DataFrame, scen: str, column: str, num: str, den: str, subject: str,
+                  key: str, claim: str, source: str, claimed: str, criterion, unit: str, label: str,
+                  basis: str, extra: str = "") -> ClaimRow:
+    """A claim about ``subject`` (``num`` or ``den``) from the paired ratio num/den of ``column``
+    on ``scen`` (``extra`` follows the CI in the measured text). The pairs hold only the seeds ok on both, so the failed seeds bound the verdict:
+    a seed the subject failed counts against the claim (``reproduced`` becomes ``inconclusive``;
+    failed on every seed: ``not reproduced``); a seed the other row failed may count for it
+    (``not reproduced`` becomes ``inconclusive``)."""
+    other = den if subject == num else num
+    pr = _paired(_per_seed(results, num, scen, column), _per_seed(results, den, scen, column))
+    k_s, n_s, bad_s = _failures(results, subject, scen)
+    k_o, n_o, bad_o = _failures(results, other, scen)
+    value = pr.ratio if pr.n else None
+    text = (f"{label}, paired by seed: {_g(pr.ratio)}{unit} [95 % CI {_g(pr.low)}–{_g(pr.high)}, {pr.n} seeds]{extra}"
+            + _failure_text(num, *_failures(results, num, scen)) + _failure_text(den, *_failures(results, den, scen)))
+    v = verdict(value, criterion, (pr.low, pr.high) if pr.n >= 2 else None)
+    if n_s and k_s == n_s:
+        v, text = NOT_REPRODUCED, text + f"; not reproduced: {subject} finished no seed ok"
+    elif k_s and v in (REPRODUCED, NOT_MEASURED):
+        v, text = INCONCLUSIVE, text + (f"; inconclusive: {subject}'s {k_s} failed seeds count against the claim "
+                                        "and are not in the pairs")
+    elif k_o and v in (NOT_REPRODUCED, NOT_MEASURED):
+        v, text = INCONCLUSIVE, text + (f"; inconclusive: {other}'s {k_o} failed seeds may count for the claim "
+                                        "and are not in the pairs")
+    return ClaimRow(key=key, claim=claim, source=source, claimed=claimed, measured=text,
+                    criterion=criterion.describe(unit), verdict=v, value=value, basis=basis)
 
 
 def robustness_claims(results: pd.DataFrame, cells: pd.DataFrame, selection: Selection,
@@ -260,57 +324,52 @@ def robustness_claims(results: pd.DataFrame, cells: pd.DataFrame, selection: Sel
     """Per non-reference scenario: ``robust_ten_times.<S>`` (best LTI row on S / the solnic family's
     thesis-chosen row, peak, ≥ 10), ``robust_less_current.<S>`` (that solnic row / that LTI row,
     mean current, < 1) and ``robust_pulse_width.<S>`` (the adaptive-pulse family's thesis-chosen
-    row / the solnic row, peak, < 1); paired by seed, verdict from the 95 % CI."""
+    row / the solnic row, peak, < 1); paired by seed, verdict from the 95 % CI, bounded by the
+    seeds either row failed (:func:`_paired_claim`). The claim text names the row tested."""
     if cells.empty:
         return []
     rows: list[ClaimRow] = []
     subject = _representative(cells, selection.solnic, reference)
     peer = _representative(cells, selection.adaptive_pulse, reference)
-    scenarios = list(dict.fromkeys(cells.loc[~cells["reference"], "scenario"]))
-    for scen in scenarios:
+    sol = _design(selection.solnic, subject, reference) if subject else selection.solnic
+    for scen in dict.fromkeys(cells.loc[~cells["reference"], "scenario"]):
         here = cells[(cells["scenario"] == scen) & ~cells["bound"]]
         lti = here[(here["family"] == selection.linear) & here["median"].notna()]
+        whole = lti[lti["ok"] == lti["cells"]]            # rows ok on every seed first
+        lti = whole if len(whole) else lti
         lti_row = str(lti.loc[lti["median"].idxmin(), "controller"]) if len(lti) else None
         src = f"§8.1, §8.2 on the real plant {scen!r} (issue 24)"
+        ten = f"On {scen}, {sol} is at least ten times more accurate than any LTI servo"
         if subject is None or lti_row is None:
             why = f"needs ok {selection.solnic} and {selection.linear} family cells on {reference} and {scen}"
-            rows.append(_claim(f"robust_ten_times.{scen}", f"On {scen}, solnic is at least ten times more accurate "
-                               "than any LTI servo", src, "≥ 10×", at_least(10.0), "×", None,
+            rows.append(_claim(f"robust_ten_times.{scen}", ten, src, "≥ 10×", at_least(10.0), "×", None,
                                f"not measured in this run ({why})", "", None))
         else:
-            pr = _paired(_per_seed(results, lti_row, scen, _ERROR), _per_seed(results, subject, scen, _ERROR))
-            excl = _excluded(results, subject, scen) + _excluded(results, lti_row, scen)
-            rows.append(_claim(
-                f"robust_ten_times.{scen}", f"On {scen}, solnic is at least ten times more accurate than any LTI servo",
-                src, "≥ 10×", at_least(10.0), "×", pr.ratio if pr.n else None,
-                f"{lti_row} / {subject} peak, paired by seed: {_g(pr.ratio)}× [95 % CI {_g(pr.low)}–{_g(pr.high)}, "
-                f"{pr.n} seeds]{excl}",
-                f"LTI side: the most accurate {selection.linear}-family row on {scen} (generous to the baseline); "
-                f"solnic side: the {selection.solnic}-family row best on {reference}, not retuned; told Table 2-1",
-                (pr.low, pr.high) if pr.n >= 2 else None))
-            pc = _paired(_per_seed(results, subject, scen, _CURRENT), _per_seed(results, lti_row, scen, _CURRENT))
-            rows.append(_claim(
-                f"robust_less_current.{scen}", f"On {scen}, solnic runs at a lower average current than that LTI servo",
-                f"abstract; §8.1 on the real plant {scen!r}", "< 1", below(1.0), "", pc.ratio if pc.n else None,
-                f"{subject} / {lti_row} mean |i|, paired by seed: {_g(pc.ratio)} [95 % CI {_g(pc.low)}–{_g(pc.high)}, "
-                f"{pc.n} seeds]{excl}", "the rows of the accuracy claim above; mean_abs_current (1/T)∫|x3|dt",
-                (pc.low, pc.high) if pc.n >= 2 else None))
+            rows.append(_paired_claim(
+                results, scen, _ERROR, lti_row, subject, subject, f"robust_ten_times.{scen}", ten, src, "≥ 10×",
+                at_least(10.0), "×", f"{lti_row} / {subject} peak",
+                f"LTI side: the most accurate {selection.linear}-family row on {scen} (generous to the baseline; "
+                f"rows ok on every seed first); solnic side: the {selection.solnic}-family row best on {reference}, "
+                "not retuned; told Table 2-1"))
+            rows.append(_paired_claim(
+                results, scen, _CURRENT, subject, lti_row, subject, f"robust_less_current.{scen}",
+                f"On {scen}, {sol} runs at a lower average current than that LTI servo",
+                f"abstract; §8.1 on the real plant {scen!r}", "< 1", below(1.0), "", f"{subject} / {lti_row} mean |i|",
+                "the rows of the accuracy claim above; mean_abs_current (1/T)∫|x3|dt"))
+        pulse = (f"On {scen}, adaptive pulse-width control"
+                 + (f" (here {peer}, the {selection.adaptive_pulse} family's best on {reference})" if peer else "")
+                 + f" beats {sol}")
         if subject is None or peer is None:
             why = f"needs ok {selection.adaptive_pulse} and {selection.solnic} family cells on {reference} and {scen}"
-            rows.append(_claim(f"robust_pulse_width.{scen}", f"On {scen}, adaptive pulse-width control beats solnic",
-                               "docs/results.md (thesis, ratio-2)", "< 1", below(1.0), "×", None,
-                               f"not measured in this run ({why})", "", None))
+            rows.append(_claim(f"robust_pulse_width.{scen}", pulse, "docs/results.md (thesis, ratio-2)", "< 1",
+                               below(1.0), "×", None, f"not measured in this run ({why})", "", None))
             continue
         pp = _paired(_per_seed(results, peer, scen, _ERROR), _per_seed(results, subject, scen, _ERROR))
-        rows.append(_claim(
-            f"robust_pulse_width.{scen}", f"On {scen}, adaptive pulse-width control beats solnic",
+        rows.append(_paired_claim(
+            results, scen, _ERROR, peer, subject, peer, f"robust_pulse_width.{scen}", pulse,
             "docs/results.md (thesis, ratio-2), tested on a real plant", "< 1", below(1.0), "×",
-            pp.ratio if pp.n else None,
-            f"{peer} / {subject} peak, paired by seed: {_g(pp.ratio)}× [95 % CI {_g(pp.low)}–{_g(pp.high)}, {pp.n} "
-            f"seeds], P({peer} lower) = {_g(pp.p_improvement)}"
-            f"{_excluded(results, peer, scen) + _excluded(results, subject, scen)}",
-            f"each family's row best on {reference}, not retuned; told Table 2-1",
-            (pp.low, pp.high) if pp.n >= 2 else None))
+            f"{peer} / {subject} peak", f"each family's row best on {reference}, not retuned; told Table 2-1",
+            f", P({peer} lower) = {_g(pp.p_improvement)}"))
     return rows
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -293,6 +294,115 @@ def test_claims_on_each_real_plant_with_paired_ratios_and_verdicts():
     assert "18 seeds" in pw.measured and "diverged 2 of 20" in pw.measured
 
 
+def _fail_seeds(results: pd.DataFrame, ctrl: str, scen: str, seeds, status: str = "diverged") -> pd.DataFrame:
+    """``results`` with ``ctrl`` on ``scen`` failed (``status``, no peak) on ``seeds``."""
+    out = results.copy()
+    m = (out["controller"] == ctrl) & (out["scenario"] == scen) & out["seed"].isin(list(seeds))
+    out.loc[m, "status"], out.loc[m, "peak_error_rad"] = status, math.nan
+    return out
+
+
+def _claims(results: pd.DataFrame, config=None) -> dict:
+    from reports.robustness import cell_table, robustness_claims
+    from reports.selection import Selection
+
+    cells = cell_table(results, config or _CONFIG)
+    return {r.key: r for r in robustness_claims(results, cells, Selection(), "thesis")}
+
+
+def test_a_claim_whose_subject_failed_seeds_is_at_best_inconclusive():
+    """solnic diverged on 17 of 20 lugre seeds: its 3 ok seeds alone say 20× (reproduced), but the
+    17 failures count against the claim; failed on all 20 it is not reproduced (no pair exists)."""
+    some = _claims(_fail_seeds(_results(), "solnic", "lugre", range(3, 20)))
+    ten = some["robust_ten_times.lugre"]
+    assert ten.value == pytest.approx(20.0, rel=1e-12)                  # the 3 pairs, as before
+    assert ten.verdict == "inconclusive"
+    assert "3 seeds]" in ten.measured and "solnic not ok on 17 of 20 seeds (diverged 17 of 20)" in ten.measured
+    assert some["robust_less_current.lugre"].verdict == "inconclusive"
+    # the other claim: pulse-width (ok on every seed) beats solnic on the 3 pairs; solnic's failures
+    # do not weaken a claim against solnic
+    assert some["robust_pulse_width.lugre"].verdict == "reproduced"
+    every = _claims(_fail_seeds(_results(), "solnic", "lugre", SEEDS))
+    assert every["robust_ten_times.lugre"].value is None
+    assert every["robust_ten_times.lugre"].verdict == "not reproduced"
+    assert "solnic not ok on 20 of 20 seeds" in every["robust_ten_times.lugre"].measured
+    assert every["robust_less_current.lugre"].verdict == "not reproduced"
+    # pulse-width ok on all 20 seeds where solnic failed: not a pair, but not against the claim
+    assert every["robust_pulse_width.lugre"].verdict == "inconclusive"
+    # the other plant is untouched
+    assert every["robust_ten_times.compliant"].verdict == "not reproduced"
+
+
+def test_failed_seeds_of_the_other_row_lift_not_reproduced_to_inconclusive():
+    """On compliant pulse-width / solnic is 1.5 on the ok pairs (not reproduced); with solnic
+    failed on 5 seeds, where pulse-width may have won, the pairs cannot refute the claim."""
+    claims = _claims(_fail_seeds(_results(), "solnic", "compliant", range(5)))
+    pw = claims["robust_pulse_width.compliant"]
+    assert pw.value == pytest.approx(1.5, rel=1e-12) and "14 seeds]" in pw.measured    # 20 − seeds 0-4 − seed 11
+    assert pw.verdict == "inconclusive"
+    assert claims["robust_ten_times.compliant"].verdict == "not reproduced"            # the subject failed
+
+
+def test_the_lti_side_is_the_most_accurate_row_ok_on_every_seed():
+    """The best LTI point (800 µrad on lugre) failed a seed: the claim compares against the
+    default linear row (1100 µrad, ok on every seed): 1100/40 = 27.5."""
+    claims = _claims(_fail_seeds(_results(), "linear[crossover=48,lag_ratio=8]", "lugre", [7]))
+    ten = claims["robust_ten_times.lugre"]
+    assert ten.value == pytest.approx(1100 / 40, rel=1e-12) and ten.verdict == "reproduced"
+    assert ten.measured.startswith("linear / solnic peak")
+
+
+def test_claims_name_the_row_of_the_family_actually_tested():
+    """When the solnic family's best row on thesis is not solnic itself, the claim says which."""
+    results = _results()
+    extra = results[results["controller"] == "solnic"].copy()
+    extra["controller"], extra["controller_base"] = "solnic-modern[a_c=2e-06]", "solnic-modern"
+    scale = {"thesis": 0.5, "lugre": 0.5, "compliant": 0.5}         # 10, 20, 100 µrad: best on thesis
+    extra["peak_error_rad"] *= extra["scenario"].map(scale)
+    results = pd.concat([results, extra], ignore_index=True)
+    claims = _claims(results)
+    ten = claims["robust_ten_times.lugre"]
+    assert ten.claim == ("On lugre, the solnic design (here solnic-modern[a_c=2e-06], the family's best on "
+                         "thesis) is at least ten times more accurate than any LTI servo")
+    assert ten.value == pytest.approx(800 / 20, rel=1e-12)
+    assert "solnic-modern[a_c=2e-06]" in claims["robust_less_current.lugre"].claim
+    pw = claims["robust_pulse_width.lugre"].claim
+    assert "(here pulse-width, the pulse-width family's best on thesis)" in pw
+    assert pw.endswith("beats the solnic design (here solnic-modern[a_c=2e-06], the family's best on thesis)")
+    # solnic itself at its defaults is named plainly
+    assert _claims(_results())["robust_ten_times.lugre"].claim.startswith("On lugre, solnic is at least")
+
+
+def test_the_verdict_names_only_a_row_ok_on_every_seed_as_holding_the_axis_best():
+    from reports.robustness import cell_table, verdicts
+
+    results = _fail_seeds(_results(), "pulse-width", "lugre", [4])       # 27 µrad on 19 seeds
+    v = {d["scenario"]: d for d in verdicts(cell_table(results, _CONFIG))}["lugre"]
+    assert v["best"] == "solnic"                                          # 40 µrad, ok on all 20
+    assert v["text"].startswith("on lugre, solnic holds the axis best")
+    assert "left out for seeds not ok, though lower on their ok seeds: pulse-width (" in v["text"]
+    assert "over 19 of 20 seeds" in v["text"] and "not ok: pulse-width (diverged 1 of 20)" in v["text"]
+    every = _fail_seeds(results, "solnic", "lugre", SEEDS)
+    for ctrl in ("linear", "linear[crossover=48,lag_ratio=8]"):
+        every = _fail_seeds(every, ctrl, "lugre", [0])
+    v = {d["scenario"]: d for d in verdicts(cell_table(every, _CONFIG))}["lugre"]
+    assert "best" not in v and v["text"].startswith("on lugre, no controller finished every seed ok; not ok:")
+
+
+def test_most_robust_names_the_rows_its_ci_does_not_separate_it_from():
+    from reports.robustness import most_robust
+
+    def row(ctrl, ratio, low, high, ok=20):
+        return dict(controller=ctrl, scenario="lugre", bound=False, reference=False, ok=ok, cells=20,
+                    median=100.0, ratio=ratio, ratio_low=low, ratio_high=high)
+
+    cells = pd.DataFrame([row("a", 1.2, 1.0, 1.5), row("b", 1.3, 1.25, 1.4), row("c", 2.0, 1.6, 2.4),
+                          row("d", 1.25, 1.1, 1.45, ok=19)])              # d: a failed seed, not eligible
+    best = most_robust(cells)
+    assert best["controller"] == "a" and best["tied"] == ["b"]
+    assert (best["ratio"], best["low"], best["high"]) == (1.2, 1.0, 1.5)
+
+
 def test_report_has_a_robustness_section_only_with_a_robustness_table(tmp_path):
     from reports.build import build_report
 
@@ -300,8 +410,43 @@ def test_report_has_a_robustness_section_only_with_a_robustness_table(tmp_path):
     html = path.read_text(encoding="utf-8")
     assert 'id="robustness"' in html and "on lugre, pulse-width holds the axis best" in html
     assert "On lugre, solnic is at least ten times more accurate than any LTI servo" in html
+    assert "linear[crossover=48,lag_ratio=8], at worst" in html and "ranked by the point ratio" in html
     plain = build_report(tmp_path / "b", results=_results(), config={"matrix": {}}).read_text(encoding="utf-8")
     assert 'id="robustness"' not in plain
+
+
+@pytest.mark.parametrize("table, message", [
+    ("best = 3", r":7: robustness\.best: must be a table of controller row = parent name .*, got 3"),
+    ("refrence = 'thesis'", r":7: robustness\.refrence: unknown key; expected one of \['reference', "),
+    ("reference = 1", r":7: robustness\.reference: must be the name of a scenario of this matrix, got 1"),
+    ("reference = 'lugre'", r":7: robustness\.reference: .*got 'lugre'; scenarios: \['thesis'\]"),
+    ("bounds = 'no'", r":7: robustness\.bounds: must be true or false"),
+    ("best_source = ['x']", r":7: robustness\.best_source: must be a string"),
+    ("told_nominal = 'thesis'", r":7: robustness\.told_nominal: must be a table"),
+    ('[robustness.best]\n"linear[crossover=9]" = "linear"',
+     r":7: robustness\.best\.linear\[crossover=9\]: 'linear\[crossover=9\]' is not a controller row of this matrix"),
+    ("[robustness.best]\nlinear = 2", r":7: robustness\.best\.linear: must be a name, got 2"),
+])
+def test_the_robustness_table_of_a_matrix_is_validated_when_parsed(tmp_path, table, message):
+    """A bad ``[robustness]`` table is a MatrixError naming file:line (the key's line, 7) and the
+    key, at parse time (before, ``best = 3`` parsed and then raised a TypeError in the report)."""
+    from bench.matrix import MatrixError, load_matrix
+
+    path = tmp_path / "m.toml"
+    body = table
+    head = "" if body.startswith("[robustness.") else "[robustness]\n"
+    path.write_text('[matrix]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\nseeds = [0]\n\n'
+                    + head + body + "\n", encoding="utf-8")
+    with pytest.raises(MatrixError, match=re.escape(str(path)) + message):
+        load_matrix(path, check_resets=False)
+
+
+def test_a_valid_robustness_table_parses_and_reaches_the_run_config():
+    data = R.robustness_matrix_data(True, {"linear": {"crossover": 30.0}}, "hand-made")
+    m = parse_matrix(data, "robustness", check_resets=False)
+    assert m.robustness["best"] == {"linear[crossover=30]": "linear"} and m.robustness["bounds"] is False
+    assert m.to_json()["robustness"]["told_nominal"] == {"quantized-nominal": "quantized",
+                                                         "delayed-nominal": "delayed"}
 
 
 # --------------------------------------------------------------------------- the command
@@ -383,6 +528,42 @@ def test_frontier_option_takes_the_best_points_from_a_frontier_run(tmp_path):
     data = R.robustness_matrix_data(True, best, source)
     assert "linear[crossover=40]" in data["matrix"]["controllers"]
     assert data["robustness"]["best_source"] == source
+
+
+def _frontier_dir(tmp_path, config_text: str, knobs: dict) -> str:
+    run = tmp_path / "fr"
+    run.mkdir()
+    _frontier_rows({"linear": [3.0] * 20, "linear[crossuver=40]": [2.0] * 20}).to_parquet(run / "results.parquet")
+    (run / "config.json").write_text(config_text.replace("KNOBS", json.dumps(knobs)), encoding="utf-8")
+    return str(run)
+
+
+_POINT = '{"matrix": {"sweep": {"controllers": {"linear[crossuver=40]": {"parent": "linear", "knobs": KNOBS}}}}}'
+
+
+@pytest.mark.parametrize("config_text, knobs, message", [
+    (_POINT, {"crossuver": 40.0},                      # a knob the controller does not take (any more)
+     "the best point of linear {'crossuver': 40.0}: unknown option 'crossuver' of 'linear'"),
+    (_POINT, {"crossover": "fast"}, "the best point of linear {'crossover': 'fast'}: "),
+    ("[1, 2]", {}, "config.json: must be a JSON object, got list"),
+    ('{"matrix": {"sweep": 3}}', {}, "config.json: matrix.sweep: must be a JSON object, got int"),
+    ('{"matrix": {"sweep": {"controllers": {"linear[crossuver=40]": "linear"}}}}', {},
+     "config.json: matrix.sweep.controllers.linear[crossuver=40]: must be an object with parent"),
+])
+def test_a_bad_frontier_directory_is_exit_2_one_line(tmp_path, config_text, knobs, message):
+    """``--frontier DIR`` whose best point or config.json is bad: exit 2, one line naming it, no
+    traceback, nothing written (before: ValueError / AttributeError tracebacks)."""
+    from typer.testing import CliRunner
+
+    from reports.cli import app
+
+    run = _frontier_dir(tmp_path, config_text, knobs)
+    out = tmp_path / "never"
+    result = CliRunner().invoke(app, ["robustness", "--quick", "--out", str(out), "--frontier", run])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert f"--frontier {run}: {message}" in text and "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()
 
 
 @pytest.mark.slow
