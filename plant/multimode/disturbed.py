@@ -69,12 +69,13 @@ def initial_state(params: PlantParams, x5: float) -> PlantState:
 class _Step:
     """Φ(h), Q(h), its minimal factor, and the bridge law of the midpoint of a width-h step."""
 
-    __slots__ = ("phi", "Q", "factor", "_bridge")
+    __slots__ = ("phi", "Q", "factor", "_bridge", "_given")
 
     def __init__(self, phi, Q):
         self.phi, self.Q = phi, Q
         self.factor = noise_factor(Q)
         self._bridge = None
+        self._given = {}     # barrier functional e -> the bisection's conditional law (see _bisect)
 
 
 @lru_cache(maxsize=16)
@@ -148,7 +149,10 @@ def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, 
 
 def transition(params: PlantParams, mode: int, h: float) -> _Step:
     """The cached :class:`_Step` of ``mode`` over ``h`` [s] (closed form; Van Loan is the tests' oracle)."""
-    memo = _cache(params)
+    return _transition(_cache(params), params, mode, h)
+
+
+def _transition(memo: dict, params: PlantParams, mode: int, h: float) -> _Step:
     key = (mode, h)
     step = memo.get(key)
     if step is None:
@@ -158,11 +162,11 @@ def transition(params: PlantParams, mode: int, h: float) -> _Step:
     return step
 
 
-def _bridge_law(params, mode, w):
+def _bridge_law(memo, params, mode, w):
     """(Φ(w/2), G, factor of Σ): X_m = Φ(w/2)X_a + G·(X_b − Φ(w)X_a) + N(0, Σ), Matheron's rule."""
-    full = transition(params, mode, w)
+    full = _transition(memo, params, mode, w)
     if full._bridge is None:
-        half = transition(params, mode, w / 2)
+        half = _transition(memo, params, mode, w / 2)
         Qh, Qw, Ph = half.Q, full.Q, half.phi
         rows = np.flatnonzero(np.diag(Qw) > 0.0)
         M = Qh @ Ph.T                                  # COV[X_m, X_b | X_a]
@@ -177,7 +181,7 @@ def _bridge_law(params, mode, w):
         B = V * np.sqrt(np.clip(lam, 0.0, None))
         keep = np.flatnonzero(lam > 1e-14 * max(lam.max(initial=0.0), 1e-300))
         full._bridge = (Ph, G, B[:, keep])
-    return full._bridge
+    return full
 
 
 class _Draws:
@@ -214,6 +218,7 @@ class _Run:
 
     def __init__(self, p, o, t, mode, flyback, record):
         self.p, self.o = p, o
+        self.memo = _cache(p)
         self.t, self.mode, self.fb = t, mode, flyback
         self.peak = self.iabs = self.isq = self.chg = self.dur = 0.0
         self.nev = self.nbrk = self.nstk = self.nsub = self.count = 0
@@ -342,12 +347,16 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     :func:`plant.multimode.zero_velocity.hitting_midpoint`), then the rest given c."""
     t0 = 0.0
     cursor = np.zeros(1, dtype=np.int64)
+    memo = run.memo
+    ekey = e.tobytes()
     while w > tol:
-        Ph, G, B = _bridge_law(p, mode, w)
-        mean = Ph @ Ya + G @ (Yb - transition(p, mode, w).phi @ Ya)
-        S = B @ B.T
-        Se = S @ e
-        var = float(e @ Se)
+        full = _bridge_law(memo, p, mode, w)
+        Ph, G, B = full._bridge
+        mean = Ph @ Ya + G @ (Yb - full.phi @ Ya)
+        given = full._given.get(ekey)
+        if given is None:                           # depends on (mode, w, e) only: computed once
+            given = full._given[ekey] = _conditional(B, e)
+        var, k, F = given
         mu = float(e @ mean) + c0
         a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
         half = w / 2
@@ -364,13 +373,9 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
                 draws.pos = int(cursor[0])
             else:
                 cm = mu + sd * float(draws.normals(1)[0])
-            k = Se / var
-            R = S - np.outer(Se, Se) / var
-            lam, V = np.linalg.eigh(0.5 * (R + R.T))
-            keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
             Ym = mean + k * (cm - mu)
-            if keep.any():
-                Ym += (V[:, keep] * np.sqrt(lam[keep])) @ draws.normals(int(keep.sum()))
+            if F is not None:
+                Ym += F @ draws.normals(F.shape[1])
         else:
             Ym = mean + (B @ draws.normals(B.shape[1]) if draws is not None and B.shape[1] else 0.0)
             cm = float(e @ Ym) + c0
@@ -384,6 +389,22 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
             Ya, t0 = Ym, t0 + half
         w = half
     return t0 + w, Yb
+
+
+def _conditional(B, e):
+    """(var, k, F) of the midpoint's law N(·, S = B·Bᵀ) given c = e·Y: var = eᵀSe, the gain
+    k = Se/var and a factor F of the conditional covariance S − Se·(Se)ᵀ/var (None when it is 0)."""
+    S = B @ B.T
+    Se = S @ e
+    var = float(e @ Se)
+    if not var > 0.0:
+        return var, None, None
+    k = Se / var
+    R = S - np.outer(Se, Se) / var
+    lam, V = np.linalg.eigh(0.5 * (R + R.T))
+    keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
+    F = (V[:, keep] * np.sqrt(lam[keep])) if keep.any() else None
+    return var, k, F
 
 
 def _flyback_time(p, Y, run):
@@ -421,7 +442,7 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         if reflecting and not far:
             w = min(o.reflect_substep, room_fb)
         rungs = reflecting and not far
-    step = transition(p, mode, w)
+    step = _transition(run.memo, p, mode, w)
     Yb = _gauss(step, Y, draws)
     run.nsub += 1
     if run.tick():
