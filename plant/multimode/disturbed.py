@@ -272,10 +272,13 @@ def _ks(p, Y):
     return max(p.stiction + Y[Y5], 0.0)
 
 
+_TOP = 2.0 ** (LADDER - 1)
+
+
 def _ladder_width(room, sub, far):
     """``room`` itself or the longest rung sub·2^k ≤ room for which ``far(w)`` holds, else
     min(sub, room)."""
-    w = sub * 2.0 ** (LADDER - 1)
+    w = sub * _TOP
     if sub < room <= w and far(room):
         return room, True
     while w > sub:
@@ -289,29 +292,40 @@ def _x3_at(p, x3, u, w):
     return u + (x3 - u) * math.exp(-w / p.motor_time_constant)
 
 
-def _stuck_far(p, Y, w, sig2):
-    """No passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is monotone)."""
+def _stuck_far(p, Y, sig2):
+    """far(w): no passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is
+    monotone). The w-free parts are evaluated once per sub-step."""
     ks = _ks(p, Y)
-    x3max = max(abs(Y[Y3]), abs(_x3_at(p, Y[Y3], Y[YU], w)))
-    return ks - x3max - abs(Y[YD]) > FAR_SIGMAS * math.sqrt(sig2 * w)
+    x3, u, ad = Y[Y3], Y[YU], abs(Y[YD])
+    ax3, g, tau3 = abs(x3), x3 - u, p.motor_time_constant
+
+    def far(w):
+        x3max = max(ax3, abs(u + g * math.exp(-w / tau3)))      # |_x3_at(w)|
+        return ks - x3max - ad > FAR_SIGMAS * math.sqrt(sig2 * w)
+    return far
 
 
-def _moving_far(p, mode, Y, w, dirn):
-    """s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope is
-    α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
+def _moving_far(p, Y, dirn):
+    """far(w): s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope
+    is α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
     β5|x5|) (x3, the means of d and x5 are exponentials), so s·x̄2(τ) ≥ s·x2 + ṡ0·τ − M·τ²/2,
-    a concave bound whose minimum on [0, w] is at an end."""
+    a concave bound whose minimum on [0, w] is at an end. The w-free parts are evaluated once
+    per sub-step."""
     a = p.alpha
     v0 = dirn * Y[Y2]
     slope = dirn * a * (Y[Y3] + Y[YD]) - a * (Y[YKC] + Y[Y5])
     curv = a * (abs(Y[YU] - Y[Y3]) / p.motor_time_constant + abs(Y[YD]) / p.disturbance_torque_tau
                 + abs(Y[Y5]) / p.correlated_friction_tau)
-    low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
     # x2's noise: α·∫w2 plus α·∫ of the zero-mean parts of d and x5, whose variances over w are
     # at most those of the integrated Brownian motions of their intensities (w³/3 each)
-    sd = a * (math.sqrt(p.sigma2_sq * w) + math.sqrt(2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
-                                                    * w ** 3 / 3.0) + math.sqrt(p.sigma5_sq * w ** 3 / 3.0))
-    return low > FAR_SIGMAS * sd
+    s2, sd2, s5 = p.sigma2_sq, 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau, p.sigma5_sq
+
+    def far(w):
+        low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
+        w3 = w ** 3
+        sd = a * (math.sqrt(s2 * w) + math.sqrt(sd2 * w3 / 3.0) + math.sqrt(s5 * w3 / 3.0))
+        return low > FAR_SIGMAS * sd
+    return far
 
 
 def _cross_prob(va, vb, w, sig2):
@@ -428,7 +442,7 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         if abs(g) > ks:                             # at (or past) stiction: breaks away now
             return _breakaway(Y, run, g)
         sig2 = sig_d2
-        w, far = _ladder_width(room_fb, o.substep, lambda w: _stuck_far(p, Y, w, sig2))
+        w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, Y, sig2))
         rungs = False
     else:
         dirn = 1.0 if mode == 3 else -1.0
@@ -438,7 +452,7 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         sig2 = p.alpha ** 2 * p.sigma2_sq if draws is not None else 0.0
         if run.just_broke:
             reflecting, run.just_broke = True, False      # at ±ks exactly: the push starts the motion
-        w, far = _ladder_width(room_fb, o.substep, lambda w: _moving_far(p, mode, Y, w, dirn))
+        w, far = _ladder_width(room_fb, o.substep, _moving_far(p, Y, dirn))
         if reflecting and not far:
             w = min(o.reflect_substep, room_fb)
         rungs = reflecting and not far
