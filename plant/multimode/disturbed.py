@@ -69,11 +69,12 @@ def initial_state(params: PlantParams, x5: float) -> PlantState:
 class _Step:
     """Φ(h), Q(h), its minimal factor, and the bridge law of the midpoint of a width-h step."""
 
-    __slots__ = ("phi", "Q", "factor", "_bridge", "_given")
+    __slots__ = ("phi", "Q", "factor", "rows", "B", "m", "_bridge", "_given")
 
     def __init__(self, phi, Q):
         self.phi, self.Q = phi, Q
-        self.factor = noise_factor(Q)
+        self.factor = f = noise_factor(Q)
+        self.rows, self.B, self.m = f.rows, f.B, f.m
         self._bridge = None
         self._given = {}     # barrier functional e -> the bisection's conditional law (see _bisect)
 
@@ -102,6 +103,8 @@ def _records(params: PlantParams) -> tuple[np.ndarray, np.ndarray]:
 # Y-index of each slot of plant.multimode.moving's augmented vector [x1, x2, x3, x4, x5, kc, u].
 _FROM7 = np.array([Y1, Y2, Y3, Y4, Y5, YKC, YU])
 _BLOCK = np.array([Y1, Y2, Y4, Y5])
+_IX7, _IXB = np.ix_(_FROM7, _FROM7), np.ix_(_BLOCK, _BLOCK)
+_IXD, _IXD4 = np.ix_([Y1, Y2, YD], [Y1, Y2, YD]), np.ix_([0, 1, 3], [0, 1, 3])
 
 
 def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -133,17 +136,16 @@ def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, 
         return phi, Q
     P7 = np.empty((7, 7))
     phi_moving(mode, h, rec[0], P7)
-    phi[np.ix_(_FROM7, _FROM7)] = P7
+    phi[_IX7] = P7
     a = p.alpha
     phi[Y1, YD] = a * e2(bd * h) / (bd * bd)
     phi[Y2, YD] = a * e1(bd * h) / bd
     phi[YD, YD] = math.exp(-bd * h)
     Q4 = np.empty((4, 4))
     q_moving(mode, h, rec[0], Q4)
-    Q[np.ix_(_BLOCK, _BLOCK)] = Q4
+    Q[_IXB] = Q4
     q_moving(1, h, rd[0], Q4)                      # d's share on (x1, x2, ·, d)
-    dblk = np.array([Y1, Y2, YD])
-    Q[np.ix_(dblk, dblk)] += Q4[np.ix_([0, 1, 3], [0, 1, 3])]
+    Q[_IXD] += Q4[_IXD4]
     return phi, Q
 
 
@@ -207,9 +209,8 @@ class _Draws:
 
 def _gauss(step: _Step, Y: np.ndarray, draws: _Draws | None) -> np.ndarray:
     out = step.phi @ Y
-    f = step.factor
-    if draws is not None and f.m:
-        out[f.rows] += f.B @ draws.normals(f.m)
+    if draws is not None and step.m:
+        out[step.rows] += step.B @ draws.normals(step.m)
     return out
 
 
