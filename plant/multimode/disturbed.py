@@ -296,8 +296,8 @@ def _x3_at(p, x3, u, w):
 def _stuck_far(p, Y, sig2):
     """far(w): no passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is
     monotone). The w-free parts are evaluated once per sub-step."""
-    ks = _ks(p, Y)
-    x3, u, ad = Y[Y3], Y[YU], abs(Y[YD])
+    ks = float(_ks(p, Y))                                      # Python floats: same IEEE
+    x3, u, ad = float(Y[Y3]), float(Y[YU]), abs(float(Y[YD]))  # doubles, cheaper arithmetic
     ax3, g, tau3 = abs(x3), x3 - u, p.motor_time_constant
 
     def far(w):
@@ -313,10 +313,11 @@ def _moving_far(p, Y, dirn):
     a concave bound whose minimum on [0, w] is at an end. The w-free parts are evaluated once
     per sub-step."""
     a = p.alpha
-    v0 = dirn * Y[Y2]
-    slope = dirn * a * (Y[Y3] + Y[YD]) - a * (Y[YKC] + Y[Y5])
-    curv = a * (abs(Y[YU] - Y[Y3]) / p.motor_time_constant + abs(Y[YD]) / p.disturbance_torque_tau
-                + abs(Y[Y5]) / p.correlated_friction_tau)
+    x2, x3, x5, kc, u, d = Y[Y2].item(), Y[Y3].item(), Y[Y5].item(), Y[YKC].item(), Y[YU].item(), Y[YD].item()
+    v0 = dirn * x2
+    slope = dirn * a * (x3 + d) - a * (kc + x5)
+    curv = a * (abs(u - x3) / p.motor_time_constant + abs(d) / p.disturbance_torque_tau
+                + abs(x5) / p.correlated_friction_tau)
     # x2's noise: α·∫w2 plus α·∫ of the zero-mean parts of d and x5, whose variances over w are
     # at most those of the integrated Brownian motions of their intensities (w³/3 each)
     s2, sd2, s5 = p.sigma2_sq, 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau, p.sigma5_sq
