@@ -220,6 +220,7 @@ class _Run:
     def __init__(self, p, o, t, mode, flyback, record):
         self.p, self.o = p, o
         self.memo = _cache(p)
+        self.sig2_moving = p.alpha ** 2 * p.sigma2_sq     # α²σ2², x2's noise intensity
         self.t, self.mode, self.fb = t, mode, flyback
         self.peak = self.iabs = self.isq = self.chg = self.dur = 0.0
         self.nev = self.nbrk = self.nstk = self.nsub = self.count = 0
@@ -293,11 +294,11 @@ def _x3_at(p, x3, u, w):
     return u + (x3 - u) * math.exp(-w / p.motor_time_constant)
 
 
-def _stuck_far(p, Y, sig2):
+def _stuck_far(p, sig2, ks, x3, u, d):
     """far(w): no passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is
-    monotone). The w-free parts are evaluated once per sub-step."""
-    ks = float(_ks(p, Y))                                      # Python floats: same IEEE
-    x3, u, ad = float(Y[Y3]), float(Y[YU]), abs(float(Y[YD]))  # doubles, cheaper arithmetic
+    monotone). The w-free parts are evaluated once per sub-step (Python floats: the same IEEE
+    doubles as numpy's scalars, cheaper arithmetic)."""
+    ad = abs(d)
     ax3, g, tau3 = abs(x3), x3 - u, p.motor_time_constant
 
     def far(w):
@@ -306,14 +307,13 @@ def _stuck_far(p, Y, sig2):
     return far
 
 
-def _moving_far(p, Y, dirn):
+def _moving_far(p, dirn, x2, x3, x5, kc, u, d):
     """far(w): s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope
     is α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
     β5|x5|) (x3, the means of d and x5 are exponentials), so s·x̄2(τ) ≥ s·x2 + ṡ0·τ − M·τ²/2,
     a concave bound whose minimum on [0, w] is at an end. The w-free parts are evaluated once
     per sub-step."""
     a = p.alpha
-    x2, x3, x5, kc, u, d = Y[Y2].item(), Y[Y3].item(), Y[Y5].item(), Y[YKC].item(), Y[YU].item(), Y[YD].item()
     v0 = dirn * x2
     slope = dirn * a * (x3 + d) - a * (kc + x5)
     curv = a * (abs(u - x3) / p.motor_time_constant + abs(d) / p.disturbance_torque_tau
@@ -423,38 +423,32 @@ def _conditional(B, e):
     return var, k, F
 
 
-def _flyback_time(p, Y, run):
-    if not run.fb:
-        return math.inf
-    return p.motor_time_constant * math.log1p(abs(Y[Y3]) / p.u_max)
-
-
 def _segment(Y, run, t_end, bridge, draws, sig_d2):
     """Advance by one sub-step (or to the next event); True when the interval must stop."""
     p, o = run.p, run.o
     mode = run.mode
     room = t_end - run.t
-    h_fb = _flyback_time(p, Y, run)
+    _, x2, x3, _, x5, d, _, u = Y.tolist()          # Python floats, the same doubles
+    h_fb = math.inf if not run.fb else p.motor_time_constant * math.log1p(abs(x3) / p.u_max)  # flyback end
     room_fb = min(room, h_fb)
-    x3, u = Y[Y3], Y[YU]
+    ks = max(p.stiction + x5, 0.0)                  # _ks
     if mode == 2:
         dirn = 0.0
-        ks = _ks(p, Y)
-        g = x3 + Y[YD]
+        g = x3 + d
         if abs(g) > ks:                             # at (or past) stiction: breaks away now
             return _breakaway(Y, run, g)
         sig2 = sig_d2
-        w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, Y, sig2))
+        w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, sig2, ks, x3, u, d))
         rungs = False
     else:
         dirn = 1.0 if mode == 3 else -1.0
-        Y[YKC] = p.coulomb if p.coulomb + Y[Y5] >= 0.0 else -Y[Y5]
-        ks = _ks(p, Y)
-        reflecting = dirn * (x3 + Y[YD]) >= ks
-        sig2 = p.alpha ** 2 * p.sigma2_sq if draws is not None else 0.0
+        kc = p.coulomb if p.coulomb + x5 >= 0.0 else -x5
+        Y[YKC] = kc
+        reflecting = dirn * (x3 + d) >= ks
+        sig2 = run.sig2_moving if draws is not None else 0.0
         if run.just_broke:
             reflecting, run.just_broke = True, False      # at ±ks exactly: the push starts the motion
-        w, far = _ladder_width(room_fb, o.substep, _moving_far(p, Y, dirn))
+        w, far = _ladder_width(room_fb, o.substep, _moving_far(p, dirn, x2, x3, x5, kc, u, d))
         if reflecting and not far:
             w = min(o.reflect_substep, room_fb)
         rungs = reflecting and not far
