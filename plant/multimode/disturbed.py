@@ -438,7 +438,10 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         if abs(g) > ks:                             # at (or past) stiction: breaks away now
             return _breakaway(Y, run, g)
         sig2 = sig_d2
-        w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, sig2, ks, x3, u, d))
+        if ks - abs(x3) - abs(d) > 0.0:
+            w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, sig2, ks, x3, u, d))
+        else:        # no rung is far: ks − x3max − |d| ≤ ks − |x3| − |d| ≤ 0 (rounding is monotone)
+            w, far = min(o.substep, room_fb), False
         rungs = False
     else:
         dirn = 1.0 if mode == 3 else -1.0
@@ -448,7 +451,10 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         sig2 = run.sig2_moving if draws is not None else 0.0
         if run.just_broke:
             reflecting, run.just_broke = True, False      # at ±ks exactly: the push starts the motion
-        w, far = _ladder_width(room_fb, o.substep, _moving_far(p, dirn, x2, x3, x5, kc, u, d))
+        if dirn * x2 > 0.0:
+            w, far = _ladder_width(room_fb, o.substep, _moving_far(p, dirn, x2, x3, x5, kc, u, d))
+        else:        # no rung is far: low ≤ s·x2 ≤ 0 ≤ 8.5σ (also for a NaN)
+            w, far = min(o.substep, room_fb), False
         if reflecting and not far:
             w = min(o.reflect_substep, room_fb)
         rungs = reflecting and not far
