@@ -29,7 +29,11 @@ crossing, the first half chosen in proportion to its own) down to ``bisection_to
   ``reflect_substep`` rather than in closed form (d is random).
 
 With ``disturbance_torque_std`` = 0 the family runs :func:`plant.multimode.interval.advance`
-itself, bit for bit. This path is plain Python over numpy (no compiled loop yet).
+itself, bit for bit. This path is plain Python over numpy (no compiled loop yet); its cost is
+cut by caching what depends only on (mode, h) or (mode, h, e) — Φ, Q and their factors, the
+bridge law, and the bisection's conditional law given c — and by scalar arithmetic on Python
+floats (the same doubles) in the sub-step's tests; every numpy product is kept as it was, so
+the bits are those of the first version.
 """
 
 from __future__ import annotations
@@ -69,12 +73,14 @@ def initial_state(params: PlantParams, x5: float) -> PlantState:
 class _Step:
     """Φ(h), Q(h), its minimal factor, and the bridge law of the midpoint of a width-h step."""
 
-    __slots__ = ("phi", "Q", "factor", "_bridge")
+    __slots__ = ("phi", "Q", "factor", "rows", "B", "m", "_bridge", "_given")
 
     def __init__(self, phi, Q):
         self.phi, self.Q = phi, Q
-        self.factor = noise_factor(Q)
+        self.factor = f = noise_factor(Q)
+        self.rows, self.B, self.m = f.rows, f.B, f.m
         self._bridge = None
+        self._given = {}     # barrier functional e -> the bisection's conditional law (see _bisect)
 
 
 @lru_cache(maxsize=16)
@@ -101,6 +107,8 @@ def _records(params: PlantParams) -> tuple[np.ndarray, np.ndarray]:
 # Y-index of each slot of plant.multimode.moving's augmented vector [x1, x2, x3, x4, x5, kc, u].
 _FROM7 = np.array([Y1, Y2, Y3, Y4, Y5, YKC, YU])
 _BLOCK = np.array([Y1, Y2, Y4, Y5])
+_IX7, _IXB = np.ix_(_FROM7, _FROM7), np.ix_(_BLOCK, _BLOCK)
+_IXD, _IXD4 = np.ix_([Y1, Y2, YD], [Y1, Y2, YD]), np.ix_([0, 1, 3], [0, 1, 3])
 
 
 def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -132,23 +140,25 @@ def _closed_form(params: PlantParams, mode: int, h: float) -> tuple[np.ndarray, 
         return phi, Q
     P7 = np.empty((7, 7))
     phi_moving(mode, h, rec[0], P7)
-    phi[np.ix_(_FROM7, _FROM7)] = P7
+    phi[_IX7] = P7
     a = p.alpha
     phi[Y1, YD] = a * e2(bd * h) / (bd * bd)
     phi[Y2, YD] = a * e1(bd * h) / bd
     phi[YD, YD] = math.exp(-bd * h)
     Q4 = np.empty((4, 4))
     q_moving(mode, h, rec[0], Q4)
-    Q[np.ix_(_BLOCK, _BLOCK)] = Q4
+    Q[_IXB] = Q4
     q_moving(1, h, rd[0], Q4)                      # d's share on (x1, x2, ·, d)
-    dblk = np.array([Y1, Y2, YD])
-    Q[np.ix_(dblk, dblk)] += Q4[np.ix_([0, 1, 3], [0, 1, 3])]
+    Q[_IXD] += Q4[_IXD4]
     return phi, Q
 
 
 def transition(params: PlantParams, mode: int, h: float) -> _Step:
     """The cached :class:`_Step` of ``mode`` over ``h`` [s] (closed form; Van Loan is the tests' oracle)."""
-    memo = _cache(params)
+    return _transition(_cache(params), params, mode, h)
+
+
+def _transition(memo: dict, params: PlantParams, mode: int, h: float) -> _Step:
     key = (mode, h)
     step = memo.get(key)
     if step is None:
@@ -158,11 +168,11 @@ def transition(params: PlantParams, mode: int, h: float) -> _Step:
     return step
 
 
-def _bridge_law(params, mode, w):
+def _bridge_law(memo, params, mode, w):
     """(Φ(w/2), G, factor of Σ): X_m = Φ(w/2)X_a + G·(X_b − Φ(w)X_a) + N(0, Σ), Matheron's rule."""
-    full = transition(params, mode, w)
+    full = _transition(memo, params, mode, w)
     if full._bridge is None:
-        half = transition(params, mode, w / 2)
+        half = _transition(memo, params, mode, w / 2)
         Qh, Qw, Ph = half.Q, full.Q, half.phi
         rows = np.flatnonzero(np.diag(Qw) > 0.0)
         M = Qh @ Ph.T                                  # COV[X_m, X_b | X_a]
@@ -177,7 +187,7 @@ def _bridge_law(params, mode, w):
         B = V * np.sqrt(np.clip(lam, 0.0, None))
         keep = np.flatnonzero(lam > 1e-14 * max(lam.max(initial=0.0), 1e-300))
         full._bridge = (Ph, G, B[:, keep])
-    return full._bridge
+    return full
 
 
 class _Draws:
@@ -203,9 +213,8 @@ class _Draws:
 
 def _gauss(step: _Step, Y: np.ndarray, draws: _Draws | None) -> np.ndarray:
     out = step.phi @ Y
-    f = step.factor
-    if draws is not None and f.m:
-        out[f.rows] += f.B @ draws.normals(f.m)
+    if draws is not None and step.m:
+        out[step.rows] += step.B @ draws.normals(step.m)
     return out
 
 
@@ -214,6 +223,8 @@ class _Run:
 
     def __init__(self, p, o, t, mode, flyback, record):
         self.p, self.o = p, o
+        self.memo = _cache(p)
+        self.sig2_moving = p.alpha ** 2 * p.sigma2_sq     # α²σ2², x2's noise intensity
         self.t, self.mode, self.fb = t, mode, flyback
         self.peak = self.iabs = self.isq = self.chg = self.dur = 0.0
         self.nev = self.nbrk = self.nstk = self.nsub = self.count = 0
@@ -267,10 +278,13 @@ def _ks(p, Y):
     return max(p.stiction + Y[Y5], 0.0)
 
 
+_TOP = 2.0 ** (LADDER - 1)
+
+
 def _ladder_width(room, sub, far):
     """``room`` itself or the longest rung sub·2^k ≤ room for which ``far(w)`` holds, else
     min(sub, room)."""
-    w = sub * 2.0 ** (LADDER - 1)
+    w = sub * _TOP
     if sub < room <= w and far(room):
         return room, True
     while w > sub:
@@ -284,29 +298,40 @@ def _x3_at(p, x3, u, w):
     return u + (x3 - u) * math.exp(-w / p.motor_time_constant)
 
 
-def _stuck_far(p, Y, w, sig2):
-    """No passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is monotone)."""
-    ks = _ks(p, Y)
-    x3max = max(abs(Y[Y3]), abs(_x3_at(p, Y[Y3], Y[YU], w)))
-    return ks - x3max - abs(Y[YD]) > FAR_SIGMAS * math.sqrt(sig2 * w)
+def _stuck_far(p, sig2, ks, x3, u, d):
+    """far(w): no passage of x3 + d through ±ks within w beyond 8.5σ of d's increment (x3 is
+    monotone). The w-free parts are evaluated once per sub-step (Python floats: the same IEEE
+    doubles as numpy's scalars, cheaper arithmetic)."""
+    ad = abs(d)
+    ax3, g, tau3 = abs(x3), x3 - u, p.motor_time_constant
+
+    def far(w):
+        x3max = max(ax3, abs(u + g * math.exp(-w / tau3)))      # |_x3_at(w)|
+        return ks - x3max - ad > FAR_SIGMAS * math.sqrt(sig2 * w)
+    return far
 
 
-def _moving_far(p, mode, Y, w, dirn):
-    """s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope is
-    α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
+def _moving_far(p, dirn, x2, x3, x5, kc, u, d):
+    """far(w): s·x2 stays 8.5σ of the step's x2 noise above 0 over w. The mean velocity's slope
+    is α·(x3 + d − s·(kc + x5)) at the start and changes at most at M = α·(β3|u − x3| + βd|d| +
     β5|x5|) (x3, the means of d and x5 are exponentials), so s·x̄2(τ) ≥ s·x2 + ṡ0·τ − M·τ²/2,
-    a concave bound whose minimum on [0, w] is at an end."""
+    a concave bound whose minimum on [0, w] is at an end. The w-free parts are evaluated once
+    per sub-step."""
     a = p.alpha
-    v0 = dirn * Y[Y2]
-    slope = dirn * a * (Y[Y3] + Y[YD]) - a * (Y[YKC] + Y[Y5])
-    curv = a * (abs(Y[YU] - Y[Y3]) / p.motor_time_constant + abs(Y[YD]) / p.disturbance_torque_tau
-                + abs(Y[Y5]) / p.correlated_friction_tau)
-    low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
+    v0 = dirn * x2
+    slope = dirn * a * (x3 + d) - a * (kc + x5)
+    curv = a * (abs(u - x3) / p.motor_time_constant + abs(d) / p.disturbance_torque_tau
+                + abs(x5) / p.correlated_friction_tau)
     # x2's noise: α·∫w2 plus α·∫ of the zero-mean parts of d and x5, whose variances over w are
     # at most those of the integrated Brownian motions of their intensities (w³/3 each)
-    sd = a * (math.sqrt(p.sigma2_sq * w) + math.sqrt(2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
-                                                    * w ** 3 / 3.0) + math.sqrt(p.sigma5_sq * w ** 3 / 3.0))
-    return low > FAR_SIGMAS * sd
+    s2, sd2, s5 = p.sigma2_sq, 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau, p.sigma5_sq
+
+    def far(w):
+        low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
+        w3 = w ** 3
+        sd = a * (math.sqrt(s2 * w) + math.sqrt(sd2 * w3 / 3.0) + math.sqrt(s5 * w3 / 3.0))
+        return low > FAR_SIGMAS * sd
+    return far
 
 
 def _cross_prob(va, vb, w, sig2):
@@ -342,12 +367,16 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     :func:`plant.multimode.zero_velocity.hitting_midpoint`), then the rest given c."""
     t0 = 0.0
     cursor = np.zeros(1, dtype=np.int64)
+    memo = run.memo
+    ekey = e.tobytes()
     while w > tol:
-        Ph, G, B = _bridge_law(p, mode, w)
-        mean = Ph @ Ya + G @ (Yb - transition(p, mode, w).phi @ Ya)
-        S = B @ B.T
-        Se = S @ e
-        var = float(e @ Se)
+        full = _bridge_law(memo, p, mode, w)
+        Ph, G, B = full._bridge
+        mean = Ph @ Ya + G @ (Yb - full.phi @ Ya)
+        given = full._given.get(ekey)
+        if given is None:                           # depends on (mode, w, e) only: computed once
+            given = full._given[ekey] = _conditional(B, e)
+        var, k, F = given
         mu = float(e @ mean) + c0
         a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
         half = w / 2
@@ -364,13 +393,9 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
                 draws.pos = int(cursor[0])
             else:
                 cm = mu + sd * float(draws.normals(1)[0])
-            k = Se / var
-            R = S - np.outer(Se, Se) / var
-            lam, V = np.linalg.eigh(0.5 * (R + R.T))
-            keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
             Ym = mean + k * (cm - mu)
-            if keep.any():
-                Ym += (V[:, keep] * np.sqrt(lam[keep])) @ draws.normals(int(keep.sum()))
+            if F is not None:
+                Ym += F @ draws.normals(F.shape[1])
         else:
             Ym = mean + (B @ draws.normals(B.shape[1]) if draws is not None and B.shape[1] else 0.0)
             cm = float(e @ Ym) + c0
@@ -386,10 +411,20 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     return t0 + w, Yb
 
 
-def _flyback_time(p, Y, run):
-    if not run.fb:
-        return math.inf
-    return p.motor_time_constant * math.log1p(abs(Y[Y3]) / p.u_max)
+def _conditional(B, e):
+    """(var, k, F) of the midpoint's law N(·, S = B·Bᵀ) given c = e·Y: var = eᵀSe, the gain
+    k = Se/var and a factor F of the conditional covariance S − Se·(Se)ᵀ/var (None when it is 0)."""
+    S = B @ B.T
+    Se = S @ e
+    var = float(e @ Se)
+    if not var > 0.0:
+        return var, None, None
+    k = Se / var
+    R = S - np.outer(Se, Se) / var
+    lam, V = np.linalg.eigh(0.5 * (R + R.T))
+    keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
+    F = (V[:, keep] * np.sqrt(lam[keep])) if keep.any() else None
+    return var, k, F
 
 
 def _segment(Y, run, t_end, bridge, draws, sig_d2):
@@ -397,31 +432,37 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
     p, o = run.p, run.o
     mode = run.mode
     room = t_end - run.t
-    h_fb = _flyback_time(p, Y, run)
+    _, x2, x3, _, x5, d, _, u = Y.tolist()          # Python floats, the same doubles
+    h_fb = math.inf if not run.fb else p.motor_time_constant * math.log1p(abs(x3) / p.u_max)  # flyback end
     room_fb = min(room, h_fb)
-    x3, u = Y[Y3], Y[YU]
+    ks = max(p.stiction + x5, 0.0)                  # _ks
     if mode == 2:
         dirn = 0.0
-        ks = _ks(p, Y)
-        g = x3 + Y[YD]
+        g = x3 + d
         if abs(g) > ks:                             # at (or past) stiction: breaks away now
             return _breakaway(Y, run, g)
         sig2 = sig_d2
-        w, far = _ladder_width(room_fb, o.substep, lambda w: _stuck_far(p, Y, w, sig2))
+        if ks - abs(x3) - abs(d) > 0.0:
+            w, far = _ladder_width(room_fb, o.substep, _stuck_far(p, sig2, ks, x3, u, d))
+        else:        # no rung is far: ks − x3max − |d| ≤ ks − |x3| − |d| ≤ 0 (rounding is monotone)
+            w, far = min(o.substep, room_fb), False
         rungs = False
     else:
         dirn = 1.0 if mode == 3 else -1.0
-        Y[YKC] = p.coulomb if p.coulomb + Y[Y5] >= 0.0 else -Y[Y5]
-        ks = _ks(p, Y)
-        reflecting = dirn * (x3 + Y[YD]) >= ks
-        sig2 = p.alpha ** 2 * p.sigma2_sq if draws is not None else 0.0
+        kc = p.coulomb if p.coulomb + x5 >= 0.0 else -x5
+        Y[YKC] = kc
+        reflecting = dirn * (x3 + d) >= ks
+        sig2 = run.sig2_moving if draws is not None else 0.0
         if run.just_broke:
             reflecting, run.just_broke = True, False      # at ±ks exactly: the push starts the motion
-        w, far = _ladder_width(room_fb, o.substep, lambda w: _moving_far(p, mode, Y, w, dirn))
+        if dirn * x2 > 0.0:
+            w, far = _ladder_width(room_fb, o.substep, _moving_far(p, dirn, x2, x3, x5, kc, u, d))
+        else:        # no rung is far: low ≤ s·x2 ≤ 0 ≤ 8.5σ (also for a NaN)
+            w, far = min(o.substep, room_fb), False
         if reflecting and not far:
             w = min(o.reflect_substep, room_fb)
         rungs = reflecting and not far
-    step = transition(p, mode, w)
+    step = _transition(run.memo, p, mode, w)
     Yb = _gauss(step, Y, draws)
     run.nsub += 1
     if run.tick():

@@ -61,7 +61,7 @@ def noise_factor(C: np.ndarray) -> NoiseFactor:
     if not np.all(np.isfinite(C)):
         raise ValueError("covariance must be finite")
     scale = np.max(np.abs(C)) if C.size else 0.0
-    if not np.allclose(C, C.T, rtol=1e-10, atol=1e-14 * scale):
+    if not (C == C.T).all() and not np.allclose(C, C.T, rtol=1e-10, atol=1e-14 * scale):
         raise ValueError("covariance must be symmetric")
     rows = np.flatnonzero(np.any(C != 0.0, axis=1))   # k(i) of (4-28)
     D = C[np.ix_(rows, rows)]                          # D = RᵀCR  (4-26)
