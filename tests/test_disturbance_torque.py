@@ -275,3 +275,24 @@ def test_bad_disturbance_is_exit_2_through_the_cli(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and f"{path}:8: scenarios.x.disturbance_torque_tau:" in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_noise_free_breakaway_is_the_root_of_the_decaying_disturbance():
+    """Noise off (as the oracle's own pulse law runs it): the stuck shaft breaks away when
+    x3(t) + d(t) = ks, x3 = u + (x3(0) − u)·e^(−t/τ3), d = d(0)·e^(−t/τd) — the root from brentq
+    (it used to end in an AttributeError: the bisection drew noise without a stream)."""
+    import scipy.optimize
+
+    p = _held_shaft(std=0.5, tau=0.02)
+    u, d0 = 2.5, -0.5
+    x = np.array([0.0, 0.0, 0.0, 0.0, 0.0, u, d0])
+    x.flags.writeable = False
+    s = PlantState(0.0, x, 2, False)
+    opts = SimOptions(noise=False)
+    r = get_family("multimode").step(s, DriveCommand.hold(u, DriveType.LINEAR), p, None, opts,
+                                     duration=0.05, record=True)
+    k = np.flatnonzero(r.events["kind"] == int(EventKind.BREAKAWAY))
+    tau3 = p.motor_time_constant
+    g = lambda t: u * (1 - math.exp(-t / tau3)) + d0 * math.exp(-t / 0.02) - p.stiction
+    t_true = scipy.optimize.brentq(g, 0.0, 0.05, xtol=1e-15)
+    assert k.size and abs(r.events["t"][k[0]] - t_true) <= max(opts.bisection_tol, 1e-12)

@@ -380,7 +380,10 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
         mu = float(e @ mean) + c0
         a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
         half = w / 2
-        if var > 0.0:
+        if draws is None:                           # noise-free: the path is its mean, Φ(w/2)·Ya
+            Ym = mean
+            cm = float(e @ Ym) + c0
+        elif var > 0.0:
             sd = math.sqrt(var)
             if a > 0.0 and b > 0.0 and sig2 > 0.0:
                 while True:
