@@ -183,4 +183,7 @@ def test_axis_loop_runs_the_fitted_matrix_as_is(tmp_path):
     out = cli("run", "--matrix", tmp_path / "axis.toml", "--out", tmp_path / "run", "--traces", "none", timeout=900)
     assert out.returncode == 0, out.stderr
     rows = pd.read_parquet(tmp_path / "run" / "results.parquet")
-    assert set(rows["scenario"]) == {"axis"} and (rows["status"] == "ok").all() and len(rows) == 14
+    written = tomllib.loads((tmp_path / "axis.toml").read_text())["matrix"]
+    assert len(written["controllers"]) >= 7 and written["seeds"] == [0, 1]      # the quick matrix's controllers
+    assert set(rows["scenario"]) == {"axis"} and (rows["status"] == "ok").all()
+    assert len(rows) == len(written["controllers"]) * len(written["seeds"])
