@@ -7,24 +7,13 @@ runs it (skipped under ``--benchmark-disable``); measured 2.49-2.55 (linear), 1.
 2.41-2.50 (pulse-width) on the shared 2-core machine (two runs).
 """
 
-import time
 
 import pytest
 
-from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
-from controllers import make_controller
-from plant.state import Status
+from benchmarks.cell_cost import cell_cpu
 
 pytestmark = pytest.mark.slow
-
-
-def _cpu(scenario, controller, duration):
-    t0 = time.process_time()
-    res = run_closed_loop(scenario.params, make_controller(controller), duration_s=duration,
-                          warmup_s=min(scenario.warmup_s, duration / 5), seed=0, family=scenario.family)
-    assert res.status == Status.OK, res.message
-    return time.process_time() - t0
 
 
 @pytest.mark.parametrize("controller", ["linear", "solnic-modern", "pulse-width"])
@@ -34,10 +23,10 @@ def test_compliant_cell_cost_ratio(benchmark, controller):
     scen = builtin_scenarios()
     thesis, compliant = scen["thesis"], scen["compliant"]
     for sc in (thesis, compliant):
-        _cpu(sc, controller, 1.0)
+        cell_cpu(sc, controller, 1.0)
 
     def both():
-        return _cpu(thesis, controller, thesis.duration_s), _cpu(compliant, controller, compliant.duration_s)
+        return cell_cpu(thesis, controller, thesis.duration_s), cell_cpu(compliant, controller, compliant.duration_s)
 
     cpu_thesis, cpu_compliant = benchmark.pedantic(both, rounds=1, iterations=1, warmup_rounds=0)
     ratio = cpu_compliant / cpu_thesis

@@ -15,26 +15,15 @@ the Python loop before the compiled one). That one ratio is reported as an expec
 against the goal; every other ratio is asserted against the goal.
 """
 
-import time
 
 import pytest
 
-from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
-from controllers import make_controller
-from plant.state import Status
+from benchmarks.cell_cost import cell_cpu
 
 pytestmark = pytest.mark.slow
 
 _GOAL = {"stribeck": 3.0, "lugre": 10.0}
-
-
-def _cpu(scenario, controller, duration):
-    t0 = time.process_time()
-    res = run_closed_loop(scenario.params, make_controller(controller), duration_s=duration,
-                          warmup_s=min(scenario.warmup_s, duration / 5), seed=0, family=scenario.family)
-    assert res.status == Status.OK, res.message
-    return time.process_time() - t0
 
 
 @pytest.mark.parametrize("controller", ["linear", "solnic-modern", "pulse-width"])
@@ -44,10 +33,10 @@ def test_real_plant_cell_cost_ratios(benchmark, controller):
     scen = builtin_scenarios()
     names = ("thesis", "stribeck", "lugre")
     for name in names:
-        _cpu(scen[name], controller, 1.0)
+        cell_cpu(scen[name], controller, 1.0)
 
     def all_three():
-        return {name: _cpu(scen[name], controller, scen[name].duration_s) for name in names}
+        return {name: cell_cpu(scen[name], controller, scen[name].duration_s) for name in names}
 
     cpu = benchmark.pedantic(all_three, rounds=1, iterations=1, warmup_rounds=0)
     ratios = {name: cpu[name] / cpu["thesis"] for name in ("stribeck", "lugre")}

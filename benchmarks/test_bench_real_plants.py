@@ -20,29 +20,16 @@ alternated, CPU per 100 s cell, results bit-identical): dithered 63.0 -> 35.7 s 
 compiled loop: ~170x -> ~115x).
 """
 
-import time
-
 import pytest
 
-from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
-from controllers import make_controller
-from plant.state import Status
+from benchmarks.cell_cost import cell_cpu
 
 pytestmark = pytest.mark.slow
 
 _GOAL = 1.5
 _MISSES = {("disturbed", "linear"), ("disturbed", "solnic-modern"), ("disturbed", "pulse-width"),
            ("quantized", "linear"), ("delayed", "linear")}
-
-
-def _cpu(scenario, controller, duration):
-    t0 = time.process_time()
-    res = run_closed_loop(scenario.params, make_controller(controller), duration_s=duration,
-                          warmup_s=min(scenario.warmup_s, duration / 5), seed=0, family=scenario.family,
-                          model=scenario.model)
-    assert res.status == Status.OK, res.message
-    return time.process_time() - t0
 
 
 _CASES = [pytest.param(s, c, marks=pytest.mark.xfail(reason="known miss, see module docstring", strict=False)
@@ -57,10 +44,10 @@ def test_real_plant_cell_cost_ratio(benchmark, name, controller):
     scen = builtin_scenarios()
     thesis, other = scen["thesis"], scen[name]
     for sc in (thesis, other):
-        _cpu(sc, controller, 1.0)
+        cell_cpu(sc, controller, 1.0)
 
     def both():
-        return _cpu(thesis, controller, thesis.duration_s), _cpu(other, controller, other.duration_s)
+        return cell_cpu(thesis, controller, thesis.duration_s), cell_cpu(other, controller, other.duration_s)
 
     cpu_thesis, cpu_other = benchmark.pedantic(both, rounds=1, iterations=1, warmup_rounds=0)
     ratio = cpu_other / cpu_thesis
