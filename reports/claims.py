@@ -29,7 +29,7 @@ from reports.selection import Selection, family_of as _family, plain as _plain
 
 __all__ = [
     "REPRODUCED", "NOT_REPRODUCED", "NOT_MEASURED", "INCONCLUSIVE", "Criterion", "within_rel", "within_abs",
-    "at_most", "at_least", "below", "above", "verdict", "Measurement", "ClaimSpec", "ClaimRow",
+    "at_most", "at_least", "below", "above", "verdict", "fmt_g", "Measurement", "ClaimSpec", "ClaimRow",
     "Selection", "CLAIMS", "evaluate_claims", "value_at", "settling_time",
 ]
 
@@ -78,14 +78,14 @@ class Criterion:
 
     def describe(self, unit: str = "") -> str:
         u = f" {unit}" if unit else ""
-        t = _g(self.target, 4)
+        t = fmt_g(self.target, 4)
         if self.kind == "rel":
             lo = self.target - self.tol * abs(self.target)
             hi = self.target + self.tol * abs(self.target)
-            return f"within ±{self.tol * 100:g} % of {t}{u} ({_g(lo)}–{_g(hi)}{u})"
+            return f"within ±{self.tol * 100:g} % of {t}{u} ({fmt_g(lo)}–{fmt_g(hi)}{u})"
         if self.kind == "abs":
             tu = " points" if unit in ("%", "points") else u
-            return f"within ±{_g(self.tol, 4)}{tu} of {t}{u}"
+            return f"within ±{fmt_g(self.tol, 4)}{tu} of {t}{u}"
         return {"at_most": "≤", "at_least": "≥", "below": "<", "above": ">"}[self.kind] + f" {t}{u}"
 
 
@@ -173,7 +173,9 @@ class ClaimRow:
     basis: str
 
 
-def _g(x: float, digits: int = 3) -> str:
+def fmt_g(x: float, digits: int = 3) -> str:
+    """A number for the report's text: ``digits`` significant figures, a true minus sign, — for
+    a missing value, ∞ for an infinite one."""
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "—"
     if math.isinf(x):
@@ -317,11 +319,11 @@ def _series_values(ctx: _Context, fn: Callable[[SeriesRun], float], what: str,
     never = int(np.isposinf(x).sum())          # +inf: the event never happened within the run
 
     def g(v: float) -> str:
-        return "never within the run" if v == math.inf else _g(v, digits) + u
+        return "never within the run" if v == math.inf else fmt_g(v, digits) + u
     if never == len(x):
         text = f"never within the run ({len(x)} seed{'s' if len(x) > 1 else ''})"
     elif len(x) == 1:
-        text = f"{_g(agg, digits)}{u} (1 seed)"
+        text = f"{fmt_g(agg, digits)}{u} (1 seed)"
     else:
         text = (f"{label} {g(agg)} (range {g(x.min())} to {g(x.max())}, {len(x)} seeds"
                 + (f", {never} never" if never else "") + ")")
@@ -338,12 +340,12 @@ def _col(run: SeriesRun, col: str) -> bool:
 
 def _m_classical_limit(ctx: _Context) -> Measurement:
     v = ctx.limits.classical_limit_rad * 1e6
-    return Measurement(v, f"{_g(v)} µrad", f"(k̄s−k̄c)/(2J(π/τs)²) from {ctx.limits.source}")
+    return Measurement(v, f"{fmt_g(v)} µrad", f"(k̄s−k̄c)/(2J(π/τs)²) from {ctx.limits.source}")
 
 
 def _m_lmax(ctx: _Context) -> Measurement:
     v = ctx.limits.lmax
-    return Measurement(v, _g(v), f"2k̄s/(k̄s−k̄c) from {ctx.limits.source}")
+    return Measurement(v, fmt_g(v), f"2k̄s/(k̄s−k̄c) from {ctx.limits.source}")
 
 
 def _m_linear_vs_limit(ctx: _Context) -> Measurement:
@@ -352,7 +354,7 @@ def _m_linear_vs_limit(ctx: _Context) -> Measurement:
         return _not_measured("no ok linear/thesis cells with peak_error_rad")
     best = float(df["peak_error_rad"].min())
     ratio = best / ctx.limits.classical_limit_rad
-    return Measurement(ratio, f"best linear peak {_g(best * 1e6)} µrad = {_g(ratio)} × limit",
+    return Measurement(ratio, f"best linear peak {fmt_g(best * 1e6)} µrad = {fmt_g(ratio)} × limit",
                        _describe_cells(df) + "; best (min) seed")
 
 
@@ -366,9 +368,9 @@ def _m_bound_sweep(ctx: _Context) -> Measurement:
     i = st["ratio"].idxmin()
     row = st.loc[i]
     return Measurement(float(row["ratio"]),
-                       f"smallest θ/θb = {_g(row['ratio'])} ({row['design']}, ωc = "
-                       f"{_g(row['omega_c'])} rad/s, L = {_g(row['lag_ratio'])}, ks/kc = "
-                       f"{_g(row['ks_over_kc'])}, noise {'on' if row['noise'] else 'off'})",
+                       f"smallest θ/θb = {fmt_g(row['ratio'])} ({row['design']}, ωc = "
+                       f"{fmt_g(row['omega_c'])} rad/s, L = {fmt_g(row['lag_ratio'])}, ks/kc = "
+                       f"{fmt_g(row['ks_over_kc'])}, noise {'on' if row['noise'] else 'off'})",
                        f"bound.csv: {len(st)} stable of {len(b)} runs; minimum over stable")
 
 
@@ -379,10 +381,10 @@ def _m_hunting(ctx: _Context) -> Measurement:
     dev = np.where(h["onset_L"].notna(), (h["onset_L"] / h["lmax"] - 1.0).abs(), np.inf)
     i = int(np.argmax(dev))
     row = h.iloc[i]
-    onset = "none found" if math.isnan(row["onset_L"]) else _g(row["onset_L"])
+    onset = "none found" if math.isnan(row["onset_L"]) else fmt_g(row["onset_L"])
     return Measurement(float(dev[i]),
-                       f"worst |onset/Lmax − 1| = {_g(dev[i])} (ks/kc = {_g(row['ks_over_kc'])}: "
-                       f"onset L {onset}, Lmax {_g(row['lmax'])})",
+                       f"worst |onset/Lmax − 1| = {fmt_g(dev[i])} (ks/kc = {fmt_g(row['ks_over_kc'])}: "
+                       f"onset L {onset}, Lmax {fmt_g(row['lmax'])})",
                        f"hunting.csv: {len(h)} plant(s); worst row")
 
 
@@ -394,7 +396,7 @@ def _m_size_peak(size: str) -> Callable[[_Context], Measurement]:
         df = ctx.cells(ctx.selection.solnic, ctx.selection.thesis_scenario, col)
         if not df.empty:
             v = float(df[col].mean()) * 1e6
-            return Measurement(v, f"mean {_g(v)} µrad (worst {_g(df[col].max() * 1e6)}, "
+            return Measurement(v, f"mean {fmt_g(v)} µrad (worst {fmt_g(df[col].max() * 1e6)}, "
                                   f"{len(df)} seeds)", _describe_cells(df) + f"; column {col}")
 
         def from_series(run: SeriesRun) -> float:
@@ -416,8 +418,8 @@ def _m_two_sevenths(ctx: _Context) -> Measurement:
         return _not_measured("no ok solnic/thesis cells with peak_error_rad")
     worst = float(df["peak_error_rad"].max())
     r = worst / ctx.limits.classical_limit_rad
-    return Measurement(r, f"worst peak {_g(worst * 1e6)} µrad = {_g(r)} × limit "
-                          f"(2/7 = {_g(2 / 7)})", _describe_cells(df) + "; worst seed")
+    return Measurement(r, f"worst peak {fmt_g(worst * 1e6)} µrad = {fmt_g(r)} × limit "
+                          f"(2/7 = {fmt_g(2 / 7)})", _describe_cells(df) + "; worst seed")
 
 
 def _m_order_of_magnitude(ctx: _Context) -> Measurement:
@@ -427,7 +429,7 @@ def _m_order_of_magnitude(ctx: _Context) -> Measurement:
                              f"containing {ctx.selection.high_error_cost!r})")
     worst = float(df["peak_error_rad"].max())
     r = worst / ctx.limits.classical_limit_rad
-    return Measurement(r, f"worst peak {_g(worst * 1e6)} µrad = {_g(r)} × limit",
+    return Measurement(r, f"worst peak {fmt_g(worst * 1e6)} µrad = {fmt_g(r)} × limit",
                        _describe_cells(df) + "; worst cell")
 
 
@@ -443,7 +445,7 @@ def _paired(a: pd.DataFrame, b: pd.DataFrame, column: str):
 
 
 def _ci_text(pr) -> str:
-    return f"[95 % CI {_g(pr.low)}–{_g(pr.high)}, {pr.n} paired seeds]"
+    return f"[95 % CI {fmt_g(pr.low)}–{fmt_g(pr.high)}, {pr.n} paired seeds]"
 
 
 def _m_ten_times_linear(ctx: _Context) -> Measurement:
@@ -462,11 +464,11 @@ def _m_ten_times_linear(ctx: _Context) -> Measurement:
     pr = _paired(lin, sol[(sol["controller"] == bc) & (sol["scenario"] == bs)], "peak_error_rad")
     if pr.n < 2:
         ratio = ml / bv
-        return Measurement(ratio, f"mean linear peak {_g(ml * 1e6)} µrad / best solnic ({bc}/{bs}) "
-                                  f"{_g(bv * 1e6)} µrad = {_g(ratio)}× (no paired seeds: no CI)",
+        return Measurement(ratio, f"mean linear peak {fmt_g(ml * 1e6)} µrad / best solnic ({bc}/{bs}) "
+                                  f"{fmt_g(bv * 1e6)} µrad = {fmt_g(ratio)}× (no paired seeds: no CI)",
                            "means over seeds; best solnic variant on the thesis plant")
-    return Measurement(pr.ratio, f"linear / best solnic ({bc}/{bs}) peak, paired by seed: {_g(pr.ratio)}× "
-                                 f"{_ci_text(pr)}; means {_g(ml * 1e6)} vs {_g(bv * 1e6)} µrad",
+    return Measurement(pr.ratio, f"linear / best solnic ({bc}/{bs}) peak, paired by seed: {fmt_g(pr.ratio)}× "
+                                 f"{_ci_text(pr)}; means {fmt_g(ml * 1e6)} vs {fmt_g(bv * 1e6)} µrad",
                        "geometric mean of per-seed ratios with a BCa bootstrap CI; best solnic variant "
                        "(lowest mean) on the thesis plant; verdict from the CI", (pr.low, pr.high))
 
@@ -489,14 +491,14 @@ def _m_vs_peers(ctx: _Context) -> Measurement:
     best = others.index[0]
     fam_plain = fam[plain.index]
     pr = _paired(plain[fam_plain == best], plain[fam_plain == s.solnic], "peak_error_rad")
-    parts = ", ".join(f"{k} {_g(v * 1e6)} µrad ({_g(v / ref)}×)" for k, v in others.items())
+    parts = ", ".join(f"{k} {fmt_g(v * 1e6)} µrad ({fmt_g(v / ref)}×)" for k, v in others.items())
     if pr.n < 2:
         ratio = float(others.iloc[0]) / ref
-        return Measurement(ratio, f"{s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+        return Measurement(ratio, f"{s.solnic} {fmt_g(ref * 1e6)} µrad; {parts}",
                            f"means over seeds on {s.thesis_scenario}; ratio = best other / {s.solnic}")
-    return Measurement(pr.ratio, f"best other ({best}) / {s.solnic}, paired by seed: {_g(pr.ratio)}× "
-                                 f"{_ci_text(pr)}, P({best} lower) = {_g(pr.p_improvement)}; "
-                                 f"means: {s.solnic} {_g(ref * 1e6)} µrad; {parts}",
+    return Measurement(pr.ratio, f"best other ({best}) / {s.solnic}, paired by seed: {fmt_g(pr.ratio)}× "
+                                 f"{_ci_text(pr)}, P({best} lower) = {fmt_g(pr.p_improvement)}; "
+                                 f"means: {s.solnic} {fmt_g(ref * 1e6)} µrad; {parts}",
                        f"best other family by mean peak on {s.thesis_scenario}; geometric mean of per-seed "
                        f"ratios with a BCa bootstrap CI; verdict from the CI", (pr.low, pr.high))
 
@@ -508,12 +510,12 @@ def _m_less_current(ctx: _Context) -> Measurement:
         return _not_measured("needs ok solnic and linear thesis cells with mean_abs_current")
     ms, ml = float(s["mean_abs_current"].mean()), float(lin["mean_abs_current"].mean())
     pr = _paired(s, lin, "mean_abs_current")
-    text = f"mean |i|: solnic {_g(ms)} vs linear {_g(ml)} ozf·in (ratio {_g(ms / ml)})"
+    text = f"mean |i|: solnic {fmt_g(ms)} vs linear {fmt_g(ml)} ozf·in (ratio {fmt_g(ms / ml)})"
     if pr.n >= 2:
-        text += f"; paired by seed {_g(pr.ratio)} {_ci_text(pr)}"
+        text += f"; paired by seed {fmt_g(pr.ratio)} {_ci_text(pr)}"
     if "supply_charge_rate" in s.columns and "supply_charge_rate" in lin.columns:
-        text += (f"; supply charge rate {_g(s['supply_charge_rate'].mean())} vs "
-                 f"{_g(lin['supply_charge_rate'].mean())}")
+        text += (f"; supply charge rate {fmt_g(s['supply_charge_rate'].mean())} vs "
+                 f"{fmt_g(lin['supply_charge_rate'].mean())}")
     if pr.n < 2:
         return Measurement(ms / ml, text, "means over seeds of mean_abs_current (1/T)∫|x3|dt")
     return Measurement(pr.ratio, text, "geometric mean of per-seed ratios of mean_abs_current (1/T)∫|x3|dt "
@@ -630,9 +632,9 @@ def _m_speedup(ctx: _Context) -> Measurement:
     metric = sp.get("error_metric", "error")
     how = str((((sp.get("equal_accuracy") or {}).get("fixed_step")) or {}).get("how") or "interpolated")
     lower = sp.get("speedup_vs_fixed_step_at_1e-6_lower_bound")
-    extra = (f"; measured lower bound without extrapolation ≥ {_g(lower)}×"
+    extra = (f"; measured lower bound without extrapolation ≥ {fmt_g(lower)}×"
              if isinstance(lower, (int, float)) and math.isfinite(lower) else "")
-    return Measurement(float(v), f"{_g(v)}× at equal accuracy 1e-6 (relative Δc error), {how}{extra}",
+    return Measurement(float(v), f"{fmt_g(v)}× at equal accuracy 1e-6 (relative Δc error), {how}{extra}",
                        f"speed.json ({metric}); fixed-step cost at the needed step {how} along its "
                        f"measured error curve")
 
@@ -646,18 +648,18 @@ def _m_noisy_speedup_coupled(coupled: Mapping[str, Any]) -> Measurement:
     basis = (f"speed.json weak_error_coupled ({coupled.get('n_coupled', '?')} coupled paths, "
              f"{coupled.get('n_anchor', '?')} anchor paths per method)")
     if not decided:
-        tols = ", ".join(f"±{_g(100 * float(k))} %" for k in sorted(cost, key=lambda k: -float(k)))
+        tols = ", ".join(f"±{fmt_g(100 * float(k))} %" for k in sorted(cost, key=lambda k: -float(k)))
         return Measurement(None, f"not decided at {tols or 'any tolerance'} of the mean Δc: the 95 % CI of "
                                  f"every measured EM step's weak error is wider than the tolerance "
                                  f"(more anchor paths needed)", basis, undecided=True)
     tol = min(decided)
     best = decided[tol]
-    parts = [f"EM step {_g(best['step_s'])} s is the coarsest certified within ±{_g(100 * tol)} % of the "
-             f"mean Δc (95 % CI of its weak error), at {_g(best['speedup'])}× the exact simulator's "
+    parts = [f"EM step {fmt_g(best['step_s'])} s is the coarsest certified within ±{fmt_g(100 * tol)} % of the "
+             f"mean Δc (95 % CI of its weak error), at {fmt_g(best['speedup'])}× the exact simulator's "
              f"cost per path"]
     for k, v in sorted(cost.items(), key=lambda kv: -float(kv[0])):
         if float(k) < tol and isinstance(v, Mapping) and not v.get("speedup"):
-            parts.append(f"at ±{_g(100 * float(k))} % not decided (the CI of every measured step is wider)")
+            parts.append(f"at ±{fmt_g(100 * float(k))} % not decided (the CI of every measured step is wider)")
     return Measurement(float(best["speedup"]), "; ".join(parts), basis)
 
 
@@ -673,8 +675,8 @@ def _m_noisy_speedup(ctx: _Context) -> Measurement:
     eq = (weak.get("equal_error") or {}).get("mean") or {}
     bound = "≥ " if sp.get("noisy_speedup_is_lower_bound") else ""
     h = eq.get("step_s")
-    where = f"Euler–Maruyama at h = {_g(h)} s" if h else "Euler–Maruyama at its finest step"
-    return Measurement(float(v), f"{bound}{_g(v)}× ({where} matches the exact Δc mean within the "
+    where = f"Euler–Maruyama at h = {fmt_g(h)} s" if h else "Euler–Maruyama at its finest step"
+    return Measurement(float(v), f"{bound}{fmt_g(v)}× ({where} matches the exact Δc mean within the "
                                  f"Monte-Carlo CI of {weak.get('n_paths', '?')} paths)",
                        "speed.json weak_error (noisy 1.2 ms pulse, mean Δc, 95 % CIs)")
 
@@ -685,8 +687,8 @@ def _m_consistency(ctx: _Context) -> Measurement:
         return _not_measured("needs ≥ 2 ok solnic/thesis seeds with peak_error_rad")
     x = df["peak_error_rad"].to_numpy()
     cv = float(np.std(x, ddof=1) / np.mean(x))
-    return Measurement(cv, f"coefficient of variation of peak error {_g(cv)} over {len(x)} seeds "
-                           f"({_g(x.min() * 1e6)}–{_g(x.max() * 1e6)} µrad)",
+    return Measurement(cv, f"coefficient of variation of peak error {fmt_g(cv)} over {len(x)} seeds "
+                           f"({fmt_g(x.min() * 1e6)}–{fmt_g(x.max() * 1e6)} µrad)",
                        _describe_cells(df))
 
 

@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from reports.claims import (INCONCLUSIVE, NOT_MEASURED, NOT_REPRODUCED, REPRODUCED, ClaimRow, at_least,
+from reports.claims import (fmt_g, INCONCLUSIVE, NOT_MEASURED, NOT_REPRODUCED, REPRODUCED, ClaimRow, at_least,
                             below, verdict)
 from reports.selection import Selection, family_of
 from reports.stats import METHOD_TEXT, median_ci, paired_ratio
@@ -53,14 +53,6 @@ def _table(config: Mapping[str, Any] | None) -> dict[str, Any]:
 def has_robustness(config: Mapping[str, Any] | None) -> bool:
     """True when the run recorded a ``[robustness]`` table."""
     return bool(_table(config))
-
-
-def _g(x: float, digits: int = 3) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "—"
-    if math.isinf(x):
-        return "∞" if x > 0 else "−∞"
-    return f"{x:.{digits}g}".replace("-", "−")
 
 
 def _bound(rows: pd.DataFrame, name: str) -> bool:
@@ -150,14 +142,14 @@ def heatmap_figure(cells: pd.DataFrame) -> go.Figure | None:
         if c["median"] > 0:
             z[i, j] = math.log10(c["median"])
         mark = " ⚠" if c["statuses"] else ""
-        ratio = "" if c["reference"] or not np.isfinite(c["ratio"]) else f"<br>×{_g(c['ratio'], 2)}"
-        text[i][j] = f"{_g(c['median'], 3)}{ratio}{mark}"
+        ratio = "" if c["reference"] or not np.isfinite(c["ratio"]) else f"<br>×{fmt_g(c['ratio'], 2)}"
+        text[i][j] = f"{fmt_g(c['median'], 3)}{ratio}{mark}"
         hover[i][j] = (f"<b>{c['controller']}</b> on <b>{c['scenario']}</b><br>"
-                       f"median peak {_g(c['median'])} µrad [95 % CI {_g(c['low'])}, {_g(c['high'])}]<br>"
+                       f"median peak {fmt_g(c['median'])} µrad [95 % CI {fmt_g(c['low'])}, {fmt_g(c['high'])}]<br>"
                        + ("reference plant" if c["reference"] else
-                          f"degradation vs reference, paired by seed: ×{_g(c['ratio'])} "
-                          f"[{_g(c['ratio_low'])}, {_g(c['ratio_high'])}], {c['ratio_n']} seeds")
-                       + f"<br>mean |i| {_g(c['current'])} ozf·in<br>ok {c['ok']}/{c['cells']}"
+                          f"degradation vs reference, paired by seed: ×{fmt_g(c['ratio'])} "
+                          f"[{fmt_g(c['ratio_low'])}, {fmt_g(c['ratio_high'])}], {c['ratio_n']} seeds")
+                       + f"<br>mean |i| {fmt_g(c['current'])} ozf·in<br>ok {c['ok']}/{c['cells']}"
                        + (f"<br>⚠ {_status_text(c['statuses'])}" if c["statuses"] else "")
                        + (" (bound: not a controller)" if c["bound"] else ""))
     finite = z[np.isfinite(z)]
@@ -169,7 +161,7 @@ def heatmap_figure(cells: pd.DataFrame) -> go.Figure | None:
         z=z, x=cols, y=labels, text=text, texttemplate="%{text}", textfont=dict(size=10),
         customdata=hover, hovertemplate="%{customdata}<extra></extra>", colorscale="Viridis",
         zmin=lo, zmax=hi if hi > lo else lo + 1,
-        colorbar=dict(title="median peak [µrad]", tickvals=ticks, ticktext=[_g(10.0 ** t) for t in ticks])))
+        colorbar=dict(title="median peak [µrad]", tickvals=ticks, ticktext=[fmt_g(10.0 ** t) for t in ticks])))
     fig.update_yaxes(autorange="reversed")
     fig.update_layout(title="Median peak error [µrad] (log colour); ×: degradation vs the reference, paired by seed; "
                             "⚠: a status other than ok", xaxis_title="scenario (truth)", yaxis_title="controller")
@@ -204,22 +196,22 @@ def verdicts(cells: pd.DataFrame) -> list[dict[str, Any]]:
             continue
         best = d.iloc[0]
         tied = [r["controller"] for _, r in d.iloc[1:].iterrows() if _overlap(best, r)]
-        text = (f"on {scen}, {best['controller']} holds the axis best: median peak {_g(best['median'])} µrad "
-                f"[{_g(best['low'])}, {_g(best['high'])}]")
+        text = (f"on {scen}, {best['controller']} holds the axis best: median peak {fmt_g(best['median'])} µrad "
+                f"[{fmt_g(best['low'])}, {fmt_g(best['high'])}]")
         if np.isfinite(best["ratio"]):
-            text += f", ×{_g(best['ratio'], 2)} [{_g(best['ratio_low'], 2)}, {_g(best['ratio_high'], 2)}] of its reference peak"
+            text += f", ×{fmt_g(best['ratio'], 2)} [{fmt_g(best['ratio_low'], 2)}, {fmt_g(best['ratio_high'], 2)}] of its reference peak"
         text += (f"; not separable from {', '.join(tied)} (overlapping CIs)" if tied else "")
         lower = measured[(measured["ok"] < measured["cells"]) & (measured["median"] < best["median"])]
         if len(lower):
             text += ("; left out for seeds not ok, though lower on their ok seeds: "
-                     + ", ".join(f"{r['controller']} ({_g(r['median'])} µrad over {r['ok']} of {r['cells']} seeds)"
+                     + ", ".join(f"{r['controller']} ({fmt_g(r['median'])} µrad over {r['ok']} of {r['cells']} seeds)"
                                  for _, r in lower.iterrows()))
         deg = measured[np.isfinite(measured["ratio"])]
         if len(deg):
             worst = deg.loc[deg["ratio"].idxmax()]
             partial = f", over its {worst['ratio_n']} seeds ok on both" if worst["ok"] < worst["cells"] else ""
-            text += (f"; {worst['controller']} degrades most: ×{_g(worst['ratio'], 2)} "
-                     f"[{_g(worst['ratio_low'], 2)}, {_g(worst['ratio_high'], 2)}] ({_g(worst['median'])} µrad{partial})")
+            text += (f"; {worst['controller']} degrades most: ×{fmt_g(worst['ratio'], 2)} "
+                     f"[{fmt_g(worst['ratio_low'], 2)}, {fmt_g(worst['ratio_high'], 2)}] ({fmt_g(worst['median'])} µrad{partial})")
         out.append({"scenario": scen, "text": text + not_ok + ".", "best": best["controller"]})
     return out
 
@@ -304,7 +296,7 @@ def _paired_claim(results: pd.DataFrame, scen: str, column: str, num: str, den: 
     k_s, n_s, bad_s = _failures(results, subject, scen)
     k_o, n_o, bad_o = _failures(results, other, scen)
     value = pr.ratio if pr.n else None
-    text = (f"{label}, paired by seed: {_g(pr.ratio)}{unit} [95 % CI {_g(pr.low)}–{_g(pr.high)}, {pr.n} seeds]{extra}"
+    text = (f"{label}, paired by seed: {fmt_g(pr.ratio)}{unit} [95 % CI {fmt_g(pr.low)}–{fmt_g(pr.high)}, {pr.n} seeds]{extra}"
             + _failure_text(num, *_failures(results, num, scen)) + _failure_text(den, *_failures(results, den, scen)))
     v = verdict(value, criterion, (pr.low, pr.high) if pr.n >= 2 else None)
     if n_s and k_s == n_s:
@@ -369,7 +361,7 @@ def robustness_claims(results: pd.DataFrame, cells: pd.DataFrame, selection: Sel
             results, scen, _ERROR, peer, subject, peer, f"robust_pulse_width.{scen}", pulse,
             "docs/results.md (thesis, ratio-2), tested on a real plant", "< 1", below(1.0), "×",
             f"{peer} / {subject} peak", f"each family's row best on {reference}, not retuned; told Table 2-1",
-            f", P({peer} lower) = {_g(pp.p_improvement)}"))
+            f", P({peer} lower) = {fmt_g(pp.p_improvement)}"))
     return rows
 
 
