@@ -62,3 +62,42 @@ def test_config_rejects_bad_fields():
         ClosedLoopEMConfig(steps=(0.1,))
     with pytest.raises(ValueError, match="warmup_s"):
         ClosedLoopEMConfig(duration_s=1.0, warmup_s=1.0)
+
+
+def test_study_reaches_the_report_the_claim_row_and_the_terminal(study, tmp_path):
+    from rich.console import Console
+
+    from bench.speed.tables import _print_table
+    from reports import build_report
+    from reports.synthetic import synthetic_inputs
+
+    data = synthetic_inputs(0)
+    data["speed"] = {**data["speed"], "closed_loop_em": study}
+    html = build_report(tmp_path, **data).read_text(encoding="utf-8")
+    assert 'id="closed-loop-em-table"' in html
+    table = html[html.index('id="closed-loop-em-table"'):]
+    table = table[:table.index("</table>")]
+    assert table.count("<tr") == 1 + len(study["rows"])          # header, exact, one row per step
+    assert "h = 0.0001 s" in table and study["rows"][1]["verdict"].split(" (")[0].split(" at")[0] in table
+
+    console = Console(record=True, width=250)
+    _print_table({"closed_loop_em": study, "technology": {"caveat": "-"}, "error_definition": "-",
+                  "elapsed_s": 1.0, "load_average_1min": 1.0}, console)
+    text = console.export_text()
+    assert text.count("EM h=") == 1 and f"{study['n_seeds']} seeds" in text
+
+
+def test_claim_row_names_the_coarsest_step_not_distinguishable():
+    from reports.claims import _closed_loop_note
+
+    rows = [{"method": "exact", "step_s": None},
+            {"step_s": 1e-4, "median_resolved": True, "p95_resolved": False},
+            {"step_s": 1e-5, "median_resolved": False, "p95_resolved": False, "median_resolution_pct": 12.0,
+             "cost_ratio": 3.5},
+            {"step_s": 3e-6, "median_resolved": False, "p95_resolved": False, "median_resolution_pct": 11.0,
+             "cost_ratio": 9.0}]
+    note = _closed_loop_note({"closed_loop_em": {"controller": "c", "n_seeds": 50, "rows": rows}})
+    assert "h = 1e−05 s" in note and "±12 %" in note and "3.5×" in note
+    rows[2]["p95_resolved"] = True
+    assert "h = 3e−06 s" in _closed_loop_note({"closed_loop_em": {"rows": rows}})
+    assert _closed_loop_note({}) == "" and _closed_loop_note(None) == ""
