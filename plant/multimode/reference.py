@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -316,6 +317,7 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 u = -math.copysign(U_, x[2]) if fly else 0.0
         else:
             u, fly = min(max(lvl, -U_), U_), False
+        split = False              # the segment was already cut at ẋ2 = 0 (see "acc")
         while t < seg_end:
             n_seg += 1
             if n_seg > max_events:
@@ -337,22 +339,38 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 vz = lambda _t, y: y[1]
                 vz.terminal, vz.direction = True, -s
                 events.append(("vz", vz))
+                if not split:
+                    # ẋ2 = α(x3 − s·kc) changes sign where x3 crosses s·kc (once per segment: x3 is
+                    # monotone). Stopping there makes x2 monotone on each piece, so a dip of x2
+                    # through 0 and back cannot fall inside one solver step and be missed.
+                    acc = lambda _t, y, s=s: y[2] - s * max(kcb + y[4], 0.0)
+                    acc.terminal, acc.direction = True, 0
+                    events.append(("acc", acc))
                 ext = lambda _t, y: y[1] - y[3]
                 ext.terminal, ext.direction = False, 0
                 events.append(("ext", ext))
             sol = solve_ivp(rhs_factory(mode, u), (t, seg_end), x, method="DOP853", rtol=rtol, atol=atol,
                             events=[e for _, e in events], dense_output=True)
             t_stop = sol.t[-1]
+            end = sol.y[:, -1]
             hit = None
             for (name, _), te, ye in zip(events, sol.t_events, sol.y_events):
+                if name != "ext" and len(te):
+                    hit = name
+            if hit == "acc" and s * end[1] < 0.0:
+                # x2 is monotone on [t, t_stop] (ẋ2 keeps its sign until x3 = s·kc) and changed sign
+                # there: it crossed 0 once inside a solver step that also held the crossing back,
+                # so the vz event saw no sign change. Locate that zero on the dense output.
+                t_stop = brentq(lambda tt: float(sol.sol(tt)[1]), t, t_stop, xtol=1e-16, rtol=1e-15)
+                end = sol.sol(t_stop)
+                hit = "vz"
+            for (name, _), te, ye in zip(events, sol.t_events, sol.y_events):
                 if name == "ext":
-                    keep = te >= peak_from
+                    keep = (te >= peak_from) & (te <= t_stop)
                     if keep.any():
                         peak = max(peak, float(np.max(np.abs(ye[keep, 0]))))
-                elif len(te):
-                    hit = name
             if t_stop >= peak_from:
-                peak = max(peak, abs(float(sol.y[0, -1])))
+                peak = max(peak, abs(float(end[0])))
             mask = (sample_times >= t) & (sample_times <= t_stop)
             if mask.any():
                 x1_at[mask] = sol.sol(sample_times[mask])[0]
@@ -362,12 +380,15 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 if grid.size:
                     dense_t.append(grid)
                     dense_x1.append(sol.sol(grid)[0])
-            x = sol.y[:, -1].copy()
+            x = np.array(end, dtype=float)
             t = t_stop
             if hit is None:
                 t = seg_end
                 continue
-            if hit == "fly":
+            split = hit == "acc"       # after any other event x3's course or the direction changes
+            if hit == "acc":
+                pass
+            elif hit == "fly":
                 x[2], u, fly = 0.0, 0.0, False
             elif hit in ("up", "dn"):
                 x[2] = ks if hit == "up" else -ks
