@@ -89,8 +89,9 @@ class PlantFamily(abc.ABC):
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
     # The family's reference simulators for a work-precision study (``bench.speed``), or None:
-    # a namespace with exact_step, fixed_step, fixed_step_pulses, event_driven, Schedule and
-    # schedule_from_commands (see plant/multimode/reference.py).
+    # a namespace with exact_step, fixed_step, fixed_step_pulses, event_driven, Schedule,
+    # schedule_from_commands (see plant/multimode/reference.py) and fixed_step_family(dt), a
+    # PlantFamily stepping the same plant by Euler–Maruyama (plant/multimode/em_family.py).
     references: ClassVar[Any] = None
     # Built-in scenarios of this family: name -> (fields over Table 2-1, one-line description).
     scenarios: ClassVar[dict[str, tuple[dict[str, Any], str]]] = {}

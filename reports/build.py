@@ -227,6 +227,39 @@ def _coupled_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]
     return rows
 
 
+def _closed_loop_table(speed: Mapping[str, Any] | None) -> list[list[dict[str, str]]]:
+    """Rows of the closed-loop EM study (speed.json ``closed_loop_em``): peak error over seeds in
+    µrad with bootstrap CIs, EM − exact in % of the exact statistic with its CI, CPU per cell."""
+    closed = (speed or {}).get("closed_loop_em")
+    if not isinstance(closed, Mapping) or not closed.get("rows"):
+        return []
+    ex = closed["rows"][0]
+
+    def urad(c: Any) -> str:
+        return "—" if not c else f"[{_num(float(c[0]) * 1e6)}, {_num(float(c[1]) * 1e6)}]"
+
+    def pct(r: Mapping[str, Any], w: str) -> str:
+        c = r.get(f"{w}_diff_ci_rad")
+        if not c:
+            return "—"
+        ref = float(ex[f"{w}_rad"])
+        return f"{_num(r[f'{w}_diff_pct'])} [{_num(100 * float(c[0]) / ref)}, {_num(100 * float(c[1]) / ref)}]"
+
+    rows = []
+    for r in closed["rows"]:
+        step = r.get("step_s")
+        cpu = float(r["cpu_per_cell_s"])
+        ratio = r.get("cost_ratio")
+        rows.append([_cell("exact (multimode)" if step is None else f"Euler–Maruyama, h = {_num(step)} s"),
+                     _cell(_num(float(r["median_rad"]) * 1e6), float(r["median_rad"]) * 1e6, "num"),
+                     _cell(urad(r["median_ci_rad"])), _cell(pct(r, "median")),
+                     _cell(_num(float(r["p95_rad"]) * 1e6), float(r["p95_rad"]) * 1e6, "num"),
+                     _cell(urad(r["p95_ci_rad"])), _cell(pct(r, "p95")),
+                     _cell(_num(cpu), cpu, "num"), _cell("1" if ratio is None else _num(ratio)),
+                     _cell(r.get("verdict", "reference"))])
+    return rows
+
+
 def _hunting_table(hunting: pd.DataFrame | None) -> list[list[dict[str, str]]]:
     if hunting is None:
         return []
@@ -503,6 +536,7 @@ def render_html(inputs: ReportInputs) -> str:
         "speed_rows": _speed_table(inputs.speed),
         "weak_rows": _weak_table(inputs.speed),
         "coupled_rows": _coupled_table(inputs.speed),
+        "closed_loop_rows": _closed_loop_table(inputs.speed),
         "speedup": None if speedup is None or math.isnan(speedup) else speedup,
         "speed_how": fixed_need,
         "speed_lower": speed_lower,

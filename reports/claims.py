@@ -15,6 +15,7 @@ over seeds; bounds (e.g. "within 6 %", "≥ 1000×") use the worst seed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -663,11 +664,32 @@ def _m_noisy_speedup_coupled(coupled: Mapping[str, Any]) -> Measurement:
     return Measurement(float(best["speedup"]), "; ".join(parts), basis)
 
 
+def _closed_loop_note(sp: Mapping[str, Any] | None) -> str:
+    """One sentence from speed.json ``closed_loop_em`` (the controller's peak error over seeds,
+    exact vs Euler–Maruyama): the coarsest step not distinguishable from exact, at what
+    resolution and cost; "" when the study is absent."""
+    closed = None if sp is None else sp.get("closed_loop_em")
+    if not isinstance(closed, Mapping) or len(closed.get("rows") or []) < 2:
+        return ""
+    em = [r for r in closed["rows"][1:] if isinstance(r, Mapping) and r.get("step_s")]
+    same = [r for r in em if not (r.get("median_resolved") or r.get("p95_resolved"))]
+    head = (f"in closed loop ({closed.get('controller', '?')}'s peak error over {closed.get('n_seeds', '?')} seeds, "
+            f"independent samples)")
+    if not same:
+        return f"; {head}: every measured EM step is distinguishable from exact"
+    r = max(same, key=lambda r: r["step_s"])
+    return (f"; {head}: EM at h = {fmt_g(r['step_s'])} s is not distinguishable from exact at "
+            f"±{fmt_g(r.get('median_resolution_pct'))} % of the median, at {fmt_g(r.get('cost_ratio'))}× "
+            f"the exact CPU per cell")
+
+
 def _m_noisy_speedup(ctx: _Context) -> Measurement:
     sp = ctx.speed
     coupled = None if sp is None else sp.get("weak_error_coupled")
     if isinstance(coupled, Mapping):
-        return _m_noisy_speedup_coupled(coupled)
+        m = _m_noisy_speedup_coupled(coupled)
+        note = _closed_loop_note(sp)
+        return dataclasses.replace(m, text=m.text + note) if note else m
     v = math.nan if sp is None else sp.get("noisy_speedup_at_equal_weak_error", math.nan)
     if v is None or math.isnan(v):
         return _not_measured("no speed.json or no noisy_speedup_at_equal_weak_error")

@@ -72,10 +72,16 @@ uncompiled (``NUMBA_DISABLE_JIT=1`` in a fresh process).
    sample cannot tell from zero; ``noisy_speedup_at_equal_weak_error`` is that ratio (the exact
    simulator's speed-up, like the noise-free headline: fixed-step time over exact time).
 
+6. **In closed loop** (``closed_loop_em``, :mod:`bench.speed.closed_loop`): the statistic a
+   benchmark user depends on — solnic's peak error over seeds on thesis — with the plant
+   stepped exactly and by Euler–Maruyama at fixed steps behind the same family seam
+   (``fixed_step_family``), compared as independent samples with bootstrap CIs, with the CPU
+   per cell of each.
+
 Modules by idea: :mod:`~bench.speed.config` (the presets), :mod:`~bench.speed.sequence` (item
 1), :mod:`~bench.speed.contestants` (item 2 and timing), :mod:`~bench.speed.accuracy` (items 3
 and 4), :mod:`~bench.speed.compare` (one sequence), :mod:`~bench.speed.comparison` (the whole
-comparison), :mod:`~bench.speed.tables` and :mod:`~bench.speed.command` (``solnic-bench speed``).
+comparison), :mod:`~bench.speed.closed_loop` (item 6), :mod:`~bench.speed.tables` and :mod:`~bench.speed.command` (``solnic-bench speed``).
 """
 
 # The names below load on first use (PEP 562), so that ``solnic-bench --help`` and ``list`` do

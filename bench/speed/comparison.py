@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.speed.closed_loop import closed_loop_em
 from bench.speed.compare import _compare
 from bench.speed.config import FULL, QUICK, TARGET_ERROR, Progress, SpeedConfig
 from bench.speed.contestants import _warm_up_references
@@ -114,6 +115,12 @@ def speed_comparison(quick: bool, *, seed: int = 0, config: SpeedConfig | None =
         say(f"noisy weak error resolved: Euler–Maruyama ladder on shared Brownian paths "
             f"({cfg.coupled.n_coupled} paths), anchored by {cfg.coupled.n_anchor} exact paths")
         result["weak_error_coupled"] = coupled_weak_error(params, cfg.coupled, seed=seed)
+
+    if cfg.closed_loop is not None:
+        cl = cfg.closed_loop
+        say(f"closed loop with noise: {roles.IDENTIFICATION} peak error over {cl.n_seeds} seeds, "
+            f"{cl.duration_s:g} s cells, exact vs Euler–Maruyama at {', '.join(f'{h:g}' for h in cl.steps)} s")
+        result["closed_loop_em"] = closed_loop_em(cl, progress=say)
 
     if cfg.linear_sequence:
         say(f"recording linear closed loop, noise-free, {cfg.record_s:g} s")

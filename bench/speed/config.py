@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from bench.speed.closed_loop import FULL_CLOSED_LOOP, QUICK_CLOSED_LOOP, ClosedLoopEMConfig
 from bench.weak_coupled import FULL_COUPLED, QUICK_COUPLED, CoupledConfig
 from bench.weak_error import FULL_WEAK, QUICK_WEAK, WeakErrorConfig
 
@@ -51,6 +52,9 @@ class SpeedConfig:
         The uncoupled noisy weak-error comparison (:mod:`bench.weak_error`).
     coupled : CoupledConfig or None
         The coupled one that resolves EM's weak error (:mod:`bench.weak_coupled`).
+    closed_loop : ClosedLoopEMConfig or None
+        The closed-loop statistic: solnic's peak error over seeds, exact vs EM
+        (:mod:`bench.speed.closed_loop`).
     """
 
     record_s: float
@@ -66,6 +70,7 @@ class SpeedConfig:
     linear_sequence: bool = False
     weak: WeakErrorConfig | None = None
     coupled: CoupledConfig | None = None
+    closed_loop: ClosedLoopEMConfig | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.record_s):
@@ -81,8 +86,9 @@ class SpeedConfig:
 
 
 QUICK = SpeedConfig(record_s=50.0, window_s=10.0, rtols=(1e-3, 1e-5, 1e-7, 1e-9, 1e-12), probe_pulses=12,
-                    probe_steps=(1e-8, 1e-9), weak=QUICK_WEAK, coupled=QUICK_COUPLED)
+                    probe_steps=(1e-8, 1e-9), weak=QUICK_WEAK, coupled=QUICK_COUPLED,
+                    closed_loop=QUICK_CLOSED_LOOP)
 
 FULL = SpeedConfig(record_s=100.0, window_s=100.0, rtols=(1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12),
                    probe_pulses=40, probe_steps=(1e-8, 1e-9), exact_processes=3, linear_sequence=True,
-                   weak=FULL_WEAK, coupled=FULL_COUPLED)
+                   weak=FULL_WEAK, coupled=FULL_COUPLED, closed_loop=FULL_CLOSED_LOOP)

@@ -16,6 +16,14 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
+def _ci_urad(ci: list[float]) -> str:
+    return f"[{_fmt(ci[0] * 1e6)}, {_fmt(ci[1] * 1e6)}]"
+
+
+def _ci_pct(ci: list[float], ref: float) -> str:
+    return f"[{_fmt(100 * ci[0] / ref)}, {_fmt(100 * ci[1] / ref)}]"
+
+
 def _print_table(result: dict[str, Any], console: Any) -> None:
     from rich.table import Table
 
@@ -81,6 +89,21 @@ def _print_table(result: dict[str, Any], console: Any) -> None:
                           f"W1 {_fmt(100 * r['vs_fine_w1_rad'] / m)} %; {_fmt(r['wall_per_path_s'] * 1e6)} µs per path")
         for tol, c in coupled["cost_at_tolerance"].items():
             console.print(f"  tolerance {float(tol):.1%} of the mean: {c['verdict']}")
+    closed = result.get("closed_loop_em")
+    if closed:
+        ex = closed["rows"][0]
+        console.print(f"closed loop with noise: {closed['controller']} on {closed['scenario']}, peak error over "
+                      f"{closed['n_seeds']} seeds ({closed['duration_s']:g} s cells, scored from "
+                      f"{closed['warmup_s']:g} s); median and p95 with bootstrap 95 % CI; independent samples")
+        console.print(f"  exact: median {_fmt(ex['median_rad'] * 1e6)} µrad {_ci_urad(ex['median_ci_rad'])}, "
+                      f"p95 {_fmt(ex['p95_rad'] * 1e6)} µrad {_ci_urad(ex['p95_ci_rad'])}, "
+                      f"{_fmt(ex['cpu_per_cell_s'])} s CPU per cell")
+        for r in closed["rows"][1:]:
+            console.print(f"  EM h={_fmt(r['step_s'])}: median {_fmt(r['median_rad'] * 1e6)} µrad, "
+                          f"EM − exact {_fmt(r['median_diff_pct'])} % {_ci_pct(r['median_diff_ci_rad'], ex['median_rad'])}; "
+                          f"p95 {_fmt(r['p95_rad'] * 1e6)} µrad, EM − exact {_fmt(r['p95_diff_pct'])} % "
+                          f"{_ci_pct(r['p95_diff_ci_rad'], ex['p95_rad'])}; {_fmt(r['cpu_per_cell_s'])} s CPU per cell "
+                          f"({_fmt(r['cost_ratio'])}× exact); {r['verdict']}")
     console.print(f"[yellow]technology:[/yellow] {result['technology']['caveat']}")
     console.print(f"error: {result['error_definition']}; elapsed {_fmt(result['elapsed_s'])} s, "
                   f"load average {_fmt(result['load_average_1min'])}")

@@ -9,7 +9,8 @@ covariance as matrices: the test oracles' counterpart), ``noise`` (the minimal f
 ``segments`` (torque events and integrals), ``stuck`` (mode 2), ``moving`` (modes 1 and 3),
 ``zero_velocity`` (the noisy velocity-zero locators), ``interval`` (the pure step, compiled
 whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
-response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``disturbed``
+response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``em_family`` (the
+Euler–Maruyama reference behind the family seam, for closed-loop comparisons), ``disturbed``
 (the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when
 ``disturbance_torque_std`` > 0).
 """
@@ -19,6 +20,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 from plant.multimode import disturbed, law_loop, reference
+from plant.multimode.em_family import FixedStepFamily
 from plant.multimode.interval import advance
 from plant.params import PlantParams
 from plant.protocol import PlantFamily, register_family
@@ -36,7 +38,8 @@ class Multimode(PlantFamily):
     references = SimpleNamespace(exact_step=advance, fixed_step=reference.fixed_step,
                                  fixed_step_pulses=reference.fixed_step_pulses,
                                  coupled_step_pulses=reference.coupled_step_pulses, event_driven=reference.event_driven,
-                                 Schedule=reference.Schedule, schedule_from_commands=reference.schedule_from_commands)
+                                 Schedule=reference.Schedule, schedule_from_commands=reference.schedule_from_commands,
+                                 fixed_step_family=FixedStepFamily)
 
     def initial_state(self, params, x5):
         """As :meth:`PlantFamily.initial_state`; with the disturbance torque on, d(0) = 0 as well."""

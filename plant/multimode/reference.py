@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
@@ -61,15 +62,19 @@ def _param_vector(p: PlantParams) -> np.ndarray:
 
 
 @njit(cache=True)
-def _em_chunk(S, n_steps, t0, dt, times, levels, bridge, prm, z, peak):
+def _em_chunk(S, n_steps, t0, dt, times, levels, bridge, prm, z, peak, acc):
     """Advance every path (rows of S) by n_steps Euler–Maruyama steps.
 
     S columns: x1, x2, x3, x4, x5, u, mode, k (schedule index). z: (n_steps, n_paths, 3).
+    ``acc`` (n_paths, 3), or (0, 3) to skip: adds the left-point rectangle sums Σ|x3|·dt,
+    Σx3²·dt and the supply charge Σ(u/u_max)·x3·dt (bridge) or Σ|x3|·dt (linear stage), the
+    first-order counterparts of the exact interval integrals (plant.state.IntervalResult).
     """
     alpha, b3, b4, b5, s2, s4, s5, umax, kcb, ksb = prm
     sq = math.sqrt(dt)
     n_paths = S.shape[0]
     n_sched = times.shape[0]
+    sums = acc.shape[0] > 0
     for j in range(n_paths):
         x1, x2, x3, x4, x5, u, mode, k = S[j, 0], S[j, 1], S[j, 2], S[j, 3], S[j, 4], S[j, 5], S[j, 6], int(S[j, 7])
         pk = peak[j]
@@ -87,6 +92,10 @@ def _em_chunk(S, n_steps, t0, dt, times, levels, bridge, prm, z, peak):
                     u = -umax if x3 > 0 else (umax if x3 < 0 else 0.0)
             else:
                 u = min(max(lvl, -umax), umax)
+            if sums:
+                acc[j, 0] += abs(x3) * dt
+                acc[j, 1] += x3 * x3 * dt
+                acc[j, 2] += (u / umax * x3 if bridge else abs(x3)) * dt
             x3n = x3 + (u - x3) * b3 * dt
             if bridge and lvl == 0.0 and u != 0.0 and (x3n == 0.0 or (x3n > 0) != (x3 > 0)):
                 x3n = 0.0          # flyback diodes stop conducting
@@ -136,6 +145,7 @@ class FixedStepResult:
 
 
 _CHUNK = 4096
+_NO_SUMS = np.zeros((0, 3))
 
 
 def fixed_step(params: PlantParams, schedule: Schedule, dt: float, *, x0: np.ndarray | None = None,
@@ -172,7 +182,7 @@ def fixed_step(params: PlantParams, schedule: Schedule, dt: float, *, x0: np.nda
             z = np.zeros((n, n_paths, 3))
         else:
             z = rng.standard_normal((n, n_paths, 3))
-        _em_chunk(S, n, t0 + done * dt, dt, schedule.times, schedule.levels, bridge, prm, z, peak)
+        _em_chunk(S, n, t0 + done * dt, dt, schedule.times, schedule.levels, bridge, prm, z, peak, _NO_SUMS)
         done += n
         if done % every == 0:
             samples.append(S[:, 0].copy())
@@ -245,7 +255,7 @@ def coupled_step_pulses(params: PlantParams, dt_u: float, dt_fine: float, factor
             z = rng.standard_normal((n, m, 3))
             for f, S in zip(factors, states):
                 zf = z if f == 1 else z.reshape(n // f, f, m, 3).sum(axis=1) / math.sqrt(f)
-                _em_chunk(S, n // f, done * dt_fine, f * dt_fine, times, levels, True, prm, zf, peak)
+                _em_chunk(S, n // f, done * dt_fine, f * dt_fine, times, levels, True, prm, zf, peak, _NO_SUMS)
             done += n
             if done * dt_fine > dt_u and all(np.all(S[:, 6] == 2.0) and np.all(S[:, 5] == 0.0)
                                              and np.all(S[:, 2] == 0.0) for S in states):
@@ -307,6 +317,7 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 u = -math.copysign(U_, x[2]) if fly else 0.0
         else:
             u, fly = min(max(lvl, -U_), U_), False
+        split = False              # the segment was already cut at ẋ2 = 0 (see "acc")
         while t < seg_end:
             n_seg += 1
             if n_seg > max_events:
@@ -328,22 +339,38 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 vz = lambda _t, y: y[1]
                 vz.terminal, vz.direction = True, -s
                 events.append(("vz", vz))
+                if not split:
+                    # ẋ2 = α(x3 − s·kc) changes sign where x3 crosses s·kc (once per segment: x3 is
+                    # monotone). Stopping there makes x2 monotone on each piece, so a dip of x2
+                    # through 0 and back cannot fall inside one solver step and be missed.
+                    acc = lambda _t, y, s=s: y[2] - s * max(kcb + y[4], 0.0)
+                    acc.terminal, acc.direction = True, 0
+                    events.append(("acc", acc))
                 ext = lambda _t, y: y[1] - y[3]
                 ext.terminal, ext.direction = False, 0
                 events.append(("ext", ext))
             sol = solve_ivp(rhs_factory(mode, u), (t, seg_end), x, method="DOP853", rtol=rtol, atol=atol,
                             events=[e for _, e in events], dense_output=True)
             t_stop = sol.t[-1]
+            end = sol.y[:, -1]
             hit = None
             for (name, _), te, ye in zip(events, sol.t_events, sol.y_events):
+                if name != "ext" and len(te):
+                    hit = name
+            if hit == "acc" and s * end[1] < 0.0:
+                # x2 is monotone on [t, t_stop] (ẋ2 keeps its sign until x3 = s·kc) and changed sign
+                # there: it crossed 0 once inside a solver step that also held the crossing back,
+                # so the vz event saw no sign change. Locate that zero on the dense output.
+                t_stop = brentq(lambda tt: float(sol.sol(tt)[1]), t, t_stop, xtol=1e-16, rtol=1e-15)
+                end = sol.sol(t_stop)
+                hit = "vz"
+            for (name, _), te, ye in zip(events, sol.t_events, sol.y_events):
                 if name == "ext":
-                    keep = te >= peak_from
+                    keep = (te >= peak_from) & (te <= t_stop)
                     if keep.any():
                         peak = max(peak, float(np.max(np.abs(ye[keep, 0]))))
-                elif len(te):
-                    hit = name
             if t_stop >= peak_from:
-                peak = max(peak, abs(float(sol.y[0, -1])))
+                peak = max(peak, abs(float(end[0])))
             mask = (sample_times >= t) & (sample_times <= t_stop)
             if mask.any():
                 x1_at[mask] = sol.sol(sample_times[mask])[0]
@@ -353,12 +380,15 @@ def event_driven(params: PlantParams, schedule: Schedule, *, rtol: float = 1e-12
                 if grid.size:
                     dense_t.append(grid)
                     dense_x1.append(sol.sol(grid)[0])
-            x = sol.y[:, -1].copy()
+            x = np.array(end, dtype=float)
             t = t_stop
             if hit is None:
                 t = seg_end
                 continue
-            if hit == "fly":
+            split = hit == "acc"       # after any other event x3's course or the direction changes
+            if hit == "acc":
+                pass
+            elif hit == "fly":
                 x[2], u, fly = 0.0, 0.0, False
             elif hit in ("up", "dn"):
                 x[2] = ks if hit == "up" else -ks
