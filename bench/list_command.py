@@ -53,8 +53,10 @@ def list_command(
     for name, s in scenarios.items():
         told = "" if s.model is None else "; model differs"
         told += "".join(f"; {k} ±{v:.0%}" for k, v in s.mismatch)
+        caveats = getattr(s.params, "caveats", None)
+        notes = "".join(f" [caveat: {c}]" for c in (caveats() if caveats else ()))
         table.add_row(escape(name), escape(s.family + told), f"{s.duration_s:g}", f"{s.warmup_s:g}",
-                      escape(s.description))
+                      escape(s.description + notes))
     out_console.print(table)
     for quick in (False, True):
         m = load_matrix(builtin_matrix_path(quick), check_resets=False)

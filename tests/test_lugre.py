@@ -380,3 +380,30 @@ def test_default_set_is_not_passive_beyond_the_local_rule():
     assert all(_cycle_work(s2=1.1 * bound, V=V, **a)[1] > 0 for V in (0.01, 0.1, 1.0, 10.0))
     table_i = _cycle_work(1e5, math.sqrt(1e5), 0.4, 1.0, 1.5, 1e-3, V=1.0)     # [N, m, s]
     assert table_i[0] + table_i[1] < 0
+
+
+def test_global_passivity_violation_is_reported_not_silent():
+    """SPEC §11: a set that violates dissipativity is reported. The defaults and the 1995 paper's
+    Table I fail σ2 ≥ σ1·(ks − kc)/kc (the cycle above extracts energy), pass the local rule and
+    are simulated: ``caveats()`` names the fields and the bound (``list`` shows it). With σ2
+    above the bound (where the cycle above dissipates) there is no caveat."""
+    p = LuGreParams()
+    (text,) = p.caveats()
+    assert all(f in text for f in ("viscous", "bristle_damping", "stiction", "coulomb")), text
+    bound = 707.0 * (2.1 - 1.4) / 1.4                                  # 353.5, by hand
+    assert p.passivity_margin() == pytest.approx(0.2 - bound, rel=1e-12) and "354" in text
+    t1 = LuGreParams(inertia=1.0, coulomb=1.0, stiction=1.5, bristle_stiffness=1e5,   # Table I [N, m, s]
+                     bristle_damping=math.sqrt(1e5), viscous=0.4, stribeck_velocity=1e-3)
+    assert t1.passivity_margin() == pytest.approx(0.4 - math.sqrt(1e5) * 0.5, rel=1e-12) and t1.caveats()
+    ok = LuGreParams(viscous=1.1 * bound)
+    assert ok.caveats() == () and ok.passivity_margin() > 0
+    assert LuGreParams(stiction=1.4).caveats() == ()                    # no Stribeck drop: passive
+
+
+@pytest.mark.slow
+def test_list_shows_the_passivity_caveat():
+    proc = cli("list")
+    assert proc.returncode == 0, proc.stderr
+    rows = [line for line in proc.stdout.splitlines() if "│" in line]
+    cells = " ".join(" ".join(c.strip() for c in line.split("│")) for line in rows)
+    assert "[caveat: not passive at all speeds" in " ".join(cells.split())
