@@ -185,6 +185,57 @@ def test_stiff_smooth_limit_approaches_the_multimode_plant():
 
 
 @pytest.mark.slow
+def test_noisy_path_flow_accuracy_is_far_below_the_noise():
+    """With noise on, the flow is integrated at NOISY_TOLERANCES (RTOL 1e-6) on stretched
+    sub-steps. Every noise intensity 0 but the noisy path taken: x1 within 2e-6 of the largest
+    |x1| of solve_ivp (Radau, rtol 1e-11; measured 4.5e-7 on the defaults), and below 1 % of the
+    spread Table 2-1's noise gives x1 on the same pulse train (Monte-Carlo, 100 paths)."""
+    from plant.lugre.integrate import NOISY_TOLERANCES
+    assert NOISY_TOLERANCES[0] == 1e-6
+    p = LuGreParams()
+    quiet = p.replace(friction_noise_psd=0.0, correlated_friction_std=0.0, command_velocity_std=0.0)
+    cmds = _pulse_train(p, 8, seed=3)
+    ref, _ = event_driven(quiet, FAMILY.initial_state(quiet, 0.1).x, cmds)
+
+    def run(params, seed):
+        s, noise, out = FAMILY.initial_state(params, 0.1), NoiseStream.from_seed(seed), []
+        for cmd in cmds:
+            res = FAMILY.step(s, cmd, params, noise, SimOptions())
+            assert res.status.value == "ok"
+            s = res.state
+            out.append(s.x[0])
+        return np.array(out)
+
+    err = np.max(np.abs(run(quiet, 1) - ref))
+    assert err <= 2e-6 * np.max(np.abs(ref)), err / np.max(np.abs(ref))
+    spread = np.std([run(p, 100 + m) for m in range(100)], axis=0)
+    assert err < 0.01 * np.min(spread[1:]), (err, spread)
+
+
+def test_noise_sub_steps_stretch_only_in_pre_sliding():
+    """A held shaft in pre-sliding (s(v)² ≤ PRESLIDING) takes its noise in one sub-step per
+    interval (a few normals), a sliding one on the 0.1 ms grid (each sub-step draws w2, w4's
+    pair and x5's: ≥ 4 normals, ~90 sub-steps after breakaway at ~1.4 ms)."""
+    from plant.lugre.interval import PRESLIDING
+    p = LuGreParams(command_velocity_initial=0.0)
+    s, noise = FAMILY.initial_state(p, 0.0), NoiseStream.from_seed(5)
+    for _ in range(100):                                       # 1 s at 1.0 ozf·in < k̄s: pre-sliding
+        s = FAMILY.step(s, DriveCommand.hold(1.0, DriveType.LINEAR), p, noise, SimOptions()).state
+    assert -math.expm1(-(s.x[1] / p.stribeck_velocity) ** 2) <= PRESLIDING
+
+    def normals(level):
+        stream = NoiseStream.from_seed(6)
+        start = stream.window()[1]
+        res = FAMILY.step(s, DriveCommand.hold(level, DriveType.LINEAR), p, stream, SimOptions())
+        return stream.window()[1] - start, res
+
+    held, res_held = normals(1.0)
+    slid, res_slid = normals(8.0)
+    assert res_slid.state.x[1] > 10 * p.stribeck_velocity and res_held.state.mode in (1, 2, 3)
+    assert held <= 12 and slid >= 4 * 80, (held, slid)
+
+
+@pytest.mark.slow
 def test_noisy_statistics_against_fine_euler_maruyama():
     """Mean and sd of x1 after each interval of a pulse train, 2000 paths each, against Euler–
     Maruyama at h = 2 µs (stable: |h·λ| ≈ 0.04). Friction noise 10× Table 2-1 and τ5 = 10 s so
