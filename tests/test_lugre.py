@@ -9,7 +9,12 @@
 * Static pre-sliding: under a constant torque below breakaway the bristles settle at
   z = x3/σ0 and the shaft at c = z.
 * σ0 → ∞, v_s → 0: the pulse response approaches the exact multimode plant's.
-* Bad input (negative σ's, v_s ≤ 0, |ripple| ≥ 1, a dissipativity violation) names the field.
+* Bad input (negative σ's, v_s ≤ 0, |ripple| ≥ 1, a dissipativity violation) names the field;
+  a set failing the global passivity condition (the defaults, Table I) is reported by
+  ``caveats()`` and ``list``.
+* With noise: the flow at the noisy tolerance against Radau (every intensity 0, the noisy path
+  taken), the pre-sliding stretch of the noise sub-steps, and the statistics against fine
+  Euler–Maruyama.
 """
 
 from __future__ import annotations
