@@ -112,7 +112,9 @@ def _listing(spec: Any) -> dict[str, Any]:
     for name, s in scenarios.items():
         told = "" if s.model is None else "; model differs"
         told += "".join(f"; {k} ±{v:.0%}" for k, v in s.mismatch)
-        scenario_rows.append([name, s.family + told, f"{s.duration_s:g}", f"{s.warmup_s:g}", s.description])
+        caveats = getattr(s.params, "caveats", None)
+        notes = "".join(f" [caveat: {c}]" for c in (caveats() if caveats else ()))
+        scenario_rows.append([name, s.family + told, f"{s.duration_s:g}", f"{s.warmup_s:g}", s.description + notes])
     lines = []
     for quick in (False, True):
         m = load_matrix(builtin_matrix_path(quick), check_resets=False)

@@ -83,6 +83,7 @@ def run_law(law, params, options: SimOptions, state: PlantState, sensor: np.ndar
     o = options.kernel_vector().copy()
     if not noisy:
         o[0] = 0.0
-    return run_chunks(_chunk, (params.law_vector(), o, integrate.TOLERANCES), law, params, options, state, sensor,
+    tol = integrate.NOISY_TOLERANCES if noisy else integrate.TOLERANCES
+    return run_chunks(_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor,
                       n_warm, noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
                       status_ok=STATUS_OK, interval_status=interval_status)

@@ -82,6 +82,25 @@ class LuGreParams(RippleParams):
                              f"stribeck_velocity, coulomb, stiction violates dissipativity: σ1²·|v| ≤ 4·(σ1 + σ2)·g(v) "
                              f"fails on 0 ≤ |v| ≤ 2·ks/σ1: the bristle damping can feed energy in there")
 
+    def passivity_margin(self) -> float:
+        """σ2 − σ1·(k̄s − k̄c)/k̄c [ozf·in·s/rad]: < 0 fails the necessary condition for passivity at
+        all speeds (Åström & Canudas de Wit 2008, eq. (7); the ripple scales k̄s and k̄c alike)."""
+        if self.coulomb <= 0.0:
+            return -math.inf if self.stiction > 0.0 and self.bristle_damping > 0.0 else self.viscous
+        return self.viscous - self.bristle_damping * (self.stiction - self.coulomb) / self.coulomb
+
+    def caveats(self) -> tuple[str, ...]:
+        """What a user must know about this set although it is accepted: ``solnic-bench list`` shows
+        it beside the scenario (not a warning at construction: every command builds the built-in
+        ``lugre`` scenario, whose defaults, like the 1995 Table I, fail the condition)."""
+        margin = self.passivity_margin()
+        if margin >= 0.0:
+            return ()
+        need = self.viscous - margin
+        return (f"not passive at all speeds: viscous = {self.viscous:g} < bristle_damping·(stiction − coulomb)/coulomb "
+                f"= {need:.3g} ozf·in·s/rad (Åström & Canudas de Wit 2008); bristles loaded at creep speed give "
+                f"energy back when the shaft then slides fast",)
+
     def dissipativity_margin(self) -> float:
         """min over 0 ≤ v ≤ 2·ks/σ1 of 4·(σ1 + σ2)·g(v) − σ1²·v at the lowest ripple levels (≥ 0: dissipative)."""
         s1, s2 = self.bristle_damping, self.viscous
