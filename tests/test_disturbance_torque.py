@@ -236,7 +236,7 @@ def test_bad_disturbance_names_the_field(fields, name):
         PlantParams(**fields)
 
 
-@pytest.mark.parametrize("family", ["two-mass", "stribeck", "lugre"])
+@pytest.mark.parametrize("family", ["stribeck", "lugre"])
 def test_families_without_the_disturbance_refuse_it_by_name(family):
     Params = get_family(family).Params
     with pytest.raises(ValueError, match=rf"disturbance_torque_std: .*not supported by family {family} yet"):
