@@ -30,8 +30,9 @@ Events (the scheme of plant.multimode.disturbed, whose helpers this module reuse
   there, an error that vanishes with ``substep`` (1e-4 s ≪ the 6.7 ms period of ``compliant``).
 * noise-free: the interval is the compiled exact step of plant.two_mass.interval when d = 0
   (d then stays 0); with d ≠ 0, the stuck breakaway is the first exit of T(t) + d(0)·e^(−t/τd)
-  from (−ks, ks) by plant.two_mass.modes.first_exit (exact), and the moving velocity zero a
-  sign change at a sub-step end, bisected to ``bisection_tol``.
+  from (−ks, ks) by plant.two_mass.modes.first_exit (exact), and the moving velocity zero the
+  first root of x2 (plant.two_mass.modes.first_root on the modal form of the core
+  [x2, φ, ω_m, x3, x5, d], d one more exponential), the peak |x1| at the roots of ẋ1 likewise.
 
 At a velocity zero the switching table of SPEC §2 applies with T + d in place of x3.
 
@@ -53,7 +54,7 @@ from plant.multimode.zero_velocity import FAR_SIGMAS, hitting_midpoint
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass import interval as compiled
-from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit
+from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
 from plant.two_mass.params import TwoMassParams
 
 __all__ = ["N_X", "D", "advance", "transition", "drift", "initial_state"]
@@ -256,6 +257,60 @@ def _stuck_exit(p, Y, ks, horizon):
     return first_exit(ca, cb, lm, n + 1, -ks, ks, horizon)
 
 
+@lru_cache(maxsize=16)
+def _moving_modal(params: TwoMassParams, mode: int):
+    """(V, V⁻¹, λ) of the moving core with d, z = [x2, φ, ω_m, x3, x5, d] (ż = A·z + b), or
+    None when A is defective to working precision (τd equal to τ3, τ5): then sub-steps decide."""
+    A = drift(params, mode)[0][np.ix_(_CORE, _CORE)]
+    ev, vec = np.linalg.eig(A)
+    if np.linalg.cond(vec) > 1e8:
+        return None
+    scale = np.max(np.abs(A))
+    ev = np.where(np.abs(ev) < 1e-12 * scale, 0.0, ev)
+    ev = np.where(ev.real > 0, 1j * ev.imag, ev)
+    return vec, np.linalg.inv(vec), ev
+
+
+_CORE = [Y2, YPHI, YWM, Y3, Y5, YD]
+
+
+def _moving_root(p, Y, mode, sigma, horizon, which=0):
+    """Noise-free: the first zero in (0, horizon] of x2 (which = 0) or of ẋ1 = x2 − x4 (which = 1)
+    (modes.first_root: exact; inf if none, −1 if it did not converge); None when the modal form
+    is unavailable."""
+    modal = _moving_modal(p, mode)
+    if modal is None:
+        return None
+    V, Vi, lam = modal
+    A, _ = drift(p, mode)
+    z = Y[_CORE]
+    b = A[np.ix_(_CORE, [YKC, YU])] @ Y[[YKC, YU]]
+    ca = np.zeros(7, dtype=np.complex128)
+    cb = np.zeros(7, dtype=np.complex128)
+    lm = np.zeros(7, dtype=np.complex128)
+    ca[:6], cb[:6], lm[:6] = V[0] * (Vi @ z), V[0] * (Vi @ b), lam
+    n = 6
+    if which == 1:
+        ca[6], lm[6] = -Y[Y4], -p.beta4
+        n = 7
+    return first_root(ca, cb, lm, n, sigma, horizon)
+
+
+def _x1_peak(p, Y, mode, w, peak):
+    """max(peak, |x1| at the roots of ẋ1 = x2 − x4 in (0, w)) on the noise-free path from Y."""
+    t, Ya = 0.0, Y.copy()
+    for _ in range(1000):
+        slope = Ya[Y2] - Ya[Y4]
+        sigma = 1.0 if slope > 0.0 else -1.0
+        r = _moving_root(p, Ya, mode, sigma, w - t, 1)
+        if r is None or not (0.0 < r < w - t):
+            break
+        Ya = _gauss(transition(p, mode, r), Ya, None)
+        peak = max(peak, abs(Ya[Y1]))
+        t += r
+    return peak
+
+
 def _velocity_zero(Y, run, dirn):
     """x2 = 0 while moving: reflect, reverse or stick by T + d against ks (SPEC §2)."""
     Y[Y2] = 0.0
@@ -307,6 +362,17 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         rungs = (near and dirn * (_shaft(p, Y) + Y[YD]) >= ks) or run.just_broke
         run.just_broke = False
         w = min(o.reflect_substep if rungs else o.substep, room_fb)
+        if draws is None and not rungs:
+            tau = _moving_root(p, Y, mode, dirn, room_fb)
+            if tau is not None and tau >= 0.0:
+                crossed = tau <= room_fb
+                w = tau if crossed else room_fb
+                Yb = _gauss(transition(p, mode, w), Y, None)
+                run.peak = _x1_peak(p, Y, mode, w, run.peak)
+                run.nsub += 1
+                if run.tick():
+                    return True
+                return _finish(Y, Yb, run, w, x3, u, h_fb, room, t_end, bridge, crossed, mode, dirn)
     step = transition(p, mode, w)
     Yb = _gauss(step, Y, draws)
     run.nsub += 1
@@ -344,6 +410,12 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
             if run.status is not Status.OK:
                 return True
             w = tc
+    return _finish(Y, Yb, run, w, x3, u, h_fb, room, t_end, bridge, crossed, mode, dirn)
+
+
+def _finish(Y, Yb, run, w, x3, u, h_fb, room, t_end, bridge, crossed, mode, dirn):
+    """Book the sub-step from Y to Yb of width w and handle its event; True to stop."""
+    p = run.p
     run.torque(x3, u, w, bridge)
     run.peak = substep_peak(Y, Yb, w, run.peak) if mode != 2 else max(run.peak, abs(Y[Y1]), abs(Yb[Y1]))
     Y[:] = Yb
