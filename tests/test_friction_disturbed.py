@@ -239,3 +239,18 @@ def test_lugre_disturbed_statistics_match_euler_maruyama_lean():
 @pytest.mark.slow
 def test_lugre_disturbed_statistics_match_euler_maruyama():
     print(_lugre_statistics(500, 3000, 2e-6, 0.2))
+
+
+@pytest.mark.parametrize("family", ["stribeck", "lugre"])
+@pytest.mark.parametrize("d0", [0.92, -0.92])
+def test_oracle_pulse_law_runs_from_a_disturbed_state(family, d0):
+    """Noise off with d(0) ≠ 0 (the oracle's pulse law from a run's state): a bridge pulse from
+    rest moves the shaft and stops (stribeck used to chatter at the breakaway: the sub-step's
+    held d sat below the breakaway value, so the shaft stopped at once, again and again)."""
+    fam = get_family(family)
+    p = fam.Params(disturbance_torque_std=0.3, disturbance_torque_tau=0.02)
+    x = np.array(fam.initial_state(p, 0.048).x)
+    x[-1] = d0
+    x.flags.writeable = False
+    moved, t_stop = fam.pulse_motion(p, PlantState(0.0, x, 2, False), 2e-3, 1.0)
+    assert moved > 1e-6 and 2e-3 < t_stop < 0.5

@@ -23,7 +23,9 @@ Scheme (plant.stribeck.moving's noisy grid, d added to it):
 * noise off: d(t) = d(0)·e^(−t/τd); with d(0) = 0 the interval is the compiled step itself
   (d stays 0); otherwise sliding holds d at each sub-step's midpoint value in the family's
   Dormand–Prince segment (second order in ``substep``), stuck crossings are sign changes at
-  sub-step ends bisected to ``bisection_tol``.
+  sub-step ends bisected to ``bisection_tol``, and the first ``reflect_substep`` after a
+  breakaway, reversal or reflection is pushed as with noise (else a load at v = 0 whose held
+  x3 + d sits a rounding below ks would stop at once, again and again).
 
 With ``disturbance_torque_std`` = 0 the family never enters this module (bit for bit).
 """
@@ -253,13 +255,13 @@ def _moving(X, dbox, run, t_end, bridge, noise):
     h_fb = math.inf if not run.fb else p.motor_time_constant * math.log1p(abs(x3) / p.u_max)
     H = min(o.substep, room, h_fb)
     shift = d
-    if noise is None:
-        shift = d * math.exp(-0.5 * H / p.disturbance_torque_tau)          # the midpoint's d
-    elif run.just_broke:
+    if run.just_broke:
         kc, ks = effective_levels(X[ATH], X[A5], L)
         H = min(o.reflect_substep, H)
         # the push that starts the motion: reflected in this first sub-step (s·(x3 + d) ≥ ks)
         shift = d + s * max(0.0, ks * (1.0 + 1e-12) + 1e-300 - s * (x3 + d))
+    elif noise is None:
+        shift = d * math.exp(-0.5 * H / p.disturbance_torque_tau)          # the midpoint's d
     run.just_broke = False
     X[A3] = x3 + shift
     X[AU] = u + shift
