@@ -20,14 +20,18 @@ Events (the scheme of plant.multimode.disturbed, whose helpers this module reuse
 
 * noisy: exact Gaussian sub-steps of ``substep`` (``reflect_substep`` while the load is pushed
   at zero velocity: s·(T + d) ≥ ks with s·x2 within 8.5σ of 0, the Skorokhod push of
-  plant.multimode.zero_velocity; a zero reached from farther is a reflection event); a crossing inside a sub-step with both ends on one side happens with the
-  Brownian-bridge probability exp(−2·c_a·c_b/(σ²·w)) of the barrier distance c, and is located
+  plant.multimode.zero_velocity; a zero reached from farther is a reflection event); a
+  crossing inside a sub-step with both ends on one side happens with the Brownian-bridge
+  probability exp(−2·c_a·c_b/(σ²·w)) of the barrier distance c, and is located
   by bridge bisection to ``bisection_tol`` (midpoints from their Gaussian law given both ends,
   Matheron's rule; the barrier coordinate first, conditioned on a crossing). Stuck: c = ks ∓
   (T + d), σ² = 2σd²/τd (d's intensity; T is C¹). Moving: c = s·x2, σ² = α²σ2² (with σ2 = 0,
   x2 is C¹ and a zero is a sign change at a sub-step end). The bridge test treats the smooth
   part of c as linear within a sub-step: its curvature (the shaft's ringing) is neglected
   there, an error that vanishes with ``substep`` (1e-4 s ≪ the 6.7 ms period of ``compliant``).
+  Stuck, longer rungs sub·2^j are taken while the mean of T + d stays 8.5σ of the rung's noise
+  inside ±ks (one exact first-exit call, modes.first_exit): a passage there has probability
+  below 1e-16 and is not tested (the ladder of plant.multimode.zero_velocity).
 * noise-free: the interval is the compiled exact step of plant.two_mass.interval when d = 0
   (d then stays 0); with d ≠ 0, the stuck breakaway is the first exit of T(t) + d(0)·e^(−t/τd)
   from (−ks, ks) by plant.two_mass.modes.first_exit (exact), and the moving velocity zero the
@@ -50,7 +54,7 @@ import numpy as np
 from plant.drive import DriveCommand, DriveType
 from plant.multimode.disturbed import _apply_level, _breakaway, _conditional, _cross_prob, _Draws, _Run, _Step
 from plant.multimode.moving import substep_peak
-from plant.multimode.zero_velocity import FAR_SIGMAS, hitting_midpoint
+from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass import interval as compiled
@@ -311,6 +315,29 @@ def _x1_peak(p, Y, mode, w, peak):
     return peak
 
 
+def _stuck_width(p, Y, ks, g, room, sub, sig2):
+    """(width, far) of a noisy stuck sub-step: the longest rung sub·2^j (≤ sub·2^(LADDER−1), or
+    ``room`` itself) over which the mean of g = T + d, T(t) + d·e^(−t/τd), stays 8.5σ√W inside
+    ±ks (W the longest candidate; plant.two_mass.modes.first_exit, one call), so that a passage
+    within it has probability below 1e-16 and is not tested; else (sub, False)."""
+    top = sub * 2.0 ** (LADDER - 1)
+    W = min(room, top)
+    if W <= sub:
+        return W, False
+    band = ks - FAR_SIGMAS * math.sqrt(sig2 * W)
+    if band <= abs(g):
+        return sub, False
+    t, side = _stuck_exit(p, Y, band, W)
+    if side == 0 and t == math.inf:
+        return W, True
+    if not t >= sub:
+        return sub, False
+    w = sub
+    while 2.0 * w <= t:
+        w *= 2.0
+    return w, True
+
+
 def _velocity_zero(Y, run, dirn):
     """x2 = 0 while moving: reflect, reverse or stick by T + d against ks (SPEC §2)."""
     Y[Y2] = 0.0
@@ -346,7 +373,9 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
         if abs(g) > ks:
             return _breakaway(Y, run, g)
         sig2 = sig_d2
-        w = min(o.substep, room_fb)
+        w, far = min(o.substep, room_fb), False
+        if draws is not None and sig2 > 0.0:
+            w, far = _stuck_width(p, Y, ks, g, room_fb, o.substep, sig2)
         if draws is None:
             w, side = _stuck_exit(p, Y, ks, room_fb)
             if w < 0.0:
@@ -404,7 +433,8 @@ def _segment(Y, run, t_end, bridge, draws, sig_d2):
             e[Y2] = dirn
             c0 = 0.0
             prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
-        crossed = prob >= 1.0 or (prob > 0.0 and draws is not None and draws.uniform() < prob)
+        crossed = prob >= 1.0 or (prob > 0.0 and draws is not None and not (mode == 2 and far)
+                                  and draws.uniform() < prob)
         if crossed:
             tc, Yb = _bisect(p, mode, e, c0, Y.copy(), Yb, w, o.bisection_tol, sig2, draws, run)
             if run.status is not Status.OK:
