@@ -237,11 +237,16 @@ def test_bad_disturbance_names_the_field(fields, name):
 
 
 @pytest.mark.parametrize("family", ["two-mass", "stribeck", "lugre"])
-def test_families_without_the_disturbance_refuse_it_by_name(family):
+def test_every_family_takes_the_disturbance_and_names_a_bad_field(family):
     Params = get_family(family).Params
-    with pytest.raises(ValueError, match=rf"disturbance_torque_std: .*not supported by family {family} yet"):
-        Params(disturbance_torque_std=0.3, disturbance_torque_tau=0.02)
-    Params(disturbance_torque_tau=0.02)          # τd alone is no disturbance
+    p = Params(disturbance_torque_std=0.3, disturbance_torque_tau=0.02)
+    assert get_family(family).initial_state(p, 0.0).x.shape[0] == \
+        get_family(family).initial_state(Params(), 0.0).x.shape[0] + 1      # d rides along
+    for fields, name in [({"disturbance_torque_std": -0.1, "disturbance_torque_tau": 0.02}, "disturbance_torque_std"),
+                         ({"disturbance_torque_std": 0.3}, "disturbance_torque_tau"),
+                         ({"disturbance_torque_std": 0.3, "disturbance_torque_tau": -1.0}, "disturbance_torque_tau")]:
+        with pytest.raises(ValueError, match=rf"^\w*Params\.{name} "):    # the field, by name
+            Params(**fields)
 
 
 _BAD = """[matrix]
@@ -261,9 +266,11 @@ def test_bad_disturbance_in_a_matrix_names_file_line_and_key(tmp_path):
     with pytest.raises(MatrixError) as info:
         load_matrix(path, check_resets=False)
     assert str(info.value).startswith(f"{path}:8: scenarios.x.disturbance_torque_std: "), str(info.value)
-    path.write_text(_BAD.replace("-0.5", "0.5\nplant = \"stribeck\""))
-    with pytest.raises(MatrixError, match="not supported by family stribeck yet"):
-        load_matrix(path, check_resets=False)
+    for family in ("two-mass", "stribeck", "lugre"):
+        path.write_text(_BAD.replace("base = \"disturbed\"", f"base = \"disturbed\"\nplant = \"{family}\""))
+        with pytest.raises(MatrixError) as info:
+            load_matrix(path, check_resets=False)
+        assert str(info.value).startswith(f"{path}:9: scenarios.x.disturbance_torque_std: "), str(info.value)
 
 
 @pytest.mark.slow

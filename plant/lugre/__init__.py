@@ -8,14 +8,16 @@ carries θ (index 6) and z (index 7) after the shared six.
 
 Modules: ``params`` (LuGreParams), ``law`` (right-hand side and Jacobian), ``integrate``
 (the integrator), ``interval`` (the pure step, compiled whole), ``law_loop`` (the compiled closed loop of a
-fixed linear law), ``reference`` (solve_ivp).
+fixed linear law), ``reference`` (solve_ivp), ``disturbed`` (the Ornstein–Uhlenbeck
+disturbance torque of SPEC §11: a ninth state entry d, used only when
+``disturbance_torque_std`` > 0).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from plant.lugre import law_loop
+from plant.lugre import disturbed, law_loop
 from plant.lugre.interval import N_STATE, advance
 from plant.lugre.params import LuGreParams
 from plant.protocol import PlantFamily, register_family
@@ -40,6 +42,8 @@ class LuGre(PlantFamily):
     }
 
     def initial_state(self, params, x5):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.initial_state(params, x5)
         x = np.zeros(N_STATE)
         x[X4] = params.command_velocity_initial
         x[X5] = x5
@@ -47,6 +51,8 @@ class LuGre(PlantFamily):
         return PlantState(0.0, x, 2, False)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.advance(state, command, params, noise, options, duration=duration, record=record)
         return advance(state, command, params, noise, options, duration=duration, record=record)
 
     def truth(self, params, state):
@@ -58,4 +64,6 @@ class LuGre(PlantFamily):
         out["kc_true"] = max(params.coulomb * m + x5, 0.0)
         out["theta"] = theta
         out["z"] = float(state.x[Z])
+        if params.disturbance_torque_std != 0.0:
+            out["disturbance_torque"] = float(state.x[disturbed.D]) if state.x.shape[0] > disturbed.D else 0.0
         return out

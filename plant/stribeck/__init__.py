@@ -8,7 +8,9 @@ error-controlled Dormand–Prince 5(4) noise-free, stochastic Heun sub-steps wit
 
 Modules: ``params`` (StribeckParams), ``law`` (the friction law), ``moving`` (modes 1 and 3),
 ``interval`` (the pure step, compiled whole), ``law_loop`` (the compiled closed loop of a
-fixed linear law), ``reference`` (solve_ivp and Euler–Maruyama);
+fixed linear law), ``reference`` (solve_ivp and Euler–Maruyama), ``disturbed`` (the
+Ornstein–Uhlenbeck disturbance torque of SPEC §11: an eighth state entry d, used only when
+``disturbance_torque_std`` > 0);
 the Dormand–Prince tableau is shared (:mod:`plant.dopri`).
 """
 
@@ -19,7 +21,7 @@ import numpy as np
 from plant.protocol import PlantFamily, register_family
 from plant.ripple import THETA, ripple_factor
 from plant.state import X5, PlantState
-from plant.stribeck import law_loop
+from plant.stribeck import disturbed, law_loop
 from plant.stribeck.interval import N_STATE, advance
 from plant.stribeck.params import StribeckParams
 
@@ -43,6 +45,8 @@ class Stribeck(PlantFamily):
     }
 
     def initial_state(self, params, x5):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.initial_state(params, x5)
         x = np.zeros(N_STATE)
         x[3] = params.command_velocity_initial
         x[X5] = x5
@@ -50,6 +54,8 @@ class Stribeck(PlantFamily):
         return PlantState(0.0, x, 2, False)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.advance(state, command, params, noise, options, duration=duration, record=record)
         return advance(state, command, params, noise, options, duration=duration, record=record)
 
     def truth(self, params, state):
@@ -60,4 +66,6 @@ class Stribeck(PlantFamily):
         out["ks_true"] = max(params.stiction * m + x5, 0.0)
         out["kc_true"] = max(params.coulomb * m + x5, 0.0)
         out["theta"] = theta
+        if params.disturbance_torque_std != 0.0:
+            out["disturbance_torque"] = float(state.x[disturbed.D]) if state.x.shape[0] > disturbed.D else 0.0
         return out

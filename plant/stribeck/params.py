@@ -41,9 +41,6 @@ class StribeckParams(RippleParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.disturbance_torque_std != 0.0:
-            raise ValueError(f"{type(self).__name__}.disturbance_torque_std: the disturbance torque is not supported "
-                             f"by family stribeck yet (only multimode), got {self.disturbance_torque_std!r}")
         name = type(self).__name__
         for field in ("stribeck_velocity", "stribeck_exponent", "viscous"):
             object.__setattr__(self, field, finite_field(name, field, getattr(self, field)))

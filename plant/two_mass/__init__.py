@@ -6,7 +6,9 @@ the shaft twist φ = θ_m − θ_load [rad] and the motor velocity ω_m [rad/s].
 
 Modules: ``params`` (the dataclass), ``modes`` (modal closed form, the first-root locator),
 ``motion`` (propagation, Φ(h), Q(h), the noise factor), ``bridge`` (noisy velocity zeros),
-``interval`` (the compiled pure step), ``law_loop`` (the compiled closed loop of a fixed linear law).
+``interval`` (the compiled pure step), ``law_loop`` (the compiled closed loop of a fixed linear law),
+``disturbed`` (the Ornstein–Uhlenbeck disturbance torque on the load, SPEC §11: a ninth state
+entry d, used only when ``disturbance_torque_std`` > 0).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 from plant.drive import DriveCommand, DriveType
 from plant.protocol import PlantFamily, _checked, register_family
 from plant.state import SimOptions
-from plant.two_mass import law_loop
+from plant.two_mass import disturbed, law_loop
 from plant.state import PlantState
 from plant.two_mass.interval import N_X, advance
 from plant.two_mass.params import TwoMassParams
@@ -42,7 +44,10 @@ class TwoMass(PlantFamily):
                                "a compliant shaft: 149 Hz resonance, ζ = 0.029, rotor inertia J/10")}
 
     def initial_state(self, params, x5):
-        """Load stuck at zero error, shaft relaxed and at rest, no current; x4, x5 as multimode."""
+        """Load stuck at zero error, shaft relaxed and at rest, no current; x4, x5 as multimode;
+        with the disturbance torque on, d(0) = 0 as a ninth entry."""
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.initial_state(params, x5)
         x = np.zeros(N_X)
         x[3] = params.command_velocity_initial
         x[4] = x5
@@ -50,13 +55,16 @@ class TwoMass(PlantFamily):
         return PlantState(0.0, x, 2, False)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
+        if params.disturbance_torque_std != 0.0:
+            return disturbed.advance(state, command, params, noise, options, duration=duration, record=record)
         return advance(state, command, params, noise, options, duration=duration, record=record)
 
     def pulse_motion(self, params, state, dt_u, sign):
         """As :meth:`PlantFamily.pulse_motion`, but the run goes on until the load is stuck with
         no current *and* the ringing shaft can no longer break it loose: with x3 = u = 0 the
         rotor's energy E = ½J_m·ω_m² + ½k·φ² does not grow while the load is stuck, and
-        |T| ≤ √(2E)·(√k + c/√J_m), so once that bound is below ks no breakaway can follow.
+        |T| ≤ √(2E)·(√k + c/√J_m), so once that bound is below ks no breakaway can follow
+        (below ks − |d| with a disturbance torque d, which decays noise-free).
         """
         p = params.replace(command_velocity_std=0.0) if params.command_velocity_std else params
         x = state.x.copy()
@@ -79,7 +87,8 @@ class TwoMass(PlantFamily):
             if s.mode != 2 or s.flyback or s.x[2] != 0.0:
                 return False
             energy = 0.5 * Jm * s.x[7] ** 2 + 0.5 * k * s.x[6] ** 2
-            return math.sqrt(2.0 * energy) * (math.sqrt(k) + c / math.sqrt(Jm)) < ks
+            d = abs(float(s.x[disturbed.D])) if s.x.shape[0] > disturbed.D else 0.0
+            return math.sqrt(2.0 * energy) * (math.sqrt(k) + c / math.sqrt(Jm)) < ks - d
         while not settled(s) and s.t < _PULSE_HORIZON_S:
             s, t_stop = _checked(self.step(s, off, p, None, opts, duration=chunk, record=True), t_stop)
         if s.mode != 2:
@@ -93,4 +102,6 @@ class TwoMass(PlantFamily):
         out["shaft_twist"] = float(x[6])
         out["motor_velocity"] = float(x[7])
         out["shaft_torque"] = float(params.shaft_stiffness * x[6] + params.shaft_damping * (x[7] - x[1]))
+        if params.disturbance_torque_std != 0.0:
+            out["disturbance_torque"] = float(x[disturbed.D]) if x.shape[0] > disturbed.D else 0.0
         return out

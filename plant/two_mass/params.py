@@ -38,9 +38,6 @@ class TwoMassParams(PlantParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.disturbance_torque_std != 0.0:
-            raise ValueError(f"{type(self).__name__}.disturbance_torque_std: the disturbance torque is not supported "
-                             f"by family two-mass yet (only multimode), got {self.disturbance_torque_std!r}")
         for name in ("motor_inertia", "shaft_stiffness"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
