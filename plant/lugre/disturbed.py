@@ -26,6 +26,7 @@ from plant.drive import DriveCommand, DriveType
 from plant.lugre import integrate
 from plant.lugre import interval as compiled
 from plant.lugre.integrate import scratch, segment
+from plant.lugre.law import L_VS
 from plant.lugre.interval import VELOCITY_THRESHOLD, _noise_kick
 from plant.randomness import NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
@@ -109,7 +110,8 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
             shift = d if noisy else d * math.exp(-0.5 * hs / taud)
             X[A3], X[AU] = x3 + shift, u + shift
             old = run.mode
-            advanced, new, peak, steps = segment(X, hs, L, run.peak, run.hbox, VELOCITY_THRESHOLD, old, 0.0, tol, W, K)
+            advanced, new, peak, steps = segment(X, hs, L, run.peak, run.hbox, VELOCITY_THRESHOLD, old, 0.0, tol, W, K,
+                                                 math.inf, math.inf)
             X[AU] = u
             X[A3] = u + (x3 - u) * math.exp(-advanced / tau3)
             run.peak = peak
@@ -128,7 +130,9 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
                     break
             if noisy and full:
                 z, cur = nz.ready()
-                _noise_kick(X, advanced, run.prm, L, z, cur, work)
+                r = X[A2] / L[L_VS]
+                quad = -math.expm1(-r * r) * advanced   # w2 through s(v)² at the flow's end (held)
+                _noise_kick(X, advanced, quad, run.prm, L, z, cur, work)
                 new = _mode_of(X[A2])
             d = _ou(d, advanced, p, nz)
             if new != old and run.event(X, _mode_event(run, old, new)):
