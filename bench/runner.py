@@ -14,7 +14,11 @@ model (a :class:`~plant.params.PlantParams`, by default the truth's own fields).
 
 A controller that describes its step as a fixed linear law (the ``linear_law`` hook) runs, when
 nothing is recorded and the family offers one for the plant (``PlantFamily.law_loop``: not with
-a quantized sensor or a delay), in the family's compiled loop with bit-identical results; every
+a quantized sensor or a delay), in the family's compiled loop with bit-identical results. A
+controller that declares a compiled step (the ``compiled_law`` hook; a linear law where its own
+loop does not apply) runs, when nothing is recorded, in the family's ``compiled_law_loop``
+(``PlantFamily.compiled_loop``: any sensor and delay, no disturbance torque), also
+bit-identical; if its step hands a sample back, the run goes on here from that sample. Every
 other run calls ``step`` here.
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
@@ -207,8 +211,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         samples on the compiled path), a run over budget stops with status ``error``. None
         (default) means no limit.
     compiled : bool
-        Run a controller that describes its step as a linear law (``linear_law`` hook) in one
-        compiled loop (the family's ``linear_law_loop``, bit-identical) when nothing is recorded.
+        Run a controller that describes its step as a linear law (``linear_law`` hook) or
+        declares a compiled step (``compiled_law`` hook) in one compiled loop (the family's
+        ``linear_law_loop`` or ``compiled_law_loop``, bit-identical) when nothing is recorded.
         False always calls ``step`` from Python.
 
     Returns
@@ -254,17 +259,34 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     truth = TruePlant(fam, params) if privileged else None
     try:
         controller.reset(model, loop.streams["controller"])
-        fast = fam.law_loop(params)
-        law = controller.linear_law() if (rec is None and not privileged and compiled and fast) else None
-        if law is not None:
-            state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
-                                                        loop.plant_noise, deadline)
-            totals = WindowTotals(**sums)
-            n_window = window.shape[0]
-            x1_window[:n_window] = window
-            if status is Status.ERROR:
-                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
-        for n in range(n_samples if law is None else 0):
+        n_start, law = 0, None
+        if rec is None and not privileged and compiled:
+            fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
+            law = controller.linear_law() if (fast or cloop) else None
+            if law is not None and fast:
+                state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
+                                                            loop.plant_noise, deadline)
+                n_start = n_samples
+            elif cloop is not None:
+                claw = controller.compiled_law()
+                if claw is None and law is not None:
+                    claw = law.compiled(params.sample_period)
+                if claw is not None:
+                    run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline)
+                    state, sums, window, status, message = run.state, run.sums, run.x1_window, run.status, run.message
+                    n_start = n_samples
+                    if run.handed_back:   # the controller's step hands sample n_done back: Python from there
+                        n_start = loop.n = run.n_done
+                        loop.state = state
+                        if run.pending is not None:
+                            loop.pending = DriveCommand(tuple(zip(*run.pending)), claw.drive)
+            if n_start > 0:
+                totals = WindowTotals(**sums)
+                n_window = window.shape[0]
+                x1_window[:n_window] = window
+                if status is Status.ERROR:
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+        for n in range(n_start, n_samples if status is Status.OK else n_start):
             y = loop.measure()
             if n >= n_warm:
                 x1_window[n_window] = state.x[X1]
@@ -290,7 +312,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
                 break
         else:
-            if law is None:
+            if n_start < n_samples and status is Status.OK:
                 x1_window[n_window] = state.x[X1]
                 n_window += 1
     except ControllerDiverged as exc:   # the controller's estimates left their range: a result
