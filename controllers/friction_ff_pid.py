@@ -103,7 +103,7 @@ _FP_COULOMB, _FP_STICTION, _FP_VS, _FP_KAPPA, _FP_VMIN, _FP_EDB, _FP_TWO = range
 _FS0, _FP0 = S_V + 1, P_NWIN + 1
 
 
-@njit(STEP_SIGNATURE, cache=True)
+@njit(cache=True)
 def _friction_ff_pid_step(s, p, y, offs, levs):
     """:class:`FrictionFfPidController`'s step: slope and x̂4, u_ff of (1)–(3), the PID, the level."""
     pid_observe(s, p, y)

@@ -26,11 +26,14 @@ family's ``compiled_law_loop`` — with the quantized sensor and the compute del
 is recorded. A :class:`LinearLaw` becomes one by :meth:`LinearLaw.compiled` (how a linear law
 runs on a plant with a quantized sensor or a delay).
 
-To declare one: write the step as ``@njit(STEP_SIGNATURE, cache=True)`` (eager and cached: a
-fresh process loads it from numba's cache), keep the controller's state in ``s`` (scalars at
-fixed indices), and return ``CompiledLaw(step, s, p, drive, max_segments)`` from
-``compiled_law()`` after ``reset``; ``step`` in Python is then
-``law_command(step(s, p, y, offs, levs), offs, levs, drive)``.
+To declare one: write the step as ``@njit(cache=True)`` (compiled, or loaded from numba's
+cache, at its first call: importing the controller costs nothing), keep the controller's state
+in ``s`` (scalars at fixed indices), and return ``CompiledLaw(step, s, p, drive, max_segments)``
+from ``compiled_law()`` after ``reset`` (which compiles it for :data:`STEP_SIGNATURE`);
+``step`` in Python is then ``law_command(step(s, p, y, offs, levs), offs, levs, drive)``.
+Examples: :mod:`controllers.reset_pid`, :mod:`controllers.friction_ff_pid`,
+:mod:`controllers.observer_pid`; tests/test_compiled_law.py has a minimal one that hands samples
+back.
 """
 
 from __future__ import annotations
@@ -92,7 +95,7 @@ class CompiledLaw:
     Attributes
     ----------
     step : numba dispatcher
-        Compiled for :data:`plant.law_step.STEP_SIGNATURE`:
+        Compiles for :data:`plant.law_step.STEP_SIGNATURE` (done here if not yet):
         ``k = step(s, p, y [rad], offs [s], levs [ozf·in])``.
     state : ndarray
         ``s``, float64, C-contiguous, writable: the controller's own state (advanced in place).
@@ -121,7 +124,11 @@ class CompiledLaw:
         if isinstance(self.max_segments, bool) or not isinstance(self.max_segments, int) or self.max_segments < 1:
             raise ValueError(f"CompiledLaw.max_segments must be an integer >= 1, got {self.max_segments!r}")
         if STEP_SIGNATURE.args not in getattr(self.step, "signatures", ()):
-            raise ValueError("CompiledLaw.step must be compiled for plant.law_step.STEP_SIGNATURE")
+            try:                          # compiled (or loaded from numba's cache) when first needed
+                self.step.compile(STEP_SIGNATURE)
+            except Exception as exc:
+                raise ValueError(f"CompiledLaw.step must be a numba function that compiles for "
+                                 f"plant.law_step.STEP_SIGNATURE: {exc}") from None
 
 
 def law_command(k: int, offs: np.ndarray, levs: np.ndarray, drive: DriveType) -> DriveCommand:
@@ -132,7 +139,7 @@ def law_command(k: int, offs: np.ndarray, levs: np.ndarray, drive: DriveType) ->
     return DriveCommand(tuple((float(offs[i]), float(levs[i])) for i in range(k)), drive)
 
 
-@njit(STEP_SIGNATURE, cache=True)
+@njit(cache=True)
 def linear_law_step(s, p, y, offs, levs):
     """:class:`LinearLaw` as a compiled step: p = (n, u_max, A_d, f_d, φ, τs, A, B, C, D)
     (A row-major), s = (sample count, x, scratch for x')."""

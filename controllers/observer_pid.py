@@ -241,7 +241,7 @@ def observer_update(z, y, u, Phi, Gamma, L):
         z[i] = acc
 
 
-@njit(STEP_SIGNATURE, cache=True)
+@njit(cache=True)
 def _observer_pid_step(s, p, y, offs, levs):
     """:class:`ObserverPidController`'s step on (s, p): slope and x̂4, breakaway and k̂c, the PID
     plus d̂, the observer update with the held level."""

@@ -227,7 +227,7 @@ def _coulomb_feedforward(s, p, on, min_velocity, coulomb):
 _RS_YPREV, _RS_RESETS = range(2)
 _RP_RESET, _RP_ON_CROSSING, _RP_ON_STICK, _RP_BAND, _RP_FF, _RP_FF_MIN, _RP_COULOMB = range(7)
 
-@njit(STEP_SIGNATURE, cache=True)
+@njit(cache=True)
 def _reset_pid_step(s, p, y, offs, levs):
     """:class:`ResetPidController`'s step: slope, x̂4, PID, reset law, feedforward, held level."""
     pid_observe(s, p, y)

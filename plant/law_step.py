@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, types
 
 __all__ = ["STEP_SIGNATURE", "STEP_TYPE", "quantize", "delay_segments", "check_command"]
@@ -40,15 +41,15 @@ STEP_TYPE = types.FunctionType(STEP_SIGNATURE)
 def quantize(value, step):
     """:func:`plant.sensor.quantize`: ``value`` [rad] on a grid of ``step`` [rad], ties up.
 
-    ⌊r⌋ is kept as a float (exact: the floor of a double is a double), so r − ⌊r⌋ and
-    ⌊r⌋·q round as Python's int arithmetic does there.
+    ⌊r⌋ is kept as a float (exact: the floor of a double is a double; no int64 overflow), so
+    r − ⌊r⌋ and ⌊r⌋·q round as Python's int arithmetic does there.
     """
     if step == 0.0:
         return value
     ratio = value / step
     if not math.isfinite(ratio):
         return value
-    level = math.floor(ratio) * 1.0
+    level = np.floor(ratio) + 0.0    # + 0.0: ⌊−0.0⌋ is −0.0, Python's int 0 is +0
     if ratio - level >= 0.5:
         level += 1.0
     return level * step
