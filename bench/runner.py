@@ -259,62 +259,71 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     truth = TruePlant(fam, params) if privileged else None
     try:
         controller.reset(model, loop.streams["controller"])
-        n_start, law = 0, None
+        n, law, claw, cloop, done = 0, None, None, None, False
         if rec is None and not privileged and compiled:
             fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
             law = controller.linear_law() if (fast or cloop) else None
             if law is not None and fast:
                 state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
                                                             loop.plant_noise, deadline)
-                n_start = n_samples
+                totals = WindowTotals(**sums)
+                n_window = window.shape[0]
+                x1_window[:n_window] = window
+                n, done = n_samples, True
+                if status is Status.ERROR:
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
             elif cloop is not None:
                 claw = controller.compiled_law()
                 if claw is None and law is not None:
                     claw = law.compiled(params.sample_period)
-                if claw is not None:
-                    run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline)
-                    state, sums, window, status, message = run.state, run.sums, run.x1_window, run.status, run.message
-                    n_start = n_samples
-                    if run.handed_back:   # the controller's step hands sample n_done back: Python from there
-                        n_start = loop.n = run.n_done
-                        loop.state = state
-                        if run.pending is not None:
-                            loop.pending = DriveCommand(tuple(zip(*run.pending)), claw.drive)
-            if n_start > 0:
-                totals = WindowTotals(**sums)
-                n_window = window.shape[0]
-                x1_window[:n_window] = window
+        while not done and n < n_samples and status is Status.OK:
+            if claw is not None:             # compiled from sample n; a handed-back sample is done below
+                pending = loop.pending
+                if pending is not None and pending.drive is not claw.drive:
+                    claw = None              # the Python path's delay raises at the next sample
+                    continue
+                run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline, n0=n,
+                            sums=dataclasses.asdict(totals), x1_window=x1_window,
+                            pending=None if pending is None else pending.arrays())
+                state = loop.state = run.state
+                n = loop.n = run.n_done
+                loop.pending = None if run.pending is None else DriveCommand(tuple(zip(*run.pending)), claw.drive)
+                totals = WindowTotals(**run.sums)
+                n_window = max(0, n - n_warm)
+                status, message = run.status, run.message
                 if status is Status.ERROR:
                     message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
-        for n in range(n_start, n_samples if status is Status.OK else n_start):
-            y = loop.measure()
-            if n >= n_warm:
-                x1_window[n_window] = state.x[X1]
-                n_window += 1
-            if rec is not None:
-                rec.sample({"t": state.t, "y": y, **loop.truth()})
-            if privileged:
-                controller.observe_truth(state, truth)
-            command = controller.step(y)
-            if rec is not None:
-                rec.internals(controller.internals())
-            step = loop.advance(command, record=rec is not None)
-            if rec is not None:
-                rec.events(step.events)
-            if n >= n_warm:
-                totals.add(step)
-            state = step.state
-            if step.status is not Status.OK:
-                status, message = step.status, step.message
-                break
-            if time.perf_counter() > deadline:
-                status = Status.ERROR
-                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
-                break
-        else:
-            if n_start < n_samples and status is Status.OK:
-                x1_window[n_window] = state.x[X1]
-                n_window += 1
+                if not run.handed_back:
+                    break
+            for n in range(n, n + 1 if claw is not None else n_samples):
+                y = loop.measure()
+                if n >= n_warm:
+                    x1_window[n_window] = state.x[X1]
+                    n_window += 1
+                if rec is not None:
+                    rec.sample({"t": state.t, "y": y, **loop.truth()})
+                if privileged:
+                    controller.observe_truth(state, truth)
+                command = controller.step(y)
+                if rec is not None:
+                    rec.internals(controller.internals())
+                step = loop.advance(command, record=rec is not None)
+                if rec is not None:
+                    rec.events(step.events)
+                if n >= n_warm:
+                    totals.add(step)
+                state = step.state
+                if step.status is not Status.OK:
+                    status, message = step.status, step.message
+                    break
+                if time.perf_counter() > deadline:
+                    status = Status.ERROR
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+                    break
+            n += 1
+        if not done and n >= n_samples and status is Status.OK:
+            x1_window[n_window] = state.x[X1]
+            n_window += 1
     except ControllerDiverged as exc:   # the controller's estimates left their range: a result
         status = Status.DIVERGED
         message = f"controller diverged: {exc}"

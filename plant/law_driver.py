@@ -132,15 +132,14 @@ class LawRun:
     """What :func:`run_law_chunks` returns to the runner.
 
     ``state`` is the plant state after ``n_done`` samples; ``sums`` the scoring window's sums
-    (:data:`TOTAL_FIELDS`) and ``x1_window`` x1 at its sample instants (with the final one when
-    the run completed). ``handed_back``: the controller handed sample ``n_done`` back; the runner
-    goes on from there in Python, with ``pending`` the compute delay's carry-over (offsets,
-    levels), or None without a delay.
+    (:data:`TOTAL_FIELDS`) so far (x1 at the window's sample instants is written into the
+    caller's array). ``handed_back``: the controller handed sample ``n_done`` back; the runner
+    does it in Python and may resume here. ``pending`` is the compute delay's carry-over
+    (offsets, levels), or None without a delay.
     """
 
     state: PlantState
     sums: dict[str, float]
-    x1_window: np.ndarray
     status: Status
     message: str
     n_done: int
@@ -148,11 +147,16 @@ class LawRun:
     pending: tuple[np.ndarray, np.ndarray] | None
 
 
+_LAST: dict[Callable[..., int], Callable[..., int]] = {}
+
+
 def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, params: Any, options: SimOptions,
                    state: PlantState, sensor: np.ndarray, n_warm: int, noise: NoiseStream | None, noisy: bool,
                    deadline: float, *, n_state: int, sheet_size: int, no_events: np.ndarray, status_ok: int,
-                   interval_status: Callable[[int, PlantState, SimOptions], tuple[Status, str]]) -> LawRun:
-    """Run ``len(sensor)`` samples of a compiled controller step ``law`` from ``state``.
+                   interval_status: Callable[[int, PlantState, SimOptions], tuple[Status, str]],
+                   n0: int = 0, sums: dict[str, float] | None = None, x1_window: np.ndarray | None = None,
+                   pending: tuple[np.ndarray, np.ndarray] | None = None) -> LawRun:
+    """Run samples ``n0`` ≤ n < ``len(sensor)`` of a compiled controller step ``law`` from ``state``.
 
     ``law`` has the attributes of ``controllers.law.CompiledLaw`` (step, state, params, drive,
     max_segments); its ``state`` is advanced in place. ``chunk`` is a family's plain Python
@@ -166,6 +170,11 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     :data:`NEED_NOISE` or :data:`HAND_BACK`. Sensor (quantized when ``params.quantization`` > 0)
     and compute delay (``params.command_delay``) as :meth:`plant.protocol.PlantFamily.observe`
     and ``delayed_step`` do them. The wall-clock limit as in :func:`run_chunks`.
+
+    A run resumed at ``n0`` > 0 (after a sample done in Python) continues the window ``sums``
+    (:data:`TOTAL_FIELDS`), writes x1 into ``x1_window`` at index n − ``n_warm`` (the caller's
+    array, length ``len(sensor) − n_warm + 1``; the final x1 is the caller's to add) and starts
+    from the delay's carry-over ``pending`` (None: nothing commanded yet, the hold of 0).
     """
     n_samples = sensor.shape[0]
     prm = params.kernel_record()
@@ -175,6 +184,15 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     offs, levs = np.zeros(m), np.zeros(m)
     w = 2 * m + 2
     pend_o, pend_l, now_o, now_l, carry_o, carry_l = (np.zeros(w) for _ in range(6))
+    prog = np.zeros(3, dtype=np.int64)
+    if pending is None:
+        prog[2] = 1   # before the first command: the hold of 0 (plant.delay)
+    else:
+        k = pending[0].shape[0]
+        if k > w:
+            pend_o, pend_l, now_o, now_l, carry_o, carry_l = (np.zeros(k + w) for _ in range(6))
+        pend_o[:k], pend_l[:k] = pending
+        prog[2] = k
     bridge = law.drive.value == "bridge"
     x = np.array(state.x, dtype=np.float64)
     x_view = x.view()
@@ -182,9 +200,10 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
     out = np.empty(n_state + sheet_size)
     totals = np.zeros(len(TOTAL_FIELDS))
-    x1_window = np.empty(n_samples - n_warm + 1)
-    prog = np.zeros(3, dtype=np.int64)
-    prog[2] = 1   # before the first command: the hold of 0 (plant.delay)
+    if sums is not None:
+        totals[:] = [sums[name] for name in TOTAL_FIELDS]
+    if x1_window is None:
+        x1_window = np.empty(n_samples - n_warm + 1)
     if noisy:
         z, zpos = noise.window()
     else:
@@ -192,19 +211,24 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     margin = NOISE_MARGIN if noisy else 0
     head = (law.step, s, law.params, s_back, bridge, float(params.u_max), float(params.quantization),
             float(params.command_delay), pend_o, pend_l, offs, levs, now_o, now_l, carry_o, carry_l)
-    fn = None
-    n, code = 0, status_ok
+    fn = _LAST.get(chunk)
+    n, code = n0, status_ok
     while n < n_samples:
         stop = min(n + CHUNK, n_samples)
         args = (*head, n, stop, n_warm, sensor, x, x_view, sheet, params.sample_period, prm, *family_args, z, zpos,
                 margin, no_events, out, totals, x1_window, prog)
         if fn is None:
-            fn = _specialised(chunk, args)
+            fn = _LAST[chunk] = _specialised(chunk, args)
         try:
             code = fn(*args)
         except NoiseExhausted:        # one interval wanted more than the margin: undo its step, extend, redo
             s[:] = s_back
             code = NEED_NOISE
+        except TypeError:             # other argument types than the last call's: compile (or load) for them
+            if fn is _specialised(chunk, args):
+                raise
+            fn = None
+            continue
         n, zpos = int(prog[0]), int(prog[1])
         if code == NEED_NOISE:
             z, zpos = noise.grow(zpos)
@@ -219,7 +243,6 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         noise.consumed(zpos)
     x.flags.writeable = False
     final = PlantState(float(sheet[0]), x, int(sheet[1]), sheet[2] != 0.0)
-    n_window = max(0, n - n_warm)
     handed_back = code == HAND_BACK
     if handed_back:
         status, message = Status.OK, ""
@@ -230,9 +253,7 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         message = "time limit exceeded"   # completed by the runner
     else:
         status, message = Status.OK, ""
-        x1_window[n_window] = final.x[0]
-        n_window += 1
     sums = {name: (float(v) if i < _N_FLOAT_TOTALS else int(v)) for i, (name, v) in enumerate(zip(TOTAL_FIELDS, totals))}
     k = int(prog[2])
-    pending = (pend_o[:k].copy(), pend_l[:k].copy()) if params.command_delay != 0.0 and n > 0 else None
-    return LawRun(final, sums, x1_window[:n_window], status, message, n, handed_back, pending)
+    pend = (pend_o[:k].copy(), pend_l[:k].copy()) if params.command_delay != 0.0 and n > 0 else None
+    return LawRun(final, sums, status, message, n, handed_back, pend)

@@ -84,11 +84,13 @@ def test_the_state_after_a_compiled_run_is_the_controllers_own():
 
 @njit(cache=True)
 def _handing_step(s, p, y, offs, levs):
-    """u = clip(−K·y) then half of it from mid-interval; hands sample p[1] back unless s[1] says
+    """u = clip(−K·y) then half of it from mid-interval; hands sample p[1] back until s[1] says
     Python has taken it; from sample p[2] on the level is NaN (the Python path raises)."""
     n = s[0]
     if n == p[1] and s[1] == 0.0:
         return 0
+    if n == p[1] + 1.0:
+        s[1] = 0.0                           # back to compiled
     s[0] = n + 1.0
     level = min(max(-p[0] * y, -p[3]), p[3])
     if n >= p[2]:
@@ -123,11 +125,12 @@ class _Handing(Controller):
         return CompiledLaw(_handing_step, self._s, self._p, DriveType.LINEAR, 2)
 
 
-@pytest.mark.parametrize("scenario", ["thesis", "delayed", "quantized", "stribeck"])
-def test_a_sample_handed_back_goes_on_in_python_with_the_same_bits(scenario):
-    compiled, n_python, _ = _run(_Handing(hand_at=137.0), scenario, 2)
-    python, n_all, _ = _run(_Handing(hand_at=137.0), scenario, 2, compiled=False)
-    assert n_python == 300 - 137 and n_all == 300                # Python from the handed-back sample on
+@pytest.mark.parametrize("scenario, hand_at", [("thesis", 137.0), ("delayed", 137.0), ("quantized", 0.0),
+                                                ("stribeck", 299.0), ("compliant", 50.0)])
+def test_a_sample_handed_back_is_done_in_python_and_the_loop_resumes_compiled(scenario, hand_at):
+    compiled, n_python, c = _run(_Handing(hand_at=hand_at), scenario, 2)
+    python, n_all, _ = _run(_Handing(hand_at=hand_at), scenario, 2, compiled=False)
+    assert n_python == 1 and n_all == 300 and c._s[0] == 300     # one sample in Python, the rest compiled
     assert compiled.status == "ok" and _row(compiled) == _row(python)
 
 

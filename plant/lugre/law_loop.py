@@ -149,7 +149,7 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
 
 
 def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor: np.ndarray, n_warm: int,
-                     noise: NoiseStream | None, deadline: float) -> LawRun:
+                     noise: NoiseStream | None, deadline: float, **resume) -> LawRun:
     """:func:`plant.law_driver.run_law_chunks` around this family's chunk (see
     plant.multimode.law_loop._law_chunk: the same loop around this family's kernel)."""
     noisy = options.noise and noise is not None
@@ -158,4 +158,4 @@ def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor
         o[0] = 0.0
     return run_law_chunks(_law_chunk, (params.law_vector(), o, integrate.TOLERANCES), law, params, options, state, sensor, n_warm, noise, noisy,
                           deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
-                          interval_status=interval_status)
+                          interval_status=interval_status, **resume)

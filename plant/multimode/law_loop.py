@@ -152,10 +152,11 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
 
 
 def run_compiled_law(law, params: PlantParams, options: SimOptions, state: PlantState, sensor: np.ndarray,
-                     n_warm: int, noise: NoiseStream | None, deadline: float) -> LawRun:
-    """:func:`plant.law_driver.run_law_chunks` around this family's chunk (no disturbance torque)."""
+                     n_warm: int, noise: NoiseStream | None, deadline: float, **resume) -> LawRun:
+    """:func:`plant.law_driver.run_law_chunks` around this family's chunk (no disturbance torque);
+    ``resume``: n0, sums, x1_window, pending of a resumed run."""
     noisy = options.noise and noise is not None
     o, TP, TL, BPh, BPw, BG, BC = kernel_inputs(params, options, noisy)
     return run_law_chunks(_law_chunk, (o, TP, TL, BPh, BPw, BG, BC), law, params, options, state, sensor, n_warm,
                           noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
-                          status_ok=STATUS_OK, interval_status=interval_status)
+                          status_ok=STATUS_OK, interval_status=interval_status, **resume)
