@@ -18,7 +18,7 @@ a quantized sensor or a delay), in the family's compiled loop with bit-identical
 controller that declares a compiled step (the ``compiled_law`` hook; a linear law where its own
 loop does not apply) runs, when nothing is recorded, in the family's ``compiled_law_loop``
 (``PlantFamily.compiled_loop``: any sensor and delay, no disturbance torque), also
-bit-identical; if its step hands a sample back, the run goes on here from that sample. Every
+bit-identical; a sample its step hands back is done here, then the compiled loop resumes. Every
 other run calls ``step`` here.
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —

@@ -11,9 +11,13 @@ segments: offsets ``offs[:k]`` [s] from the sample instant (the first 0, increas
 levels ``levs[:k]`` [ozf·in], as :class:`plant.drive.DriveCommand` holds them. A return k ≤ 0
 (or a command the Python path would reject: non-finite, offsets out of order or ≥ τs, a bridge
 level other than 0, ±u_max) *hands the sample back*: the compiled loop restores ``s`` to what
-it was before the call and returns, and the runner redoes that sample — and the rest of the
-run — by calling the controller's Python ``step`` (which calls the same function, so it meets
-the same case and raises what the Python path raises).
+it was before the call and returns; the runner does that one sample by calling the
+controller's Python ``step`` (which calls the same function, so it meets the same case: it may
+do in Python what the compiled step cannot, or raise what the Python path raises) and then
+resumes the compiled loop at the next sample. A hand-back costs one Python sample plus one
+re-entry into the compiled loop, ~70 µs together (loaded 2-core machine: a hand-back every
+sample in 100 still runs a 100 s thesis cell in 0.021 s against 0.014 s without, 0.075 s in
+Python; every 10th is slower than the Python loop): for rare events, not for every sample.
 
 A family's compiled loop receives ``step`` typed as :data:`STEP_TYPE` (a numba first-class
 function: one compiled, cached loop serves every controller; the call goes through a pointer).
