@@ -49,7 +49,6 @@ import numpy as np
 from numba import njit
 
 from controllers.base import register
-from controllers.law import STEP_SIGNATURE
 from controllers.pid import P_NWIN, S_UFF, S_V, S_X4, pid_hold, pid_observe, pid_proportional
 from controllers.reset_pid import PidFrictionOptions, _PidFrictionBase
 from plant.drive import DriveCommand

@@ -56,7 +56,6 @@ import scipy.linalg
 from numba import njit
 
 from controllers.base import register
-from controllers.law import STEP_SIGNATURE
 from controllers.pid import P_NWIN, P_STICK, S_V, S_X4, pid_hold, pid_observe, pid_proportional, py_max
 from controllers.reset_pid import PidFrictionOptions, _PidFrictionBase, _positive
 from plant.drive import DriveCommand

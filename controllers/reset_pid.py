@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from controllers.base import Controller, register
-from controllers.law import STEP_SIGNATURE, CompiledLaw, law_command
+from controllers.law import CompiledLaw, law_command
 from controllers.linear import LinearDesign, design_linear
 from controllers.pid import (P_NWIN, S_LEVEL, S_N, S_Q, S_STUCK, S_UFF, S_V, S_VPREV, S_X4, PidLayout,
                              PidRealisation, SlopeEstimator, pid_hold, pid_observe, pid_proportional)
@@ -158,8 +158,8 @@ class _PidFrictionBase(Controller):
     """PID realisation, slope estimate, stick detection, x̂4 and the Coulomb feedforward.
 
     The per-sample state lives in the array ``self._s`` laid out by
-    :class:`controllers.pid.PidLayout`; a subclass sets ``_compiled_step`` (compiled for
-    :data:`controllers.law.STEP_SIGNATURE`), the sizes ``_n_own_state`` / ``_n_own_params`` of its
+    :class:`controllers.pid.PidLayout`; a subclass sets ``_compiled_step`` (a numba step of
+    the form :data:`plant.law_step.STEP_SIGNATURE`), the sizes ``_n_own_state`` / ``_n_own_params`` of its
     own entries, and fills its own parameters in ``reset``. ``step`` calls that function, which is
     also what :meth:`compiled_law` hands the runner.
     """

@@ -142,6 +142,47 @@ def test_a_command_python_rejects_ends_both_paths_with_the_same_error():
     assert _row(compiled)[:2] == _row(python)[:2]
 
 
+@njit(cache=True)
+def _pulse_step(s, p, y, offs, levs):
+    """Every p[2]-th sample a bridge pulse of width min(p[0]·|y|, p[1]) [s] towards zero, else off."""
+    n = s[0]
+    s[0] = n + 1.0
+    w = min(p[0] * abs(y), p[1])
+    offs[0], levs[0] = 0.0, 0.0
+    if n % p[2] != 0.0 or not w > 0.0:
+        return 1
+    levs[0] = -p[3] if y > 0 else p[3]
+    offs[1], levs[1] = w, 0.0
+    return 2
+
+
+class _Pulses(Controller):
+    """Bridge pulses from a compiled step (test only, not registered)."""
+
+    name = "pulses"
+    drive = DriveType.BRIDGE
+
+    def reset(self, params, rng):
+        self._s, self._p = np.zeros(1), np.array([40.0, 2e-3, 5.0, params.u_max])
+        self._offs, self._levs = np.zeros(2), np.zeros(2)
+
+    def step(self, y):
+        return law_command(_pulse_step(self._s, self._p, y, self._offs, self._levs), self._offs, self._levs,
+                           DriveType.BRIDGE)
+
+    def compiled_law(self):
+        return CompiledLaw(_pulse_step, self._s, self._p, DriveType.BRIDGE, 2)
+
+
+@pytest.mark.parametrize("scenario", ["thesis", "delayed", "lugre"])
+def test_bridge_pulses_from_a_compiled_step_are_the_python_rows(scenario):
+    compiled, n_python, _ = _run(_Pulses(), scenario, 4)
+    python, _, _ = _run(_Pulses(), scenario, 4, compiled=False)
+    assert n_python == 0 and compiled.status == "ok"
+    assert compiled.metrics["n_events"] > 100                    # pulses and flybacks happened
+    assert _row(compiled) == _row(python)
+
+
 # --- the compiled sensor and delay ---------------------------------------------------------------
 
 def test_compiled_quantizer_is_the_sensors_bit_for_bit():
