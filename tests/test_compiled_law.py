@@ -236,3 +236,10 @@ def test_the_compiled_loop_is_offered_without_a_disturbance_torque_only():
     for name in ("thesis", "quantized", "delayed"):
         assert fam.compiled_loop(sc[name].params) is fam.compiled_law_loop is not None
     assert fam.compiled_loop(sc["disturbed"].params) is None
+
+
+def test_time_limit_stops_the_compiled_law_loop():
+    r, n_python, _ = _run("reset-pid", "delayed", 0, duration=50.0, time_limit_s=1e-9)
+    assert n_python == 0
+    assert r.status == "error" and r.message.startswith("time limit of 1e-09 s exceeded at t = ")
+    assert 1.0 <= r.simulated_s <= 20.0       # within the first chunks of 1000 samples (10 s)
