@@ -25,6 +25,10 @@ function: one compiled, cached loop serves every controller; the call goes throu
 The sensor and the delay, compiled: :func:`quantize` is :func:`plant.sensor.quantize` and
 :func:`delay_segments` is :func:`plant.delay.delay_command` on arrays, in the same order of
 floating-point operations (tests/test_compiled_law.py compares them on random inputs).
+
+numba's on-disk cache keys a function on its own file only: after editing this module (or a
+controller's step helpers in another file), delete the ``law_loop._law_chunk*`` files under
+``plant/*/__pycache__`` (and the steps' own), or a cached loop keeps the old code.
 """
 
 from __future__ import annotations
