@@ -11,9 +11,16 @@ warmed by a 1 s cell of each path first. ``make benchmark`` runs it (skipped und
 
 Known misses are xfail (the assertion stays the goal): the solnic family, dithered and
 oracle-pulse have no compiled step yet (pulse-width neither: 0.096–0.102 s, at the goal).
-Measured on the shared 2-core machine under load (04:50 UTC, one process each, CPU per 100 s):
-friction-ff-pid 0.018, observer-pid 0.049, reset-pid 0.017, linear 0.012 (compiled) — against
-0.157, 0.196, 0.085 and 0.010 for the Python loop of the revision this issue started from.
+Measured on the shared 2-core machine under load (2026-11-27, load average ~12, CPU per 100 s):
+
+* this benchmark (05:13 UTC, one process, compiled / Python loop over the same ``step``):
+  friction-ff-pid 0.009 / 0.074 s (7.9×), observer-pid 0.019 / 0.087 s (4.5×), reset-pid
+  0.011 / 0.081 s (7.5×), linear 0.007 / 0.077 s; pulse-width 0.105 and oracle-pulse 0.418
+  (no compiled step: both paths the same);
+* ``compare_revision.py`` against 0ed8bc0, the revision issue 27's compiled steps started from
+  (alternating processes, median of 2 rounds): friction-ff-pid 0.088 → 0.010 s (8.4×),
+  observer-pid 0.100 → 0.019 s (5.2×), reset-pid 0.086 → 0.012 s (7.3×), linear 0.007 → 0.008 s
+  (the same compiled loop as before), the other controllers unchanged within the noise.
 """
 
 import time
