@@ -20,7 +20,10 @@ Measured on the shared 2-core machine under load (2026-11-27, load average ~12, 
 * ``compare_revision.py`` against 0ed8bc0, the revision issue 27's compiled steps started from
   (alternating processes, median of 2 rounds): friction-ff-pid 0.088 → 0.010 s (8.4×),
   observer-pid 0.100 → 0.019 s (5.2×), reset-pid 0.086 → 0.012 s (7.3×), linear 0.007 → 0.008 s
-  (the same compiled loop as before), the other controllers unchanged within the noise.
+  (the same compiled loop as before). The controllers without a compiled step came out
+  0.96–1.9× apart (pulse-width 0.198 → 0.112, solnic-modern 0.907 → 0.484): the noise of two
+  rounds on this machine, not a change (their code path is the same; pulse-width measured
+  0.105 s on both paths in one process).
 """
 
 import time
