@@ -243,3 +243,20 @@ def test_time_limit_stops_the_compiled_law_loop():
     assert n_python == 0
     assert r.status == "error" and r.message.startswith("time limit of 1e-09 s exceeded at t = ")
     assert 1.0 <= r.simulated_s <= 20.0       # within the first chunks of 1000 samples (10 s)
+
+
+def test_a_lead_path_outside_the_compiled_kernels_is_fed_in_and_not_compiled():
+    """More than two lead states (no design of the registered ranges has them) use numpy's
+    product outside the compiled step: the same law to rounding, and no compiled loop."""
+    from controllers.pid import P_NLEAD
+    P = builtin_scenarios()["thesis"].params
+    a, b = make_controller("reset-pid"), make_controller("reset-pid")
+    for c in (a, b):
+        c.reset(P, np.random.default_rng(0))
+    b._layout.compiled, b._p[P_NLEAD] = False, 0.0
+    b.pid.proportional = b.pid.__class__.proportional.__get__(b.pid)    # the numpy form
+    assert b.compiled_law() is None and a.compiled_law() is not None
+    y = np.random.default_rng(1).normal(0, 2e-5, 400)
+    ua = [a.step(v).segments[0][1] for v in y]
+    ub = [b.step(v).segments[0][1] for v in y]
+    np.testing.assert_allclose(ub, ua, rtol=1e-9, atol=1e-12)
