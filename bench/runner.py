@@ -14,7 +14,11 @@ model (a :class:`~plant.params.PlantParams`, by default the truth's own fields).
 
 A controller that describes its step as a fixed linear law (the ``linear_law`` hook) runs, when
 nothing is recorded and the family offers one for the plant (``PlantFamily.law_loop``: not with
-a quantized sensor or a delay), in the family's compiled loop with bit-identical results; every
+a quantized sensor or a delay), in the family's compiled loop with bit-identical results. A
+controller that declares a compiled step (the ``compiled_law`` hook; a linear law where its own
+loop does not apply) runs, when nothing is recorded, in the family's ``compiled_law_loop``
+(``PlantFamily.compiled_loop``: any sensor and delay, no disturbance torque), also
+bit-identical; a sample its step hands back is done here, then the compiled loop resumes. Every
 other run calls ``step`` here.
 
 Randomness has one root (STYLE §5): ``SeedSequence(seed)`` spawns four child generators —
@@ -207,8 +211,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         samples on the compiled path), a run over budget stops with status ``error``. None
         (default) means no limit.
     compiled : bool
-        Run a controller that describes its step as a linear law (``linear_law`` hook) in one
-        compiled loop (the family's ``linear_law_loop``, bit-identical) when nothing is recorded.
+        Run a controller that describes its step as a linear law (``linear_law`` hook) or
+        declares a compiled step (``compiled_law`` hook) in one compiled loop (the family's
+        ``linear_law_loop`` or ``compiled_law_loop``, bit-identical) when nothing is recorded.
         False always calls ``step`` from Python.
 
     Returns
@@ -254,45 +259,71 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     truth = TruePlant(fam, params) if privileged else None
     try:
         controller.reset(model, loop.streams["controller"])
-        fast = fam.law_loop(params)
-        law = controller.linear_law() if (rec is None and not privileged and compiled and fast) else None
-        if law is not None:
-            state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
-                                                        loop.plant_noise, deadline)
-            totals = WindowTotals(**sums)
-            n_window = window.shape[0]
-            x1_window[:n_window] = window
-            if status is Status.ERROR:
-                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
-        for n in range(n_samples if law is None else 0):
-            y = loop.measure()
-            if n >= n_warm:
-                x1_window[n_window] = state.x[X1]
-                n_window += 1
-            if rec is not None:
-                rec.sample({"t": state.t, "y": y, **loop.truth()})
-            if privileged:
-                controller.observe_truth(state, truth)
-            command = controller.step(y)
-            if rec is not None:
-                rec.internals(controller.internals())
-            step = loop.advance(command, record=rec is not None)
-            if rec is not None:
-                rec.events(step.events)
-            if n >= n_warm:
-                totals.add(step)
-            state = step.state
-            if step.status is not Status.OK:
-                status, message = step.status, step.message
-                break
-            if time.perf_counter() > deadline:
-                status = Status.ERROR
-                message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
-                break
-        else:
-            if law is None:
-                x1_window[n_window] = state.x[X1]
-                n_window += 1
+        n, law, claw, cloop, done = 0, None, None, None, False
+        if rec is None and not privileged and compiled:
+            fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
+            law = controller.linear_law() if (fast or cloop) else None
+            if law is not None and fast:
+                state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
+                                                            loop.plant_noise, deadline)
+                totals = WindowTotals(**sums)
+                n_window = window.shape[0]
+                x1_window[:n_window] = window
+                n, done = n_samples, True
+                if status is Status.ERROR:
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+            elif cloop is not None:
+                claw = controller.compiled_law()
+                if claw is None and law is not None:
+                    claw = law.compiled(params.sample_period)
+        while not done and n < n_samples and status is Status.OK:
+            if claw is not None:             # compiled from sample n; a handed-back sample is done below
+                pending = loop.pending
+                if pending is not None and pending.drive is not claw.drive:
+                    claw = None              # the Python path's delay raises at the next sample
+                    continue
+                run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline, n0=n,
+                            sums=dataclasses.asdict(totals), x1_window=x1_window,
+                            pending=None if pending is None else pending.arrays())
+                state = loop.state = run.state
+                n = loop.n = run.n_done
+                loop.pending = None if run.pending is None else DriveCommand(tuple(zip(*run.pending)), claw.drive)
+                totals = WindowTotals(**run.sums)
+                n_window = max(0, n - n_warm)
+                status, message = run.status, run.message
+                if status is Status.ERROR:
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+                if not run.handed_back:
+                    break
+            for n in range(n, n + 1 if claw is not None else n_samples):
+                y = loop.measure()
+                if n >= n_warm:
+                    x1_window[n_window] = state.x[X1]
+                    n_window += 1
+                if rec is not None:
+                    rec.sample({"t": state.t, "y": y, **loop.truth()})
+                if privileged:
+                    controller.observe_truth(state, truth)
+                command = controller.step(y)
+                if rec is not None:
+                    rec.internals(controller.internals())
+                step = loop.advance(command, record=rec is not None)
+                if rec is not None:
+                    rec.events(step.events)
+                if n >= n_warm:
+                    totals.add(step)
+                state = step.state
+                if step.status is not Status.OK:
+                    status, message = step.status, step.message
+                    break
+                if time.perf_counter() > deadline:
+                    status = Status.ERROR
+                    message = f"time limit of {time_limit_s:g} s exceeded at t = {state.t:.2f} s"
+                    break
+            n += 1
+        if not done and n >= n_samples and status is Status.OK:
+            x1_window[n_window] = state.x[X1]
+            n_window += 1
     except ControllerDiverged as exc:   # the controller's estimates left their range: a result
         status = Status.DIVERGED
         message = f"controller diverged: {exc}"

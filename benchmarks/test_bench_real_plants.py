@@ -7,8 +7,11 @@ miss the goal are marked xfail with the reason (the assertion stays the goal):
 
 * ``disturbed``: the disturbance path (plant/multimode/disturbed.py) is Python over numpy, with
   no compiled interval and no compiled linear-law loop yet;
-* ``quantized``/``delayed`` with ``linear``: the compiled linear-law loop models the ideal sensor
-  and no delay, so linear falls back to the per-sample Python path.
+* ``delayed`` with ``linear``: since issue 27 the linear law runs on ``quantized`` and ``delayed``
+  in the compiled-law loop (plant/law_step.py; before, the per-sample Python path: 10.5× and
+  13.5×); the delay adds a segment boundary, hence plant work, to every interval, and the ratio
+  measured 0.99–1.6× over three runs (loaded machine, 2026-11-27 04:30–05:15 UTC; quantized
+  1.2–1.4×): at the goal, within the noise, so left marked.
 
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
@@ -29,7 +32,7 @@ pytestmark = pytest.mark.slow
 
 _GOAL = 1.5
 _MISSES = {("disturbed", "linear"), ("disturbed", "solnic-modern"), ("disturbed", "pulse-width"),
-           ("quantized", "linear"), ("delayed", "linear")}
+           ("delayed", "linear")}
 
 
 _CASES = [pytest.param(s, c, marks=pytest.mark.xfail(reason="known miss, see module docstring", strict=False)

@@ -30,6 +30,11 @@ Optional hooks (class attributes and methods with neutral defaults) replace ever
 ``linear_law``
     A controller whose step is a fixed linear law (plus square-wave dither) may describe it
     (:class:`controllers.law.LinearLaw`); the runner then compiles the whole loop.
+``compiled_law``
+    A controller whose per-sample work is one numba function over a state array may declare
+    it (:class:`controllers.law.CompiledLaw`); its ``step`` calls the same function, and the
+    runner runs the whole loop compiled when nothing is recorded (also on a quantized sensor
+    and with a compute delay). A ``linear_law`` runs this way where its own loop does not apply.
 """
 
 from __future__ import annotations
@@ -110,6 +115,12 @@ class Controller(abc.ABC):
     def linear_law(self) -> Any:
         """After :meth:`reset`: a :class:`~controllers.law.LinearLaw` if ``step`` computes exactly
         that law (then the runner may run it compiled, without calling ``step``), else None."""
+        return None
+
+    def compiled_law(self) -> Any:
+        """After :meth:`reset`: a :class:`~controllers.law.CompiledLaw` whose step is the one
+        ``step`` calls on the same state array (then the runner may run the loop compiled, the
+        state advancing in place), else None (the runner compiles a :meth:`linear_law` itself)."""
         return None
 
     def observe_truth(self, state: Any, plant: Any) -> None:

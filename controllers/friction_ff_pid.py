@@ -46,8 +46,10 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from controllers.base import register
+from controllers.pid import P_NWIN, S_UFF, S_V, S_X4, pid_hold, pid_observe, pid_proportional
 from controllers.reset_pid import PidFrictionOptions, _PidFrictionBase
 from plant.drive import DriveCommand
 from plant.params import PlantParams
@@ -67,7 +69,17 @@ def stribeck_level(v: float, coulomb: float, stiction: float, stribeck_velocity:
 def friction_feedforward(v_ref: float, e: float, *, coulomb: float, stiction: float,
                          stribeck_velocity: float, compensation: float, min_velocity: float,
                          error_deadband: float) -> float:
-    """u_ff [ozf·in] of (1)–(3) for reference velocity ``v_ref`` [rad/s] and error ``e`` [rad]."""
+    """u_ff [ozf·in] of (1)–(3) for reference velocity ``v_ref`` [rad/s] and error ``e`` [rad]
+    (what the compiled step computes: :func:`_feedforward`)."""
+    return _feedforward(v_ref, e, coulomb, stiction, stribeck_velocity, compensation, min_velocity, error_deadband,
+                        2.0)
+
+
+@njit(cache=True)
+def _feedforward(v_ref, e, coulomb, stiction, stribeck_velocity, compensation, min_velocity, error_deadband, two):
+    """(1)–(3) compiled. ``two`` = 2.0 comes in at run time so that (v/v_s)² is libm's
+    pow(v/v_s, 2.0), as Python's ``**`` computes it (a constant 2 would become v·v, which glibc's
+    pow does not always equal)."""
     if abs(v_ref) >= min_velocity:
         s = math.copysign(1.0, v_ref)
         if s * e > error_deadband:        # the axis is ahead of the reference: withhold  (1)
@@ -76,7 +88,33 @@ def friction_feedforward(v_ref: float, e: float, *, coulomb: float, stiction: fl
         s = -math.copysign(1.0, e)
     else:
         return 0.0
-    return compensation * s * stribeck_level(v_ref, coulomb, stiction, stribeck_velocity)
+    v = abs(v_ref)                        # g(|v_r|)  (3)
+    if stribeck_velocity == 0.0:
+        g = stiction if v == 0.0 else coulomb
+    else:
+        g = coulomb + (stiction - coulomb) * math.exp(-math.pow(v / stribeck_velocity, two))
+    return compensation * s * g
+
+
+# friction-ff-pid's own entries of s and p (after controllers.pid.PidLayout's shared ones)
+_FS_SIGN_CHANGES = 0
+_FP_COULOMB, _FP_STICTION, _FP_VS, _FP_KAPPA, _FP_VMIN, _FP_EDB, _FP_TWO = range(7)
+_FS0, _FP0 = S_V + 1, P_NWIN + 1
+
+
+@njit(cache=True)
+def _friction_ff_pid_step(s, p, y, offs, levs):
+    """:class:`FrictionFfPidController`'s step: slope and x̂4, u_ff of (1)–(3), the PID, the level."""
+    pid_observe(s, p, y)
+    u_ff = _feedforward(s[S_X4], y, p[_FP0 + _FP_COULOMB], p[_FP0 + _FP_STICTION], p[_FP0 + _FP_VS],
+                        p[_FP0 + _FP_KAPPA], p[_FP0 + _FP_VMIN], p[_FP0 + _FP_EDB], p[_FP0 + _FP_TWO])
+    prev = s[S_UFF]
+    if (u_ff > 0.0) != (prev > 0.0) or (u_ff < 0.0) != (prev < 0.0):
+        s[_FS0 + _FS_SIGN_CHANGES] += 1.0
+    s[S_UFF] = u_ff
+    offs[0] = 0.0
+    levs[0] = pid_hold(s, p, pid_proportional(s, p, y), u_ff)
+    return 1
 
 
 @dataclass(frozen=True)
@@ -120,26 +158,22 @@ class FrictionFfPidController(_PidFrictionBase):
     knobs = MappingProxyType({"compensation": (0.0, 0.5, 1.0, 1.5, 2.0)})
     counter = "sign_changes"
 
+    _compiled_step = staticmethod(_friction_ff_pid_step)
+    _n_own_state, _n_own_params = 1, 7
+
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design the PID for the model ``params``; x̂4 starts at its commanded velocity."""
         super().reset(params, rng)
         o = self.options
         self.x4_hat = params.command_velocity_initial
-        self._ff_args = dict(coulomb=params.coulomb, stiction=params.stiction,
-                             stribeck_velocity=o.stribeck_velocity, compensation=o.compensation,
-                             min_velocity=o.feedforward_min_velocity,
-                             error_deadband=o.error_deadband * params.measurement_noise_std)
-        self._sign_changes = 0
-        self._proportional = self.pid.proportional
+        p, i = self._p, self._own_p
+        p[i(_FP_COULOMB)], p[i(_FP_STICTION)], p[i(_FP_VS)] = params.coulomb, params.stiction, o.stribeck_velocity
+        p[i(_FP_KAPPA)], p[i(_FP_VMIN)] = o.compensation, o.feedforward_min_velocity
+        p[i(_FP_EDB)], p[i(_FP_TWO)] = o.error_deadband * params.measurement_noise_std, 2.0
 
     def step(self, y: float) -> DriveCommand:
-        """u(n) = clip(−(v + q) + u_ff), u_ff of (1)–(3)."""
-        self._observe(y)
-        u_ff = friction_feedforward(self.x4_hat, y, **self._ff_args)
-        if (u_ff > 0.0) != (self._u_ff > 0.0) or (u_ff < 0.0) != (self._u_ff < 0.0):
-            self._sign_changes += 1
-        self._u_ff = u_ff
-        return self._hold(self._proportional(y), u_ff)
+        """u(n) = clip(−(v + q) + u_ff), u_ff of (1)–(3) (:func:`_friction_ff_pid_step`)."""
+        return super().step(y)
 
     def internals(self) -> dict[str, float]:
         return {"u_linear": self._level, "integrator": -self.pid.q, "feedforward": self._u_ff,
@@ -149,6 +183,6 @@ class FrictionFfPidController(_PidFrictionBase):
         if not hasattr(self, "design"):
             return {}
         out = self.design.summary()
-        out.update(compensation=self.options.compensation, sign_changes=self._sign_changes,
-                   x4_hat=self.x4_hat)
+        out.update(compensation=self.options.compensation,
+                   sign_changes=int(self._s[self._own(_FS_SIGN_CHANGES)]), x4_hat=self.x4_hat)
         return out

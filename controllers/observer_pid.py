@@ -53,8 +53,10 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
+from numba import njit
 
 from controllers.base import register
+from controllers.pid import P_NWIN, P_STICK, S_V, S_X4, pid_hold, pid_observe, pid_proportional, py_max
 from controllers.reset_pid import PidFrictionOptions, _PidFrictionBase, _positive
 from plant.drive import DriveCommand
 from plant.params import PlantParams
@@ -191,6 +193,80 @@ def _ackermann(A: np.ndarray, C: np.ndarray, poles: np.ndarray) -> np.ndarray:
     return phi @ np.linalg.solve(obs, np.eye(n)[:, -1])
 
 
+# observer-pid's own entries of s and p (after controllers.pid.PidLayout's shared ones)
+_OS_Z, _OS_KC, _OS_MOVING, _OS_BREAKAWAYS, _OS_WAS_MOVING, _OS_UCOMP = 0, 4, 5, 6, 7, 8
+_OP_PHI, _OP_GAMMA, _OP_L, _OP_ALPHA_KC, _OP_JUMP = 0, 16, 20, 24, 25
+_OS0, _OP0 = S_V + 1, P_NWIN + 1
+
+
+@njit(cache=True)
+def _term(coef, var):
+    # one product of _observer_step's straight-line code: an exact 1 is not multiplied
+    return var if coef == 1.0 else coef * var
+
+
+@njit(cache=True)
+def observer_update(z, y, u, Phi, Gamma, L):
+    """z := Φ·z + Γ·u + L·(y − z0) in place, in :func:`_observer_step`'s order of operations
+    (each row (Φi0·z0 + Φi2·z2) + (Φi1·z1 + Φi3·z3), then + Γi·u, then + Li·e, with e = y − z0;
+    products with an exact 0 coefficient dropped, an exact 1 not multiplied). ``Phi`` is
+    row-major, 16 entries."""
+    z0, z1, z2, z3 = z[0], z[1], z[2], z[3]
+    zz = (z0, z1, z2, z3)
+    e = y - z0
+    for i in range(4):
+        have = False
+        acc = 0.0
+        for pair in range(2):
+            ja, jb = pair, pair + 2
+            ca, cb = Phi[4 * i + ja], Phi[4 * i + jb]
+            if ca != 0.0 and cb != 0.0:
+                part = _term(ca, zz[ja]) + _term(cb, zz[jb])
+            elif ca != 0.0:
+                part = _term(ca, zz[ja])
+            elif cb != 0.0:
+                part = _term(cb, zz[jb])
+            else:
+                continue
+            if have:
+                acc = acc + part
+            else:
+                acc = part
+                have = True
+        if Gamma[i] != 0.0:
+            acc = acc + _term(Gamma[i], u)
+        if L[i] != 0.0:
+            acc = acc + _term(L[i], e)
+        z[i] = acc
+
+
+@njit(cache=True)
+def _observer_pid_step(s, p, y, offs, levs):
+    """:class:`ObserverPidController`'s step on (s, p): slope and x̂4, breakaway and k̂c, the PID
+    plus d̂, the observer update with the held level."""
+    pid_observe(s, p, y)
+    z = s[_OS0 + _OS_Z:_OS0 + _OS_Z + 4]
+    x2_hat = z[1] + s[S_X4]
+    moving = abs(x2_hat) > p[P_STICK]
+    if moving:
+        if s[_OS0 + _OS_WAS_MOVING] == 0.0 and p[_OP0 + _OP_JUMP] != 0.0:
+            z[3] = math.copysign(s[_OS0 + _OS_KC], x2_hat)     # static → Coulomb level at breakaway
+            s[_OS0 + _OS_BREAKAWAYS] += 1.0
+        s[_OS0 + _OS_MOVING] += 1.0
+        kc = s[_OS0 + _OS_KC]                                   # after Friedland & Park
+        kc = kc + p[_OP0 + _OP_ALPHA_KC] * (math.copysign(z[3], x2_hat) - kc)
+        s[_OS0 + _OS_KC] = py_max(kc, 0.0)
+    s[_OS0 + _OS_WAS_MOVING] = 1.0 if moving else 0.0
+    u_comp = z[3]
+    s[_OS0 + _OS_UCOMP] = u_comp
+    level = pid_hold(s, p, pid_proportional(s, p, y), u_comp)
+    observer_update(z, y, level, p[_OP0 + _OP_PHI:_OP0 + _OP_PHI + 16], p[_OP0 + _OP_GAMMA:_OP0 + _OP_GAMMA + 4],
+                    p[_OP0 + _OP_L:_OP0 + _OP_L + 4])
+    offs[0] = 0.0
+    levs[0] = level
+    return 1
+
+
 @dataclass(frozen=True)
 class ObserverPidOptions(PidFrictionOptions):
     """Options of :class:`ObserverPidController`: :class:`PidFrictionOptions` plus
@@ -245,6 +321,9 @@ class ObserverPidController(_PidFrictionBase):
     knobs = MappingProxyType({"observer_bandwidth": (5.0, 10.0, 20.0, 30.0, 50.0, 80.0, 120.0, 160.0,
                                                      250.0)})
 
+    _compiled_step = staticmethod(_observer_pid_step)
+    _n_own_state, _n_own_params = 9, 26
+
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design the PID and the observer for ``params``; k̂c from the nominal k̄c."""
         o = self.options
@@ -252,40 +331,27 @@ class ObserverPidController(_PidFrictionBase):
             raise ValueError(f"observer_bandwidth must be < π/τs = {math.pi / params.sample_period:.4g} "
                              f"rad/s, got {o.observer_bandwidth!r}")
         super().reset(params, rng)
-        self.observer = DisturbanceObserver(params.inertia, params.motor_time_constant,
-                                            params.sample_period, o.observer_bandwidth)
-        self.kc_hat = o.initial_coulomb_factor * params.coulomb
-        self._alpha_kc = params.sample_period / o.coulomb_tau
-        self._u_comp = 0.0
-        self._moving_samples = 0
-        self._breakaways = 0
-        self._was_moving = False
-        self._breakaway_jump = o.breakaway_jump
-        self._proportional = self.pid.proportional
+        self.observer = obs = DisturbanceObserver(params.inertia, params.motor_time_constant,
+                                                  params.sample_period, o.observer_bandwidth)
+        s, p, i = self._s, self._p, self._own_p
+        s[self._own(_OS_KC)] = o.initial_coulomb_factor * params.coulomb
+        p[i(_OP_PHI):i(_OP_PHI) + 16] = obs.Phi.ravel()
+        p[i(_OP_GAMMA):i(_OP_GAMMA) + 4] = obs.Gamma
+        p[i(_OP_L):i(_OP_L) + 4] = obs.L
+        p[i(_OP_ALPHA_KC)], p[i(_OP_JUMP)] = params.sample_period / o.coulomb_tau, o.breakaway_jump
 
     def step(self, y: float) -> DriveCommand:
-        """u(n) = clip(u_pid + d̂); at breakaway d̂ := k̂c·sign(x̂2) (see module docstring)."""
-        self._observe(y)
-        obs = self.observer
-        x2_hat = obs.velocity + self.x4_hat
-        moving = abs(x2_hat) > self._stick_velocity
-        if moving:
-            if not self._was_moving and self._breakaway_jump:
-                obs.disturbance = math.copysign(self.kc_hat, x2_hat)   # static → Coulomb level at breakaway
-                self._breakaways += 1
-            self._moving_samples += 1
-            # after Friedland & Park: k̂c follows the observed friction in the direction of motion
-            self.kc_hat += self._alpha_kc * (math.copysign(obs.disturbance, x2_hat) - self.kc_hat)
-            self.kc_hat = max(self.kc_hat, 0.0)
-        self._was_moving = moving
-        self._u_comp = u_comp = obs.disturbance
-        cmd = self._hold(self._proportional(y), u_comp)
-        obs.update(y, self._level)
-        return cmd
+        """u(n) = clip(u_pid + d̂); at breakaway d̂ := k̂c·sign(x̂2) (see module docstring;
+        :func:`_observer_pid_step`)."""
+        return super().step(y)
+
+    kc_hat = property(lambda self: float(self._s[self._own(_OS_KC)]), doc="k̂c [ozf·in].")
+    d_hat = property(lambda self: float(self._s[self._own(_OS_Z + 3)]), doc="d̂ [ozf·in].")
 
     def internals(self) -> dict[str, float]:
-        return {"u_linear": self._level, "integrator": -self.pid.q, "compensation": self._u_comp,
-                "d_hat": self.observer.disturbance, "kc_hat": self.kc_hat, "x4_hat": self.x4_hat,
+        s = self._s
+        return {"u_linear": self._level, "integrator": -self.pid.q, "compensation": float(s[self._own(_OS_UCOMP)]),
+                "d_hat": self.d_hat, "kc_hat": self.kc_hat, "x4_hat": self.x4_hat,
                 "stuck": float(self.stuck)}
 
     def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
@@ -296,6 +362,7 @@ class ObserverPidController(_PidFrictionBase):
         if not hasattr(self, "design"):
             return {}
         out = self.design.summary()
+        s = self._s
         out.update(observer_bandwidth=self.options.observer_bandwidth, kc_hat=self.kc_hat,
-                   moving_samples=self._moving_samples, breakaways=self._breakaways)
+                   moving_samples=int(s[self._own(_OS_MOVING)]), breakaways=int(s[self._own(_OS_BREAKAWAYS)]))
         return out

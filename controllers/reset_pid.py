@@ -41,13 +41,19 @@ from typing import Any
 
 import numpy as np
 
+from numba import njit
+
 from controllers.base import Controller, register
+from controllers.law import CompiledLaw, law_command
 from controllers.linear import LinearDesign, design_linear
-from controllers.pid import PidRealisation, SlopeEstimator
+from controllers.pid import (P_NWIN, S_LEVEL, S_N, S_Q, S_STUCK, S_UFF, S_V, S_VPREV, S_X4, PidLayout,
+                             PidRealisation, SlopeEstimator, pid_hold, pid_observe, pid_proportional)
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
 __all__ = ["ResetPidOptions", "ResetPidController", "PidFrictionOptions"]
+
+_RS0, _RP0 = S_V + 1, P_NWIN + 1   # the first own entries of s and p (controllers.pid.PidLayout)
 
 _LINEAR = DriveType.LINEAR
 
@@ -149,9 +155,19 @@ class ResetPidOptions(PidFrictionOptions):
 
 
 class _PidFrictionBase(Controller):
-    """PID realisation, slope estimate, stick detection, x̂4 and the Coulomb feedforward."""
+    """PID realisation, slope estimate, stick detection, x̂4 and the Coulomb feedforward.
+
+    The per-sample state lives in the array ``self._s`` laid out by
+    :class:`controllers.pid.PidLayout`; a subclass sets ``_compiled_step`` (a numba step of
+    the form :data:`plant.law_step.STEP_SIGNATURE`), the sizes ``_n_own_state`` / ``_n_own_params`` of its
+    own entries, and fills its own parameters in ``reset``. ``step`` calls that function, which is
+    also what :meth:`compiled_law` hands the runner.
+    """
 
     drive = DriveType.LINEAR
+    _compiled_step: Any = None
+    _n_own_state = 0
+    _n_own_params = 0
 
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         o = self.options
@@ -159,42 +175,76 @@ class _PidFrictionBase(Controller):
         self.design = o.design(params)
         self.pid = PidRealisation(self.design)
         self.slope = SlopeEstimator(o.velocity_window, params.sample_period)
-        self._slope_update = self.slope.update
-        self._stick_velocity = o.stick_velocity
-        self._alpha_ref = params.sample_period / o.reference_velocity_tau
-        self._u_max = params.u_max
-        self.x4_hat = 0.0
-        self.stuck = False
-        self._n = 0
-        self._level = 0.0
-        self._u_ff = 0.0
+        self._layout = PidLayout(self.pid, self.slope, o.stick_velocity, params.sample_period / o.reference_velocity_tau,
+                                 params.u_max, self._n_own_state, self._n_own_params)
+        self._s, self._p = self._layout.s, self._layout.p
+        self.pid.bind(self._s, S_Q)
+        self._offs, self._levs = np.zeros(1), np.zeros(1)
 
-    def _observe(self, y: float) -> None:
-        """Slope, stick detection and x̂4 from y(n)."""
-        ydot = self._slope_update(y)
-        self.stuck = math.isfinite(ydot) and abs(ydot + self.x4_hat) < self._stick_velocity
-        if self.stuck:
-            self.x4_hat += self._alpha_ref * (-ydot - self.x4_hat)   # ẏ = −x4 while stuck
+    # the shared state, read from the array
+    x4_hat = property(lambda self: float(self._s[S_X4]), lambda self, v: self._s.__setitem__(S_X4, v),
+                      doc="x̂4 [rad/s], the stuck-sample average of −ẏ̂.")
+    stuck = property(lambda self: bool(self._s[S_STUCK]), doc="Stuck at the last sample.")
+    _level = property(lambda self: float(self._s[S_LEVEL]), doc="The last commanded level [ozf·in].")
+    _u_ff = property(lambda self: float(self._s[S_UFF]), doc="The last feedforward [ozf·in].")
+    _n = property(lambda self: int(self._s[S_N]), doc="Samples stepped.")
 
-    def _feedforward(self) -> float:
-        o = self.options
-        if o.coulomb_feedforward and abs(self.x4_hat) > o.feedforward_min_velocity:
-            return math.copysign(self.params.coulomb, self.x4_hat)
-        return 0.0
+    def _own(self, i: int) -> int:
+        """Index in s of the controller's own entry i."""
+        return self._layout.own_s + i
 
-    def _hold(self, v: float, extra: float) -> DriveCommand:
-        """u = clip(−(v + q) + extra); integrate q only when not clipped."""
-        pid = self.pid
-        q_before = pid.q
-        q = pid.integrate(v)
-        u = -(v + q) + extra
-        u_max = self._u_max
-        if abs(u) > u_max:   # conditional integration (anti-windup)
-            pid.q = q_before
-            u = -(v + q_before) + extra
-        self._level = level = min(max(u, -u_max), u_max)
-        self._n += 1
-        return DriveCommand.hold(level, _LINEAR)
+    def _own_p(self, i: int) -> int:
+        """Index in p of the controller's own constant i."""
+        return self._layout.own_p + i
+
+    def step(self, y: float) -> DriveCommand:
+        """The compiled step on this controller's arrays (see the subclass's docstring)."""
+        s = self._s
+        if not self._layout.compiled:      # more than two lead states: numpy's form, outside
+            s[S_V] = self.pid.proportional(y)
+        return law_command(self._compiled_step(s, self._p, y, self._offs, self._levs), self._offs, self._levs,
+                           _LINEAR)
+
+    def compiled_law(self) -> CompiledLaw | None:
+        """The compiled step on this controller's own arrays (None before ``reset``, or for a
+        lead path of more than two states)."""
+        layout = getattr(self, "_layout", None)
+        if layout is None or not layout.compiled:
+            return None
+        return CompiledLaw(self._compiled_step, self._s, self._p, _LINEAR, 1)
+
+
+@njit(cache=True)
+def _coulomb_feedforward(s, p, on, min_velocity, coulomb):
+    """k̄c·sign(x̂4) once |x̂4| > v_min (``on``: the option), else 0."""
+    x4 = s[S_X4]
+    if on and abs(x4) > min_velocity:
+        return math.copysign(coulomb, x4)
+    return 0.0
+
+
+# reset-pid's own entries of s and p
+_RS_YPREV, _RS_RESETS = range(2)
+_RP_RESET, _RP_ON_CROSSING, _RP_ON_STICK, _RP_BAND, _RP_FF, _RP_FF_MIN, _RP_COULOMB = range(7)
+
+@njit(cache=True)
+def _reset_pid_step(s, p, y, offs, levs):
+    """:class:`ResetPidController`'s step: slope, x̂4, PID, reset law, feedforward, held level."""
+    pid_observe(s, p, y)
+    v = pid_proportional(s, p, y)
+    y_prev = s[_RS0 + _RS_YPREV]
+    crossed = p[_RP0 + _RP_ON_CROSSING] != 0.0 and y * y_prev < 0.0 and abs(y - y_prev) > p[_RP0 + _RP_BAND]
+    if p[_RP0 + _RP_RESET] != 0.0 and ((p[_RP0 + _RP_ON_STICK] != 0.0 and s[S_STUCK] != 0.0 and s[S_Q] * y < 0.0)
+                                       or crossed):
+        s[S_Q] = 0.0                     # the integrator pushes away from e = 0
+        s[S_VPREV] = 0.0
+        s[_RS0 + _RS_RESETS] += 1.0
+    s[_RS0 + _RS_YPREV] = y
+    u_ff = _coulomb_feedforward(s, p, p[_RP0 + _RP_FF] != 0.0, p[_RP0 + _RP_FF_MIN], p[_RP0 + _RP_COULOMB])
+    s[S_UFF] = u_ff
+    offs[0] = 0.0
+    levs[0] = pid_hold(s, p, v, u_ff)
+    return 1
 
 
 @register("reset-pid")
@@ -215,25 +265,29 @@ class ResetPidController(_PidFrictionBase):
     knobs = MappingProxyType({"crossover": (10.0, 20.0, 30.0, 40.0, 48.0)})
     counter = "resets"
 
+    _compiled_step = staticmethod(_reset_pid_step)
+    _n_own_state, _n_own_params = 2, 7
+
     def reset(self, params: PlantParams, rng: np.random.Generator) -> None:
         """Design for ``params`` and zero every state."""
         super().reset(params, rng)
+        o = self.options
+        p, i = self._p, self._own_p
+        p[i(_RP_RESET)], p[i(_RP_ON_CROSSING)], p[i(_RP_ON_STICK)] = o.reset, o.reset_on_crossing, o.reset_on_stick
+        p[i(_RP_BAND)], p[i(_RP_FF)], p[i(_RP_FF_MIN)] = o.crossing_band, o.coulomb_feedforward, o.feedforward_min_velocity
+        p[i(_RP_COULOMB)] = params.coulomb
         self._reset_times: list[float] = []
-        self._y_prev = 0.0
 
     def step(self, y: float) -> DriveCommand:
-        """u(n) = clip(−(v + q) + k̄c·sign(x̂4)), with q := 0 on a stick where q·e < 0."""
+        """u(n) = clip(−(v + q) + k̄c·sign(x̂4)), with q := 0 on a stick where q·e < 0 or at a
+        crossing (:func:`_reset_pid_step`); the reset instants are kept for :meth:`event_times`
+        (complete for runs stepped from Python, i.e. recorded ones)."""
         t = self._n * self.params.sample_period
-        self._observe(y)
-        v = self.pid.proportional(y)
-        o = self.options
-        crossed = o.reset_on_crossing and y * self._y_prev < 0.0 and abs(y - self._y_prev) > o.crossing_band
-        if o.reset and ((o.reset_on_stick and self.stuck and self.pid.q * y < 0.0) or crossed):
-            self.pid.reset_integrator()                 # the integrator pushes away from e = 0
+        resets = self._s[self._own(_RS_RESETS)]
+        cmd = super().step(y)
+        if self._s[self._own(_RS_RESETS)] != resets:
             self._reset_times.append(t)
-        self._y_prev = y
-        self._u_ff = self._feedforward()
-        return self._hold(v, self._u_ff)
+        return cmd
 
     def internals(self) -> dict[str, float]:
         return {"u_linear": self._level, "integrator": -self.pid.q, "feedforward": self._u_ff,
@@ -246,6 +300,6 @@ class ResetPidController(_PidFrictionBase):
         if not hasattr(self, "design"):
             return {}
         out = self.design.summary()
-        out.update(resets=len(self._reset_times), reset_law=self.options.reset,
+        out.update(resets=int(self._s[self._own(_RS_RESETS)]), reset_law=self.options.reset,
                    x4_hat=self.x4_hat)
         return out

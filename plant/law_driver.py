@@ -17,6 +17,7 @@ position).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import PlantState, SimOptions, Status
 
-__all__ = ["run_chunks", "CHUNK", "NOISE_MARGIN", "NEED_NOISE", "TOTAL_FIELDS"]
+__all__ = ["run_chunks", "run_law_chunks", "LawRun", "CHUNK", "NOISE_MARGIN", "NEED_NOISE", "HAND_BACK", "TOTAL_FIELDS"]
 
 CHUNK = 1000            # samples per compiled call (the wall-clock limit is checked between them)
 NOISE_MARGIN = 1 << 15  # unread normals guaranteed before each interval (else back to Python)
@@ -102,3 +103,157 @@ def run_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, params: 
         n_window += 1
     sums = {name: (float(v) if i < _N_FLOAT_TOTALS else int(v)) for i, (name, v) in enumerate(zip(TOTAL_FIELDS, totals))}
     return final, sums, x1_window[:n_window], status, message
+
+
+# --------------------------------------------------------------------------- a compiled controller step
+
+HAND_BACK = -2   # the chunk's code: the controller's step handed the current sample back to Python
+_SPECIALISED: dict[tuple, Callable[..., int]] = {}
+
+
+def _specialised(py_chunk: Callable[..., int], args: tuple) -> Callable[..., int]:
+    """``py_chunk`` compiled (cache=True) for these arguments with the first one, the step, typed
+    as the first-class function :data:`plant.law_step.STEP_TYPE`: one machine-code loop for every
+    controller, loaded from numba's cache in a fresh process (a step passed as a dispatcher would
+    specialise the loop on each function and miss the cache every time)."""
+    import numba
+
+    from plant.law_step import STEP_TYPE
+    sig = (STEP_TYPE, *(numba.typeof(a) for a in args[1:]))
+    key = (py_chunk, sig)
+    fn = _SPECIALISED.get(key)
+    if fn is None:
+        fn = _SPECIALISED[key] = numba.njit(sig, cache=True)(py_chunk)
+    return fn
+
+
+@dataclass
+class LawRun:
+    """What :func:`run_law_chunks` returns to the runner.
+
+    ``state`` is the plant state after ``n_done`` samples; ``sums`` the scoring window's sums
+    (:data:`TOTAL_FIELDS`) so far (x1 at the window's sample instants is written into the
+    caller's array). ``handed_back``: the controller handed sample ``n_done`` back; the runner
+    does it in Python and may resume here. ``pending`` is the compute delay's carry-over
+    (offsets, levels), or None without a delay.
+    """
+
+    state: PlantState
+    sums: dict[str, float]
+    status: Status
+    message: str
+    n_done: int
+    handed_back: bool
+    pending: tuple[np.ndarray, np.ndarray] | None
+
+
+_LAST: dict[Callable[..., int], Callable[..., int]] = {}
+
+
+def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, params: Any, options: SimOptions,
+                   state: PlantState, sensor: np.ndarray, n_warm: int, noise: NoiseStream | None, noisy: bool,
+                   deadline: float, *, n_state: int, sheet_size: int, no_events: np.ndarray, status_ok: int,
+                   interval_status: Callable[[int, PlantState, SimOptions], tuple[Status, str]],
+                   n0: int = 0, sums: dict[str, float] | None = None, x1_window: np.ndarray | None = None,
+                   pending: tuple[np.ndarray, np.ndarray] | None = None) -> LawRun:
+    """Run samples ``n0`` ≤ n < ``len(sensor)`` of a compiled controller step ``law`` from ``state``.
+
+    ``law`` has the attributes of ``controllers.law.CompiledLaw`` (step, state, params, drive,
+    max_segments); its ``state`` is advanced in place. ``chunk`` is a family's plain Python
+    chunk function with the argument layout
+
+    ``chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, offs, levs, now_o,
+    now_l, carry_o, carry_l, n0, n1, n_warm, sensor, x, x_view, sheet, tau, prm, *family_args, z,
+    zpos, margin, ev, out, totals, x1_window, prog)``
+
+    (``prog``: samples done, noise position, pending segments); it returns a kernel status code,
+    :data:`NEED_NOISE` or :data:`HAND_BACK`. Sensor (quantized when ``params.quantization`` > 0)
+    and compute delay (``params.command_delay``) as :meth:`plant.protocol.PlantFamily.observe`
+    and ``delayed_step`` do them. The wall-clock limit as in :func:`run_chunks`.
+
+    A run resumed at ``n0`` > 0 (after a sample done in Python) continues the window ``sums``
+    (:data:`TOTAL_FIELDS`), writes x1 into ``x1_window`` at index n − ``n_warm`` (the caller's
+    array, length ``len(sensor) − n_warm + 1``; the final x1 is the caller's to add) and starts
+    from the delay's carry-over ``pending`` (None: nothing commanded yet, the hold of 0).
+    """
+    n_samples = sensor.shape[0]
+    prm = params.kernel_record()
+    s = law.state
+    s_back = s.copy()
+    m = int(law.max_segments)
+    offs, levs = np.zeros(m), np.zeros(m)
+    w = 2 * m + 2
+    pend_o, pend_l, now_o, now_l, carry_o, carry_l = (np.zeros(w) for _ in range(6))
+    prog = np.zeros(3, dtype=np.int64)
+    if pending is None:
+        prog[2] = 1   # before the first command: the hold of 0 (plant.delay)
+    else:
+        k = pending[0].shape[0]
+        if k > w:
+            pend_o, pend_l, now_o, now_l, carry_o, carry_l = (np.zeros(k + w) for _ in range(6))
+        pend_o[:k], pend_l[:k] = pending
+        prog[2] = k
+    bridge = law.drive.value == "bridge"
+    x = np.array(state.x, dtype=np.float64)
+    x_view = x.view()
+    x_view.flags.writeable = False
+    sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
+    out = np.empty(n_state + sheet_size)
+    totals = np.zeros(len(TOTAL_FIELDS))
+    if sums is not None:
+        totals[:] = [sums[name] for name in TOTAL_FIELDS]
+    if x1_window is None:
+        x1_window = np.empty(n_samples - n_warm + 1)
+    if noisy:
+        z, zpos = noise.window()
+    else:
+        z, zpos = np.empty(0), 0
+    margin = NOISE_MARGIN if noisy else 0
+    head = (law.step, s, law.params, s_back, bridge, float(params.u_max), float(params.quantization),
+            float(params.command_delay), pend_o, pend_l, offs, levs, now_o, now_l, carry_o, carry_l)
+    fn = _LAST.get(chunk)
+    n, code = n0, status_ok
+    while n < n_samples:
+        stop = min(n + CHUNK, n_samples)
+        args = (*head, n, stop, n_warm, sensor, x, x_view, sheet, params.sample_period, prm, *family_args, z, zpos,
+                margin, no_events, out, totals, x1_window, prog)
+        if fn is None:
+            fn = _LAST[chunk] = _specialised(chunk, args)
+        try:
+            code = fn(*args)
+        except NoiseExhausted:        # one interval wanted more than the margin: undo its step, extend, redo
+            s[:] = s_back
+            code = NEED_NOISE
+        except TypeError:             # other argument types than the last call's: compile (or load) for them
+            if fn is _specialised(chunk, args):
+                raise
+            fn = None
+            continue
+        n, zpos = int(prog[0]), int(prog[1])
+        if code == NEED_NOISE:
+            z, zpos = noise.grow(zpos)
+            while z.shape[0] - zpos < NOISE_MARGIN:
+                z, zpos = noise.grow(zpos)
+            continue
+        if code != status_ok:
+            break
+        if time.perf_counter() > deadline and n < n_samples:
+            break
+    if noisy:
+        noise.consumed(zpos)
+    x.flags.writeable = False
+    final = PlantState(float(sheet[0]), x, int(sheet[1]), sheet[2] != 0.0)
+    handed_back = code == HAND_BACK
+    if handed_back:
+        status, message = Status.OK, ""
+    elif code != status_ok:
+        status, message = interval_status(code, final, options)
+    elif n < n_samples:
+        status = Status.ERROR
+        message = "time limit exceeded"   # completed by the runner
+    else:
+        status, message = Status.OK, ""
+    sums = {name: (float(v) if i < _N_FLOAT_TOTALS else int(v)) for i, (name, v) in enumerate(zip(TOTAL_FIELDS, totals))}
+    k = int(prog[2])
+    pend = (pend_o[:k].copy(), pend_l[:k].copy()) if params.command_delay != 0.0 and n > 0 else None
+    return LawRun(final, sums, status, message, n, handed_back, pend)

@@ -36,6 +36,13 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     law's commands. ``None`` when the family has none; the runner then calls ``step``.
     It models the ideal sensor, no delay and no disturbance torque, so :meth:`law_loop` offers
     it only when ``quantization``, ``command_delay`` and ``disturbance_torque_std`` are 0.
+``compiled_law_loop``
+    Optional fast path for any controller that declares a compiled step
+    (:mod:`plant.law_step`, ``controllers.law.CompiledLaw``): the family's compiled closed loop
+    around that step, with the quantized sensor and the compute delay, bit-identical to calling
+    :meth:`observe`, the controller's ``step`` and :meth:`delayed_step`; returns a
+    :class:`plant.law_driver.LawRun`. :meth:`compiled_loop` offers it without a disturbance
+    torque.
 
 The runner, traces, series, metrics and the report reach a plant only through this protocol.
 A family registers itself with :func:`register_family`; the built-in ones are listed in
@@ -88,6 +95,7 @@ class PlantFamily(abc.ABC):
     Params: ClassVar[type] = PlantParams
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
+    compiled_law_loop: ClassVar[Callable[..., Any] | None] = None
     # The family's reference simulators for a work-precision study (``bench.speed``), or None:
     # a namespace with exact_step, fixed_step, fixed_step_pulses, event_driven, Schedule,
     # schedule_from_commands (see plant/multimode/reference.py) and fixed_step_family(dt), a
@@ -131,6 +139,12 @@ class PlantFamily(abc.ABC):
         if params.quantization != 0.0 or params.command_delay != 0.0 or params.disturbance_torque_std != 0.0:
             return None
         return self.linear_law_loop
+
+    def compiled_loop(self, params: PlantParams) -> Callable[..., Any] | None:
+        """:attr:`compiled_law_loop` when it applies to ``params`` (no disturbance torque), else None."""
+        if params.disturbance_torque_std != 0.0:
+            return None
+        return self.compiled_law_loop
 
     def truth(self, params: PlantParams, state: PlantState) -> dict[str, float]:
         """The state's shared meaning and the effective friction kc = k̄c + x5, ks = k̄s + x5 (≥ 0)."""

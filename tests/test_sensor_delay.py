@@ -210,8 +210,9 @@ def test_delayed_bridge_pulses_are_the_hand_shifted_sequence():
 
 
 def test_a_delay_never_takes_the_compiled_path_and_changes_a_linear_law():
-    """The compiled loop has no delay or quantizer: the runner steps instead (same numbers either
-    way), and the delayed linear design really is another closed loop."""
+    """The linear law's own compiled loop has no delay or quantizer: the runner takes the
+    compiled-law loop instead (tests/test_compiled_law.py; same numbers either way), and the
+    delayed linear design really is another closed loop."""
     fam = get_family("multimode")
     assert fam.law_loop(PlantParams()) is fam.linear_law_loop is not None
     assert fam.law_loop(PlantParams(command_delay=1e-3)) is None

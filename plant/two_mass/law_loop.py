@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from plant.linear_drive import compensator_step, square_wave_segments
-from plant.law_driver import CHUNK, NEED_NOISE, TOTAL_FIELDS, run_chunks
+from plant.law_driver import HAND_BACK, NEED_NOISE, LawRun, run_chunks, run_law_chunks, CHUNK, TOTAL_FIELDS
+from plant.law_step import check_command, delay_segments, quantize
 from plant.randomness import NoiseStream
 from plant.state import PlantState, SimOptions, Status
 from plant.two_mass.interval import N_X as N_STATE
@@ -42,7 +43,7 @@ def interval_status(code, state, options):
         return Status.OK, ""
     return _STATUS_OF[code], _message(code, state, options)
 
-__all__ = ["run_law", "CHUNK", "TOTAL_FIELDS"]
+__all__ = ["run_law", "run_compiled_law", "CHUNK", "TOTAL_FIELDS"]
 
 _NEED_NOISE = NEED_NOISE
 _TDUR, _TPEAK, _TIABS, _TISQ, _TCHG, _TNEV, _TNBRK, _TNSUB = range(8)
@@ -106,3 +107,76 @@ def run_law(law, params: TwoMassParams, options: SimOptions, state: PlantState, 
     return run_chunks(_chunk, (q, V, Vi, lam, o, TP, TL, BT), law, params, options, state, sensor, n_warm, noise, noisy, deadline,
                       n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
                       interval_status=interval_status)
+
+def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, offs, levs, now_o, now_l, carry_o,
+               carry_l, n0, n1, n_warm, sensor, x, x_view, sheet, tau, prm, q, V, Vi, lam, o, TP, TL, BT, z, zpos,
+               margin, ev, out, totals, x1_window, prog):
+    """Samples n0 ≤ n < n1 of a compiled controller step (:func:`plant.law_driver.run_law_chunks`).
+
+    Per sample, in the runner's order: y(n) = quantize(x1 + w1(n)) (``PlantFamily.observe``);
+    the step; the delay (``delayed_step``); the interval kernel; the window sums; the state.
+    ``prog`` gets (samples done, noise position, pending segments); returns a kernel status
+    code, NEED_NOISE, or HAND_BACK with ``s`` restored (the sample is not done).
+    """
+    n_s = s.shape[0]
+    prog[0], prog[1] = n0, zpos
+    for n in range(n0, n1):
+        if z.shape[0] > 0 and z.shape[0] - zpos < margin:
+            return NEED_NOISE
+        x1 = x[0]
+        y = quantize(x1 + sensor[n], quant)
+        for i in range(n_s):
+            s_back[i] = s[i]
+        k = step(s, p, y, offs, levs)
+        if not check_command(k, offs, levs, tau, bridge, u_max):
+            for i in range(n_s):
+                s[i] = s_back[i]
+            return HAND_BACK
+        n_pend = prog[2]
+        if delay != 0.0:
+            n_now, n_carry = delay_segments(offs, levs, k, pend_o, pend_l, n_pend, delay, tau, now_o, now_l,
+                                            carry_o, carry_l)
+            seg_o, seg_l = now_o[:n_now].copy(), now_l[:n_now].copy()
+        else:
+            n_carry = 0
+            seg_o, seg_l = offs[:k].copy(), levs[:k].copy()
+        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o, seg_l, bridge, prm, q, V,
+                              Vi, lam, o, TP, TL, BT, z, zpos, ev, out)
+        S = out[N_STATE:]
+        if n >= n_warm:
+            x1_window[n - n_warm] = x1
+            totals[_TDUR] += S[SHEET_DURATION]
+            if S[SHEET_PEAK] > totals[_TPEAK]:
+                totals[_TPEAK] = S[SHEET_PEAK]
+            totals[_TIABS] += S[SHEET_ABS]
+            totals[_TISQ] += S[SHEET_SQ]
+            totals[_TCHG] += S[SHEET_CHARGE]
+            totals[_TNEV] += S[SHEET_EVENTS]
+            totals[_TNBRK] += S[SHEET_BREAKAWAYS]
+            totals[_TNSUB] += S[SHEET_SUBSTEPS]
+        for i in range(N_STATE):
+            x[i] = out[i]
+        sheet[0], sheet[1], sheet[2] = S[SHEET_T], S[SHEET_MODE], S[SHEET_FLYBACK]
+        for i in range(n_carry):
+            pend_o[i], pend_l[i] = carry_o[i], carry_l[i]
+        if delay != 0.0:
+            prog[2] = n_carry
+        zpos = pos
+        prog[0], prog[1] = n + 1, zpos
+        if S[SHEET_STATUS] != STATUS_OK:
+            return int(S[SHEET_STATUS])
+    return STATUS_OK
+
+
+def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor: np.ndarray, n_warm: int,
+                     noise: NoiseStream | None, deadline: float, **resume) -> LawRun:
+    """:func:`plant.law_driver.run_law_chunks` around this family's chunk (see
+    plant.multimode.law_loop._law_chunk: the same loop around this family's kernel)."""
+    noisy = options.noise and noise is not None
+    q, V, Vi, lam, o, TP, TL, BT = plan(params, options)
+    if not noisy:
+        o = o.copy()
+        o[_O_NOISE] = 0.0
+    return run_law_chunks(_law_chunk, (q, V, Vi, lam, o, TP, TL, BT), law, params, options, state, sensor, n_warm, noise, noisy,
+                          deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
+                          interval_status=interval_status, **resume)
