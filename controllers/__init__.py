@@ -7,6 +7,12 @@ peers ``pulse-width`` (Yang & Tomizuka 1988), ``reset-pid`` (Beerens et al. 2019
 the deployed baseline ``friction-ff-pid`` (PID + static friction feedforward from the told model).
 """
 
+from pathlib import Path as _Path
+
+from plant import _jit_cache
+
+_jit_cache.refresh(_Path(__file__).resolve().parent)   # compiled steps call helpers across files
+
 from controllers.base import Controller, available_controllers, get_controller, make_controller, register
 
 from controllers import linear as _linear  # noqa: E402,F401  (registers "linear")

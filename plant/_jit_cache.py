@@ -5,7 +5,8 @@ it calls: edit ``plant/multimode/zero_velocity.py`` and ``plant.multimode.interv
 load its cached machine code with the *old* callee inlined. Before any kernel is imported, this
 compares a digest of every ``plant/**/*.py`` with the one stored in ``plant/__pycache__`` and
 drops the cached kernels of every plant folder (the families' too) when they differ. A fresh checkout has no cache; this only matters to someone
-editing the plant.
+editing the plant. :mod:`controllers` calls it for its own folder (the compiled controller steps
+call helpers in other files of that package the same way).
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ import hashlib
 from pathlib import Path
 
 
-def refresh() -> None:
-    here = Path(__file__).resolve().parent
+def refresh(package: Path | None = None) -> None:
+    """Drop the cached kernels of ``package`` (default: ``plant``) when its source changed."""
+    here = package if package is not None else Path(__file__).resolve().parent
     cache = here / "__pycache__"
     digest = hashlib.sha256()
     for src in sorted(here.rglob("*.py")):

@@ -26,9 +26,9 @@ The sensor and the delay, compiled: :func:`quantize` is :func:`plant.sensor.quan
 :func:`delay_segments` is :func:`plant.delay.delay_command` on arrays, in the same order of
 floating-point operations (tests/test_compiled_law.py compares them on random inputs).
 
-numba's on-disk cache keys a function on its own file only: after editing this module (or a
-controller's step helpers in another file), delete the ``law_loop._law_chunk*`` files under
-``plant/*/__pycache__`` (and the steps' own), or a cached loop keeps the old code.
+numba's on-disk cache keys a function on its own file only; :mod:`plant._jit_cache` drops the
+cached kernels of ``plant/`` (and ``controllers/``, for the steps' helpers) when any source file
+of that package changed.
 """
 
 from __future__ import annotations

@@ -157,6 +157,7 @@ def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor
     o = options.kernel_vector().copy()
     if not noisy:
         o[0] = 0.0
-    return run_law_chunks(_law_chunk, (params.law_vector(), o, integrate.TOLERANCES), law, params, options, state, sensor, n_warm, noise, noisy,
+    tol = integrate.NOISY_TOLERANCES if noisy else integrate.TOLERANCES
+    return run_law_chunks(_law_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor, n_warm, noise, noisy,
                           deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
                           interval_status=interval_status, **resume)
