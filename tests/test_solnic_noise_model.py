@@ -92,7 +92,7 @@ def test_backward_equation_solver_is_bit_identical_to_the_row_array_reference():
     # the fused Thomas loops (issue 27) must give exactly the numbers of the formulation they
     # replaced, over pulses that stop in every phase (reflecting layer present or not)
     from controllers.solnic.noise_model import _absorbed_moments
-    from tests.solnic_reference_kernels import absorbed_moments
+    from tests.reference_kernels import absorbed_moments
     p = PlantParams()
     al, U, tau, s2 = p.alpha, p.u_max, p.motor_time_constant, p.alpha**2 * p.sigma2_sq
     rng = np.random.default_rng(27)

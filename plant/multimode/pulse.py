@@ -17,10 +17,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.interval import advance
+from numba import njit
+
+from plant.multimode.interval import (SHEET_FLYBACK, SHEET_MODE, SHEET_SIZE, SHEET_STATUS, SHEET_T, STATUS_OK,
+                                      _NREC as _SHEET_NREC, _RecordFull, _event_scratch, advance, interval_kernel,
+                                      kernel_inputs)
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
-from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
+from plant.state import N_STATE, X1, X3, X4, EventKind, SimOptions, Status, initial_state
+
+_STICK = int(EventKind.STICK)
 
 __all__ = ["PulseResponse", "pulse_response"]
 
@@ -115,3 +121,83 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
     t_cz = times.get("current_zero", dt_u + t_fly)
     t_brk = times.get("breakaway")
     return PulseResponse(float(state.x[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
+
+
+# --- the noise-free pulse motion of PlantFamily.pulse_motion, compiled --------------------------
+
+@njit(cache=True)
+def _run_until_stuck(x, mode, flyback, t, first, level, chunk, horizon, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev,
+                     out):
+    """Noise-free intervals from (x, mode, flyback, t): with ``first`` > 0 one interval of that
+    length at ``level``; otherwise intervals of ``chunk`` seconds at level 0 while the shaft
+    moves or the flyback lasts and t < ``horizon``. Returns (status code, t_stop or −1 when no
+    stick event, intervals run); the last state and work sheet are left in ``out``."""
+    offsets = np.zeros(1)
+    levels = np.empty(1)
+    t_stop = -1.0
+    n = 0
+    xs = x
+    while True:
+        if first > 0.0:
+            h, levels[0] = first, level
+        else:
+            if not ((mode != 2 or flyback) and t < horizon):
+                break
+            h, levels[0] = chunk, 0.0
+        interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev,
+                        out)
+        n += 1
+        S = out[N_STATE:]
+        code = int(S[SHEET_STATUS])
+        if code != STATUS_OK:
+            return code, t_stop, n
+        for i in range(int(S[_SHEET_NREC])):
+            if ev[i, 6] == _STICK:
+                t_stop = ev[i, 0]
+        t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
+        xs = out[:N_STATE].copy()
+        if first > 0.0:
+            break
+    return STATUS_OK, t_stop, n
+
+
+_NOISE_OFF = SimOptions(noise=False)
+_NO_NORMALS = np.empty(0)
+
+
+def pulse_motion(params: PlantParams, state, dt_u: float, sign: int, horizon: float) -> tuple[float, float] | None:
+    """:meth:`plant.protocol.PlantFamily.pulse_motion` of this plant (no disturbance torque)
+    with its intervals run in one compiled call per phase: the same kernel on the same inputs,
+    so the same numbers. ``params`` is already the quiet-command copy. None when the event
+    buffer overflowed or the run failed (the caller then runs the generic path, which reports it).
+    """
+    x = state.x.copy()
+    x[X4] = 0.0
+    o, TP, TL, BPh, BPw, BG, BC = kernel_inputs(params, _NOISE_OFF, False)
+    prm = params.kernel_record()
+    ev = _event_scratch()
+    out = np.empty(N_STATE + SHEET_SIZE)
+    t_stop = 0.0
+    mode, flyback, t = state.mode, state.flyback, 0.0
+    try:
+        if dt_u > 0:
+            code, ts, _ = _run_until_stuck(x, mode, flyback, t, dt_u, sign * params.u_max, 0.0, horizon, prm, o,
+                                           TP, TL, BPh, BPw, BG, BC, _NO_NORMALS, ev, out)
+            if code != STATUS_OK:
+                return None
+            t_stop = ts if ts >= 0.0 else t_stop
+            S = out[N_STATE:]
+            x, t, mode, flyback = out[:N_STATE].copy(), float(S[SHEET_T]), int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
+        chunk = max(2.0 * params.motor_time_constant * math.log1p(abs(float(x[X3])) / params.u_max), 1e-3)
+        code, ts, n = _run_until_stuck(x, mode, flyback, t, 0.0, 0.0, chunk, horizon, prm, o, TP, TL, BPh, BPw, BG,
+                                       BC, _NO_NORMALS, ev, out)
+    except _RecordFull:
+        return None
+    if code != STATUS_OK:
+        return None
+    if n:
+        t_stop = ts if ts >= 0.0 else t_stop
+        x, mode = out[:N_STATE], int(out[N_STATE + SHEET_MODE])
+    if mode != 2:
+        return None
+    return float(x[X1]) - float(state.x[X1]), t_stop

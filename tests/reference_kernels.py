@@ -3,6 +3,8 @@ them: each is the code as it was before an optimisation that must not change a s
 
 ``absorbed_moments``: :func:`controllers.solnic.noise_model._absorbed_moments` with row arrays
 for the tridiagonal matrix and separate factorisation, elimination and source loops (issue 27).
+``step``: :func:`plant.multimode.zero_velocity._step` drawing its four normals by four checked
+calls of :func:`plant.randomness.normal` (issue 27).
 """
 
 import math
@@ -11,6 +13,27 @@ import numpy as np
 from numba import njit
 
 from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
+from plant.randomness import normal
+
+A1, A2, A3, A4, A5, AKC, AU = range(7)
+
+
+@njit(cache=True)
+def step(X, P, L, z, cursor, out):
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    z0 = normal(z, cursor)
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    out[A1] = (x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc
+               + P[A1, AU] * u + L[0, 0] * z0)
+    out[A2] = (x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+               + L[1, 0] * z0 + L[1, 1] * z1)
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4 + L[2, 0] * z0 + L[2, 1] * z1 + L[2, 2] * z2
+    out[A5] = P[A5, A5] * x5 + L[3, 0] * z0 + L[3, 1] * z1 + L[3, 2] * z2 + L[3, 3] * z3
+    out[AKC] = kc
+    out[AU] = u
 
 
 @njit(cache=True)
