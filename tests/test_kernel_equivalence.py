@@ -96,3 +96,14 @@ def test_compiled_pulse_motion_is_the_generic_one():
             assert got == want
             n_moved += want[0] != 0.0
     assert n_moved > 40
+
+
+def test_compiled_log1p_is_pythons():
+    # the compiled pulse_motion sizes its flyback chunks with numba's log1p where the generic
+    # path uses math.log1p: the same function of the C library, checked value for value
+    from numba import njit
+
+    f = njit(lambda v: math.log1p(v))
+    rng = np.random.default_rng(1)
+    for v in np.concatenate((rng.uniform(0.0, 1.0, 5000), 10.0 ** rng.uniform(-18, 0, 5000))):
+        assert f(v) == math.log1p(v)

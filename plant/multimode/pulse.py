@@ -126,39 +126,47 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
 # --- the noise-free pulse motion of PlantFamily.pulse_motion, compiled --------------------------
 
 @njit(cache=True)
-def _run_until_stuck(x, mode, flyback, t, first, level, chunk, horizon, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev,
-                     out):
-    """Noise-free intervals from (x, mode, flyback, t): with ``first`` > 0 one interval of that
-    length at ``level``; otherwise intervals of ``chunk`` seconds at level 0 while the shaft
-    moves or the flyback lasts and t < ``horizon``. Returns (status code, t_stop or −1 when no
-    stick event, intervals run); the last state and work sheet are left in ``out``."""
+def _interval(xs, mode, flyback, t, h, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out, t_stop):
+    """One noise-free interval of ``h`` at ``level``; (status, time of its last stick event or
+    ``t_stop``), the new state and sheet in ``out``."""
     offsets = np.zeros(1)
-    levels = np.empty(1)
-    t_stop = -1.0
-    n = 0
-    xs = x
-    while True:
-        if first > 0.0:
-            h, levels[0] = first, level
-        else:
-            if not ((mode != 2 or flyback) and t < horizon):
-                break
-            h, levels[0] = chunk, 0.0
-        interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev,
-                        out)
-        n += 1
-        S = out[N_STATE:]
-        code = int(S[SHEET_STATUS])
+    levels = np.full(1, level)
+    interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev, out)
+    S = out[N_STATE:]
+    for i in range(int(S[_SHEET_NREC])):
+        if ev[i, 6] == _STICK:
+            t_stop = ev[i, 0]
+    return int(S[SHEET_STATUS]), t_stop
+
+
+@njit(cache=True)
+def _pulse_motion(x0, mode, flyback, dt_u, level, tau, u_max, horizon, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out):
+    """The intervals of :meth:`plant.protocol.PlantFamily.pulse_motion` from the state (x0 with
+    x4 = 0, mode, flyback) at t = 0: ``level`` for ``dt_u`` (if > 0), then level 0 in chunks of
+    max(2τ·ln(1 + |x3|/u_max), 1 ms) while the shaft moves or the flyback lasts and t < ``horizon``.
+    Returns (status code, Δx1, time of the last stick event (0 if none), final mode)."""
+    xs = x0.copy()
+    xs[3] = 0.0                                   # x4 = 0: the shaft's own motion
+    x1_0 = xs[0]
+    t_stop = 0.0
+    t = 0.0
+    S = out[N_STATE:]
+    if dt_u > 0:
+        code, t_stop = _interval(xs, mode, flyback, t, dt_u, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
+                                 t_stop)
         if code != STATUS_OK:
-            return code, t_stop, n
-        for i in range(int(S[_SHEET_NREC])):
-            if ev[i, 6] == _STICK:
-                t_stop = ev[i, 0]
+            return code, 0.0, t_stop, mode
         t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
         xs = out[:N_STATE].copy()
-        if first > 0.0:
-            break
-    return STATUS_OK, t_stop, n
+    chunk = max(2.0 * tau * math.log1p(abs(xs[2]) / u_max), 1e-3)
+    while (mode != 2 or flyback) and t < horizon:
+        code, t_stop = _interval(xs, mode, flyback, t, chunk, 0.0, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
+                                 t_stop)
+        if code != STATUS_OK:
+            return code, 0.0, t_stop, mode
+        t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
+        xs = out[:N_STATE].copy()
+    return STATUS_OK, xs[0] - x1_0, t_stop, mode
 
 
 _NOISE_OFF = SimOptions(noise=False)
@@ -167,37 +175,17 @@ _NO_NORMALS = np.empty(0)
 
 def pulse_motion(params: PlantParams, state, dt_u: float, sign: int, horizon: float) -> tuple[float, float] | None:
     """:meth:`plant.protocol.PlantFamily.pulse_motion` of this plant (no disturbance torque)
-    with its intervals run in one compiled call per phase: the same kernel on the same inputs,
-    so the same numbers. ``params`` is already the quiet-command copy. None when the event
-    buffer overflowed or the run failed (the caller then runs the generic path, which reports it).
-    """
-    x = state.x.copy()
-    x[X4] = 0.0
+    in one compiled call: the same kernel on the same inputs, so the same numbers.
+    ``params`` is already the quiet-command copy. None when the event buffer overflowed or the
+    run failed (the caller then runs the generic path, which reports it)."""
     o, TP, TL, BPh, BPw, BG, BC = kernel_inputs(params, _NOISE_OFF, False)
-    prm = params.kernel_record()
-    ev = _event_scratch()
-    out = np.empty(N_STATE + SHEET_SIZE)
-    t_stop = 0.0
-    mode, flyback, t = state.mode, state.flyback, 0.0
     try:
-        if dt_u > 0:
-            code, ts, _ = _run_until_stuck(x, mode, flyback, t, dt_u, sign * params.u_max, 0.0, horizon, prm, o,
-                                           TP, TL, BPh, BPw, BG, BC, _NO_NORMALS, ev, out)
-            if code != STATUS_OK:
-                return None
-            t_stop = ts if ts >= 0.0 else t_stop
-            S = out[N_STATE:]
-            x, t, mode, flyback = out[:N_STATE].copy(), float(S[SHEET_T]), int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
-        chunk = max(2.0 * params.motor_time_constant * math.log1p(abs(float(x[X3])) / params.u_max), 1e-3)
-        code, ts, n = _run_until_stuck(x, mode, flyback, t, 0.0, 0.0, chunk, horizon, prm, o, TP, TL, BPh, BPw, BG,
-                                       BC, _NO_NORMALS, ev, out)
+        code, dx1, t_stop, mode = _pulse_motion(state.x, state.mode, state.flyback, dt_u, sign * params.u_max,
+                                                params.motor_time_constant, params.u_max, horizon,
+                                                params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, _NO_NORMALS,
+                                                _event_scratch(), np.empty(N_STATE + SHEET_SIZE))
     except _RecordFull:
         return None
-    if code != STATUS_OK:
+    if code != STATUS_OK or mode != 2:
         return None
-    if n:
-        t_stop = ts if ts >= 0.0 else t_stop
-        x, mode = out[:N_STATE], int(out[N_STATE + SHEET_MODE])
-    if mode != 2:
-        return None
-    return float(x[X1]) - float(state.x[X1]), t_stop
+    return dx1, t_stop
