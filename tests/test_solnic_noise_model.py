@@ -86,3 +86,24 @@ def test_mean_running_max_closed_form_against_the_integrated_tail(b, s2, t):
     truth, _ = quad(lambda x: tail(x * sd), 0.0, 40.0, epsabs=0.0, epsrel=1e-12, limit=400)
     truth *= sd
     assert _mean_running_max(b, s2, t) == pytest.approx(truth, rel=1e-8)
+
+
+def test_backward_equation_solver_is_bit_identical_to_the_row_array_reference():
+    # the fused Thomas loops (issue 27) must give exactly the numbers of the formulation they
+    # replaced, over pulses that stop in every phase (reflecting layer present or not)
+    from controllers.solnic.noise_model import _absorbed_moments
+    from tests.reference_kernels import absorbed_moments
+    p = PlantParams()
+    al, U, tau, s2 = p.alpha, p.u_max, p.motor_time_constant, p.alpha**2 * p.sigma2_sq
+    rng = np.random.default_rng(27)
+    n_reflect = 0
+    for _ in range(300):
+        ks = rng.uniform(0.5, 3.5)
+        kc = ks * rng.uniform(0.3, 1.0)
+        dtu, t_b = rng.uniform(0.3e-3, 3e-3), rng.uniform(0.0, 0.3e-3)
+        t_cz = t_b + rng.uniform(0.5e-3, 4e-3)
+        x3_off = U * -math.expm1(-dtu / tau)
+        n_reflect += x3_off > ks and dtu + tau * math.log((x3_off + U) / (ks + U)) > t_b
+        args = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, 64, 48, 16)
+        assert _absorbed_moments(*args) == absorbed_moments(*args), args
+    assert n_reflect > 50      # both phases (reflecting, then absorbing) exercised

@@ -79,6 +79,7 @@ from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, ST
 __all__ = ["SolnicController", "adjusted_increment"]
 
 _NAN = float("nan")
+_OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command (2 µs a sample)
 
 
 @lru_cache(maxsize=32)
@@ -272,12 +273,12 @@ class SolnicController(Controller):
                                 earliest=earliest, duration=pred.t_current_zero,
                                 overshoot_factor=self.options.overshoot_factor)
             if trig is None:
-                return DriveCommand.hold(0.0, DriveType.BRIDGE)
+                return _OFF
             if self._pending is not None and attempt == 0:
                 self._evaluate(t)
                 continue
             return self._launch(t, trig.offset, trig.sign, trig.overshoot, dtu, pred)
-        return DriveCommand.hold(0.0, DriveType.BRIDGE)
+        return _OFF
 
     def _launch(self, t: float, offset: float, sign: int, overshoot: bool, dtu: float,
                 pred: PulsePrediction) -> DriveCommand:

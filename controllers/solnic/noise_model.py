@@ -263,7 +263,14 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
     """(E[Δc], E[Δc²]) of a moving pulse from the backward equations (4)–(6) of the module
     docstring, solved on [t_b, t_cz] × [0, X] by Crank–Nicolson (two implicit Euler steps after
     each change of boundary condition), with the coasting polynomials (2) at t = t_cz and the
-    unabsorbed Gaussian moments (7) at x = X."""
+    unabsorbed Gaussian moments (7) at x = X.
+
+    The tridiagonal matrix of a time step is constant inside the domain, so it is held as three
+    interior scalars and the boundary rows; the Thomas factorisation runs in the same loop as
+    u1's forward elimination (two independent division chains), and the source of u2 is added
+    during u1's back substitution. Every number is computed by the same operations in the same
+    order as the row-array formulation it replaces (tests/test_solnic_noise_model.py compares
+    the two bit for bit)."""
     x3_off = U * -math.expm1(-dt_u / tau)
     a = al * kc
     T = t_cz
@@ -275,6 +282,7 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
     X = v_peak + _PDE_SIGMAS * math.sqrt(s2 * (T - t_b))
     dx = X / n_x
     D = 0.5 * s2 / (dx * dx)                      # diffusion over dx²
+    D2 = 2 * D
     c4, c3 = 1.0 / (4 * a * a), 5 * s2 / (6 * a**3)
     c2, c1 = 5 * s2 * s2 / (4 * a**4), 5 * s2**3 / (4 * a**5)
     n = n_x + 1
@@ -288,9 +296,6 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
         u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
     r1 = np.empty(n)
     r2 = np.empty(n)
-    lo = np.empty(n)
-    di = np.empty(n)
-    up = np.empty(n)
     cp = np.empty(n)
     dm = np.empty(n)
     M = 0.0                                       # ∫_t^T μ
@@ -308,22 +313,22 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             mu_n = al * (_x3(t_n, dt_u, U, tau, x3_off) - kc)
             th = 1.0 if k < 2 else 0.5
             e = (1.0 - th) * h
+            thh = th * h
             # explicit part: u + (1−θ)h(L u + f)
             ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
             for i in range(1, n_x):
-                r1[i] = u1[i] + e * (ao * u1[i - 1] - 2 * D * u1[i] + bo * u1[i + 1] + x[i]) + th * h * x[i]
-                r2[i] = u2[i] + e * (ao * u2[i - 1] - 2 * D * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
+                r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
+                r2[i] = u2[i] + e * (ao * u2[i - 1] - D2 * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
             an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
-            for i in range(1, n_x):
-                lo[i], di[i], up[i] = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn
+            lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn      # interior rows
             if reflect:                               # u_x(0) = 0: ghost u[-1] = u[1]
-                r1[0] = u1[0] + e * (2 * D * (u1[1] - u1[0]))
-                r2[0] = u2[0] + e * (2 * D * (u2[1] - u2[0]))
-                lo[0], di[0], up[0] = 0.0, 1.0 + 2 * th * h * D, -2 * th * h * D
+                r1[0] = u1[0] + e * (D2 * (u1[1] - u1[0]))
+                r2[0] = u2[0] + e * (D2 * (u2[1] - u2[0]))
+                di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
             else:                                     # absorbed: u(0) = 0
                 r1[0] = r2[0] = 0.0
-                lo[0], di[0], up[0] = 0.0, 1.0, 0.0
-            # x = X: no absorption before T, Gaussian moments (7)
+                di_0, up_0 = 1.0, 0.0
+            # x = X: no absorption before T, Gaussian moments (7); its row is (0, 1, 0)
             M += 0.5 * h * (mu_o + mu_n)
             K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
             w = T - t_n
@@ -334,26 +339,31 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             Ez3 = y * (y * y + 3 * vz)
             Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
             EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
-            lo[n_x], di[n_x], up[n_x] = 0.0, 1.0, 0.0
             r1[n_x] = EI + EP1
             r2[n_x] = (EI * EI + s2 * w**3 / 3.0 + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a)))
                        + EP2)
-            # Thomas: factor once, solve u1, then u2 with the new u1 in its source
-            cp[0] = up[0] / di[0]
-            dm[0] = di[0]
-            for i in range(1, n):
-                dm[i] = di[i] - lo[i] * cp[i - 1]
-                cp[i] = up[i] / dm[i]
+            # Thomas: factor while eliminating u1, then u2 with the new u1 in its source
+            cp[0] = up_0 / di_0
+            dm[0] = di_0
             u1[0] = r1[0] / dm[0]
-            for i in range(1, n):
-                u1[i] = (r1[i] - lo[i] * u1[i - 1]) / dm[i]
-            for i in range(n - 2, -1, -1):
-                u1[i] -= cp[i] * u1[i + 1]
             for i in range(1, n_x):
-                r2[i] += th * h * 2 * x[i] * u1[i]
+                d = di_i - lo_i * cp[i - 1]
+                dm[i] = d
+                cp[i] = up_i / d
+                u1[i] = (r1[i] - lo_i * u1[i - 1]) / d
+            d = 1.0 - 0.0 * cp[n_x - 1]
+            dm[n_x] = d
+            cp[n_x] = 0.0 / d
+            u1[n_x] = (r1[n_x] - 0.0 * u1[n_x - 1]) / d
+            src = th * h * 2
+            for i in range(n - 2, 0, -1):
+                u1[i] -= cp[i] * u1[i + 1]
+                r2[i] += src * x[i] * u1[i]
+            u1[0] -= cp[0] * u1[1]
             u2[0] = r2[0] / dm[0]
-            for i in range(1, n):
-                u2[i] = (r2[i] - lo[i] * u2[i - 1]) / dm[i]
+            for i in range(1, n_x):
+                u2[i] = (r2[i] - lo_i * u2[i - 1]) / dm[i]
+            u2[n_x] = (r2[n_x] - 0.0 * u2[n_x - 1]) / dm[n_x]
             for i in range(n - 2, -1, -1):
                 u2[i] -= cp[i] * u2[i + 1]
             mu_o = mu_n

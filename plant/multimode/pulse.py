@@ -17,10 +17,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.interval import advance
+from numba import njit
+
+from plant.multimode.interval import (SHEET_FLYBACK, SHEET_MODE, SHEET_SIZE, SHEET_STATUS, SHEET_T, STATUS_OK,
+                                      _NREC as _SHEET_NREC, _RecordFull, _event_scratch, advance, interval_kernel,
+                                      kernel_inputs)
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
-from plant.state import X1, X3, EventKind, SimOptions, Status, initial_state
+from plant.state import N_STATE, X1, X3, X4, EventKind, SimOptions, Status, initial_state
+
+_STICK = int(EventKind.STICK)
 
 __all__ = ["PulseResponse", "pulse_response"]
 
@@ -115,3 +121,71 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
     t_cz = times.get("current_zero", dt_u + t_fly)
     t_brk = times.get("breakaway")
     return PulseResponse(float(state.x[X1]), t_brk, t_cz, times.get("stop", 0.0) if t_brk is not None else 0.0)
+
+
+# --- the noise-free pulse motion of PlantFamily.pulse_motion, compiled --------------------------
+
+@njit(cache=True)
+def _interval(xs, mode, flyback, t, h, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out, t_stop):
+    """One noise-free interval of ``h`` at ``level``; (status, time of its last stick event or
+    ``t_stop``), the new state and sheet in ``out``."""
+    offsets = np.zeros(1)
+    levels = np.full(1, level)
+    interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev, out)
+    S = out[N_STATE:]
+    for i in range(int(S[_SHEET_NREC])):
+        if ev[i, 6] == _STICK:
+            t_stop = ev[i, 0]
+    return int(S[SHEET_STATUS]), t_stop
+
+
+@njit(cache=True)
+def _pulse_motion(x0, mode, flyback, dt_u, level, tau, u_max, horizon, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out):
+    """The intervals of :meth:`plant.protocol.PlantFamily.pulse_motion` from the state (x0 with
+    x4 = 0, mode, flyback) at t = 0: ``level`` for ``dt_u`` (if > 0), then level 0 in chunks of
+    max(2τ·ln(1 + |x3|/u_max), 1 ms) while the shaft moves or the flyback lasts and t < ``horizon``.
+    Returns (status code, Δx1, time of the last stick event (0 if none), final mode)."""
+    xs = x0.copy()
+    xs[3] = 0.0                                   # x4 = 0: the shaft's own motion
+    x1_0 = xs[0]
+    t_stop = 0.0
+    t = 0.0
+    S = out[N_STATE:]
+    if dt_u > 0:
+        code, t_stop = _interval(xs, mode, flyback, t, dt_u, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
+                                 t_stop)
+        if code != STATUS_OK:
+            return code, 0.0, t_stop, mode
+        t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
+        xs = out[:N_STATE].copy()
+    chunk = max(2.0 * tau * math.log1p(abs(xs[2]) / u_max), 1e-3)
+    while (mode != 2 or flyback) and t < horizon:
+        code, t_stop = _interval(xs, mode, flyback, t, chunk, 0.0, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
+                                 t_stop)
+        if code != STATUS_OK:
+            return code, 0.0, t_stop, mode
+        t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
+        xs = out[:N_STATE].copy()
+    return STATUS_OK, xs[0] - x1_0, t_stop, mode
+
+
+_NOISE_OFF = SimOptions(noise=False)
+_NO_NORMALS = np.empty(0)
+
+
+def pulse_motion(params: PlantParams, state, dt_u: float, sign: int, horizon: float) -> tuple[float, float] | None:
+    """:meth:`plant.protocol.PlantFamily.pulse_motion` of this plant (no disturbance torque)
+    in one compiled call: the same kernel on the same inputs, so the same numbers.
+    ``params`` is already the quiet-command copy. None when the event buffer overflowed or the
+    run failed (the caller then runs the generic path, which reports it)."""
+    o, TP, TL, BPh, BPw, BG, BC = kernel_inputs(params, _NOISE_OFF, False)
+    try:
+        code, dx1, t_stop, mode = _pulse_motion(state.x, state.mode, state.flyback, dt_u, sign * params.u_max,
+                                                params.motor_time_constant, params.u_max, horizon,
+                                                params.kernel_record(), o, TP, TL, BPh, BPw, BG, BC, _NO_NORMALS,
+                                                _event_scratch(), np.empty(N_STATE + SHEET_SIZE))
+    except _RecordFull:
+        return None
+    if code != STATUS_OK or mode != 2:
+        return None
+    return dx1, t_stop

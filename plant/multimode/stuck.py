@@ -19,7 +19,7 @@ import math
 from numba import njit
 
 from plant.expfun import e4
-from plant.randomness import normal
+from plant.randomness import ZPOS, NoiseExhausted
 
 __all__ = ["stuck_propagate"]
 
@@ -44,7 +44,10 @@ def stuck_propagate(X, h, p, noisy, z, cursor):
         l11 = math.sqrt(max(c11, 0.0))
         l21 = c14 / l11 if l11 > 0.0 else 0.0      # zero-length step (breakaway at once)
         l22 = math.sqrt(max(c44 - l21 * l21, 0.0))
-        z1 = normal(z, cursor)
-        z2 = normal(z, cursor)
+        i = cursor[ZPOS]                  # the next two normals, one bounds check (NoiseExhausted
+        if i + 2 > z.shape[0]:            # makes the caller rerun the whole interval)
+            raise NoiseExhausted()
+        cursor[ZPOS] = i + 2
+        z1, z2 = z[i], z[i + 1]
         X[A1] += l11 * z1
         X[A4] += l21 * z1 + l22 * z2

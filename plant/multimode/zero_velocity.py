@@ -28,7 +28,7 @@ from numba import njit
 
 from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
                           q_moving, substep_peak, velocity_extremum_time)
-from plant.randomness import normal, uniform, uniform_below
+from plant.randomness import ZPOS, NoiseExhausted, normal, uniform, uniform_below
 
 __all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
            "FAR_SIGMAS", "hitting_midpoint"]
@@ -42,6 +42,23 @@ def _cross_prob(va, vb, h, sig_v2):
     if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
         return 1.0
     return math.exp(-2.0 * va * vb / (sig_v2 * h))
+
+
+@njit(cache=True)
+def _crossed(va, vb, h, sig_v2, z, cursor):
+    """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc = :func:`_cross_prob` (va, vb, h):
+    the same decision from the same draws, without exp and erfc when the exponent is below −70
+    (pc < 4e−31) and the normal above −11 (U = Φ(Z) > 1.9e−28 > pc: no crossing)."""
+    if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
+        return True
+    e = -2.0 * va * vb / (sig_v2 * h)
+    if e < -70.0:
+        x = normal(z, cursor)
+        if x > -11.0:
+            return False
+        return 0.5 * math.erfc(-x / math.sqrt(2.0)) < math.exp(e)
+    pc = math.exp(e)
+    return pc >= 1.0 or uniform_below(z, cursor, pc)
 
 
 @njit(cache=True)
@@ -169,9 +186,11 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     pr = _cross_prob(x2m, b, half, sig_v2)
     p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     Xm[A2] = x2m
-    z1 = normal(z, cursor)
-    z2 = normal(z, cursor)
-    z3 = normal(z, cursor)
+    i = cursor[ZPOS]                      # the next three normals, one bounds check (see _step)
+    if i + 3 > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[ZPOS] = i + 3
+    z1, z2, z3 = z[i], z[i + 1], z[i + 2]
     dv = x2m - mean2
     Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
     Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
@@ -397,10 +416,14 @@ def _step(X, P, L, z, cursor, out):
     triangular L.
     """
     x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
-    z0 = normal(z, cursor)
-    z1 = normal(z, cursor)
-    z2 = normal(z, cursor)
-    z3 = normal(z, cursor)
+    # the stream's next four normals, as four calls of plant.randomness.normal would read them,
+    # with one bounds check (NoiseExhausted makes the caller rerun the interval, so where
+    # inside it the buffer ran out does not matter): 3× cheaper than four checked calls
+    i = cursor[ZPOS]
+    if i + 4 > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[ZPOS] = i + 4
+    z0, z1, z2, z3 = z[i], z[i + 1], z[i + 2], z[i + 3]
     out[A1] = (x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc
                + P[A1, AU] * u + L[0, 0] * z0)
     out[A2] = (x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
@@ -521,8 +544,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
                 Xb[A2] += s * (-low)
                 Xb[A1] += s * (-low) * step / 2.0
         else:
-            pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
-            if pc >= 1.0 or uniform_below(z, cursor, pc):
+            if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
                 if regular and k == 0:
                     tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
                 else:

@@ -1,0 +1,138 @@
+"""Reference implementations kept for bit-for-bit tests of the compiled kernels that replaced
+them: each is the code as it was before an optimisation that must not change a single bit.
+
+``absorbed_moments``: :func:`controllers.solnic.noise_model._absorbed_moments` with row arrays
+for the tridiagonal matrix and separate factorisation, elimination and source loops (issue 27).
+``step``: :func:`plant.multimode.zero_velocity._step` drawing its four normals by four checked
+calls of :func:`plant.randomness.normal` (issue 27).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
+from plant.randomness import normal
+
+A1, A2, A3, A4, A5, AKC, AU = range(7)
+
+
+@njit(cache=True)
+def step(X, P, L, z, cursor, out):
+    x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
+    z0 = normal(z, cursor)
+    z1 = normal(z, cursor)
+    z2 = normal(z, cursor)
+    z3 = normal(z, cursor)
+    out[A1] = (x1 + P[A1, A2] * x2 + P[A1, A3] * x3 + P[A1, A4] * x4 + P[A1, A5] * x5 + P[A1, AKC] * kc
+               + P[A1, AU] * u + L[0, 0] * z0)
+    out[A2] = (x2 + P[A2, A3] * x3 + P[A2, A5] * x5 + P[A2, AKC] * kc + P[A2, AU] * u
+               + L[1, 0] * z0 + L[1, 1] * z1)
+    out[A3] = P[A3, A3] * x3 + P[A3, AU] * u
+    out[A4] = P[A4, A4] * x4 + L[2, 0] * z0 + L[2, 1] * z1 + L[2, 2] * z2
+    out[A5] = P[A5, A5] * x5 + L[3, 0] * z0 + L[3, 1] * z1 + L[3, 2] * z2 + L[3, 3] * z3
+    out[AKC] = kc
+    out[AU] = u
+
+
+@njit(cache=True)
+def absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl):
+    """(E[Δc], E[Δc²]) of a moving pulse from the backward equations (4)–(6) of the module
+    docstring, solved on [t_b, t_cz] × [0, X] by Crank–Nicolson (two implicit Euler steps after
+    each change of boundary condition), with the coasting polynomials (2) at t = t_cz and the
+    unabsorbed Gaussian moments (7) at x = X."""
+    x3_off = U * -math.expm1(-dt_u / tau)
+    a = al * kc
+    T = t_cz
+    t_ks = dt_u + tau * math.log((x3_off + U) / (ks + U)) if x3_off > ks else dt_u
+    t_ks = min(max(t_ks, t_b), T)
+    t_kc = dt_u + tau * math.log((x3_off + U) / (kc + U)) if x3_off > kc else dt_u
+    t_kc = min(max(t_kc, t_b), T)
+    v_peak = max(_v0(t_kc, dt_u, t_b, al, U, tau, ks, kc, x3_off), 0.0)
+    X = v_peak + _PDE_SIGMAS * math.sqrt(s2 * (T - t_b))
+    dx = X / n_x
+    D = 0.5 * s2 / (dx * dx)                      # diffusion over dx²
+    c4, c3 = 1.0 / (4 * a * a), 5 * s2 / (6 * a**3)
+    c2, c1 = 5 * s2 * s2 / (4 * a**4), 5 * s2**3 / (4 * a**5)
+    n = n_x + 1
+    x = np.empty(n)
+    u1 = np.empty(n)
+    u2 = np.empty(n)
+    for i in range(n):
+        xi = i * dx
+        x[i] = xi
+        u1[i] = xi * xi / (2 * a) + s2 * xi / (2 * a * a)
+        u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
+    r1 = np.empty(n)
+    r2 = np.empty(n)
+    lo = np.empty(n)
+    di = np.empty(n)
+    up = np.empty(n)
+    cp = np.empty(n)
+    dm = np.empty(n)
+    M = 0.0                                       # ∫_t^T μ
+    K = 0.0                                       # ∫_t^T μ(r)(T − r) dr
+    for phase in range(2):
+        t_hi, t_lo, m = (T, t_ks, n_abs) if phase == 0 else (t_ks, t_b, n_refl)
+        if not t_hi > t_lo:
+            continue
+        h = (t_hi - t_lo) / m
+        reflect = phase == 1
+        mu_o = al * (_x3(t_hi, dt_u, U, tau, x3_off) - kc)
+        for k in range(m):
+            t_o = t_hi - k * h
+            t_n = t_hi - (k + 1) * h
+            mu_n = al * (_x3(t_n, dt_u, U, tau, x3_off) - kc)
+            th = 1.0 if k < 2 else 0.5
+            e = (1.0 - th) * h
+            # explicit part: u + (1−θ)h(L u + f)
+            ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
+            for i in range(1, n_x):
+                r1[i] = u1[i] + e * (ao * u1[i - 1] - 2 * D * u1[i] + bo * u1[i + 1] + x[i]) + th * h * x[i]
+                r2[i] = u2[i] + e * (ao * u2[i - 1] - 2 * D * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
+            an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
+            for i in range(1, n_x):
+                lo[i], di[i], up[i] = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn
+            if reflect:                               # u_x(0) = 0: ghost u[-1] = u[1]
+                r1[0] = u1[0] + e * (2 * D * (u1[1] - u1[0]))
+                r2[0] = u2[0] + e * (2 * D * (u2[1] - u2[0]))
+                lo[0], di[0], up[0] = 0.0, 1.0 + 2 * th * h * D, -2 * th * h * D
+            else:                                     # absorbed: u(0) = 0
+                r1[0] = r2[0] = 0.0
+                lo[0], di[0], up[0] = 0.0, 1.0, 0.0
+            # x = X: no absorption before T, Gaussian moments (7)
+            M += 0.5 * h * (mu_o + mu_n)
+            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
+            w = T - t_n
+            y, vz = X + M, s2 * w
+            EI = X * w + K
+            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+            Ez2 = y * y + vz
+            Ez3 = y * (y * y + 3 * vz)
+            Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
+            EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
+            lo[n_x], di[n_x], up[n_x] = 0.0, 1.0, 0.0
+            r1[n_x] = EI + EP1
+            r2[n_x] = (EI * EI + s2 * w**3 / 3.0 + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a)))
+                       + EP2)
+            # Thomas: factor once, solve u1, then u2 with the new u1 in its source
+            cp[0] = up[0] / di[0]
+            dm[0] = di[0]
+            for i in range(1, n):
+                dm[i] = di[i] - lo[i] * cp[i - 1]
+                cp[i] = up[i] / dm[i]
+            u1[0] = r1[0] / dm[0]
+            for i in range(1, n):
+                u1[i] = (r1[i] - lo[i] * u1[i - 1]) / dm[i]
+            for i in range(n - 2, -1, -1):
+                u1[i] -= cp[i] * u1[i + 1]
+            for i in range(1, n_x):
+                r2[i] += th * h * 2 * x[i] * u1[i]
+            u2[0] = r2[0] / dm[0]
+            for i in range(1, n):
+                u2[i] = (r2[i] - lo[i] * u2[i - 1]) / dm[i]
+            for i in range(n - 2, -1, -1):
+                u2[i] -= cp[i] * u2[i + 1]
+            mu_o = mu_n
+    return u1[0], u2[0]

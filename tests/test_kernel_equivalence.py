@@ -1,0 +1,109 @@
+"""Issue 27's cheaper kernels give the numbers of the code they replaced, bit for bit.
+
+* :func:`plant.multimode.zero_velocity._step` (four normals behind one bounds check) against
+  the four-call reference (tests/reference_kernels.py), on the ladder's own Φ and noise factors;
+* :func:`plant.multimode.zero_velocity._crossed` against ``pc >= 1.0 or uniform_below(pc)``
+  with pc = :func:`_cross_prob`: the same decision from the same number of normals, also where
+  its shortcut applies (exponent < −70) and around its bounds;
+* the multimode family's compiled ``pulse_motion`` against the generic
+  :meth:`plant.protocol.PlantFamily.pulse_motion` (Python intervals through ``advance``), from
+  stuck states with friction offsets, including no-pulse and failing cases.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from plant.multimode.interval import _tables
+from plant.multimode.zero_velocity import _cross_prob, _crossed, _step
+from plant.params import PlantParams
+from plant.protocol import PlantFamily, get_family
+from plant.randomness import NoiseExhausted, uniform_below
+from plant.state import PlantState, SimOptions
+from tests.reference_kernels import step as reference_step
+
+
+def test_step_reads_the_same_normals_and_gives_the_same_state():
+    _, TP, TL, *_ = _tables(PlantParams(), SimOptions())
+    rng = np.random.default_rng(0)
+    z = rng.standard_normal(64)
+    for trial in range(200):
+        X = rng.normal(0.0, 1.0, 7) * np.array([1e-5, 1e-3, 1.0, 1e-4, 0.3, 1.0, 3.0])
+        P, L = TP[trial % 2, trial % 3 % 2, trial % TP.shape[2]], TL[trial % 2, trial % 3 % 2, trial % TP.shape[2]]
+        c1, c2 = np.array([trial % 50], dtype=np.int64), np.array([trial % 50], dtype=np.int64)
+        o1, o2 = np.empty(7), np.empty(7)
+        _step(X, P, L, z, c1, o1)
+        reference_step(X, P, L, z, c2, o2)
+        assert c1[0] == c2[0] == trial % 50 + 4
+        assert np.array_equal(o1, o2)
+    with pytest.raises(NoiseExhausted):           # fewer than four normals left
+        _step(X, P, L, z, np.array([61], dtype=np.int64), o1)
+
+
+def _reference_crossed(va, vb, h, s2, z, cursor):
+    pc = _cross_prob(va, vb, h, s2)
+    return pc >= 1.0 or uniform_below(z, cursor, pc)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_crossing_decision_and_draws_match_the_probability_form(seed):
+    rng = np.random.default_rng(seed)
+    # normals including the far tail below −11 where the shortcut must defer to erfc
+    z = np.concatenate((rng.standard_normal(4000), [-11.5, -11.0, -10.999, -12.0, -40.0, 0.0, -0.0]))
+    rng.shuffle(z)
+    n_short = 0
+    for i in range(4000):
+        s2 = 10.0 ** rng.uniform(-10, -4)
+        h = 10.0 ** rng.uniform(-6, -3)
+        scale = math.sqrt(s2 * h) * 10.0 ** rng.uniform(-1, 1.5)
+        va, vb = rng.normal(0, scale), rng.normal(0, scale)
+        if i % 7 == 0:
+            vb = -va if i % 14 == 0 else 0.0
+        if i % 11 == 0:                   # exponent right at the shortcut's edge
+            vb = 70.0 * s2 * h / (2.0 * va) * (1.0 + rng.uniform(-1e-12, 1e-12)) if va != 0 else vb
+        pos = i % (z.shape[0] - 1)
+        c1, c2 = np.array([pos], dtype=np.int64), np.array([pos], dtype=np.int64)
+        assert _crossed(va, vb, h, s2, z, c1) == _reference_crossed(va, vb, h, s2, z, c2), (va, vb, h, s2, z[pos])
+        assert c1[0] == c2[0]
+        n_short += va * vb > 0 and -2.0 * va * vb / (s2 * h) < -70.0
+    assert n_short > 300
+    # deep in the shortcut with a normal below −11: erfc decides (no crossing: Φ(−40) ≈ 0 < pc is false)
+    c1, c2 = np.array([0], dtype=np.int64), np.array([0], dtype=np.int64)
+    zz = np.array([-40.0])
+    assert _crossed(1.0, 1.0, 1.0, 0.02, zz, c1) == _reference_crossed(1.0, 1.0, 1.0, 0.02, zz, c2)
+
+
+def test_compiled_pulse_motion_is_the_generic_one():
+    fam = get_family("multimode")
+    rng = np.random.default_rng(27)
+    n_moved = n_fail = 0
+    for params in (PlantParams(), PlantParams().replace(friction_noise_psd=0.0), PlantParams().replace(stiction=2.9)):
+        for _ in range(40):
+            x = np.array([rng.normal(0, 2e-5), 0.0, 0.0, rng.normal(0, 1e-4), rng.normal(0, 0.3), 0.0])
+            x.flags.writeable = False
+            state = PlantState(rng.uniform(0, 10), x, 2, False)
+            dtu = float(rng.choice([0.0, rng.uniform(0, 3e-3), rng.uniform(0.8e-3, 1.6e-3)]))
+            sign = int(rng.choice([-1, 1]))
+            try:
+                want = PlantFamily.pulse_motion(fam, params, state, dtu, sign)
+            except RuntimeError as e:
+                with pytest.raises(RuntimeError, match=str(e)[:20]):
+                    fam.pulse_motion(params, state, dtu, sign)
+                n_fail += 1
+                continue
+            got = fam.pulse_motion(params, state, dtu, sign)
+            assert got == want
+            n_moved += want[0] != 0.0
+    assert n_moved > 40
+
+
+def test_compiled_log1p_is_pythons():
+    # the compiled pulse_motion sizes its flyback chunks with numba's log1p where the generic
+    # path uses math.log1p: the same function of the C library, checked value for value
+    from numba import njit
+
+    f = njit(lambda v: math.log1p(v))
+    rng = np.random.default_rng(1)
+    for v in np.concatenate((rng.uniform(0.0, 1.0, 5000), 10.0 ** rng.uniform(-18, 0, 5000))):
+        assert f(v) == math.log1p(v)
