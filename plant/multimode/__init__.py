@@ -11,14 +11,14 @@ covariance as matrices: the test oracles' counterpart), ``noise`` (the minimal f
 whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
 response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``disturbed``
 (the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when
-``disturbance_torque_std`` > 0).
+``disturbance_torque_std`` > 0; compiled in ``disturbed_jit``, its linear-law loop ``disturbed_loop``).
 """
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-from plant.multimode import disturbed, law_loop, reference
+from plant.multimode import disturbed, disturbed_loop, law_loop, reference
 from plant.multimode.interval import advance
 from plant.params import PlantParams
 from plant.protocol import PlantFamily, register_family
@@ -43,6 +43,13 @@ class Multimode(PlantFamily):
         if params.disturbance_torque_std != 0.0:
             return disturbed.initial_state(params, x5)
         return super().initial_state(params, x5)
+
+    def law_loop(self, params):
+        """As :meth:`PlantFamily.law_loop`; with the disturbance torque on (ideal sensor, no delay),
+        the disturbed plant's own compiled loop (:mod:`plant.multimode.disturbed_loop`)."""
+        if params.disturbance_torque_std != 0.0 and params.quantization == 0.0 and params.command_delay == 0.0:
+            return disturbed_loop.run_law
+        return super().law_loop(params)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
         if params.disturbance_torque_std != 0.0:

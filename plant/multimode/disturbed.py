@@ -337,10 +337,11 @@ def _moving_far(p, dirn, x2, x3, x5, kc, u, d):
 
 
 def _cross_prob(va, vb, w, sig2):
-    """P(a Brownian bridge from va > 0 to vb over w touches 0); 1 when vb ≤ 0."""
+    """P(a Brownian bridge from va > 0 to vb over w touches 0); 1 when vb ≤ 0, 0 for w = 0 (what
+    exp(−∞) gave, without numpy's divide-by-zero warning)."""
     if vb <= 0.0 or va <= 0.0:
         return 1.0
-    if sig2 <= 0.0:
+    if sig2 <= 0.0 or not w > 0.0:
         return 0.0
     return math.exp(-2.0 * va * vb / (sig2 * w))
 

@@ -219,7 +219,7 @@ def _closed_form(mode, h, rec, rd, dp, phi, Q):
 @njit(cache=True)
 def _noise_factor(Q, rows, Bflat, fa):
     """plant.multimode.noise.noise_factor(Q): the non-zero rows and the factor of their block
-    (Cholesky, else the scaled eigen-factor); returns m."""
+    (Cholesky, else the scaled eigen-factor, stored transposed and flagged by returning −m); returns m."""
     m = 0
     for i in range(_N):
         nz = False
@@ -254,8 +254,8 @@ def _noise_factor(Q, rows, Bflat, fa):
     lam, V = np.linalg.eigh(Sy)
     for i in range(m):
         for j in range(m):
-            B[i, j] = (V[i, j] * math.sqrt(max(lam[j], 0.0))) * d[i]
-    return m
+            B[j, i] = (V[i, j] * math.sqrt(max(lam[j], 0.0))) * d[i]      # stored as Bᵀ (numpy's is column-ordered)
+    return -m
 
 
 # --- the caches --------------------------------------------------------------------------------
@@ -335,13 +335,13 @@ def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW,
     for j in range(_N):
         if lam[j] > thr:
             nb += 1
-    Bb = BBF[k, :_N * nb].reshape((_N, nb))
+    BbT = BBF[k, :_N * nb].reshape((nb, _N))       # Bᵀ: numpy's B is column-ordered (eigh's V)
     c = 0
     for j in range(_N):
         if lam[j] > thr:
             sq = math.sqrt(max(lam[j], 0.0))
             for i in range(_N):
-                Bb[i, c] = V[i, j] * sq
+                BbT[c, i] = V[i, j] * sq
             c += 1
     BNB[k] = nb
     BG[k] = G
@@ -356,8 +356,7 @@ def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
     if BCN[k, v] != -2:
         return
     nb = BNB[k]
-    B = BBF[k, :_N * nb].reshape((_N, nb))
-    S = _aat(B, fa)
+    S = _aat(BBF[k, :_N * nb].reshape((nb, _N)).T, fa)
     Se = np.dot(S, e)
     var = np.dot(e, Se)
     BCV[k, v] = var
@@ -383,13 +382,13 @@ def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
     for j in range(_N):
         if lam[j] > thr:
             nf += 1
-    F = BCF[k, v, :_N * nf].reshape((_N, nf))
+    FT = BCF[k, v, :_N * nf].reshape((nf, _N))     # Fᵀ: numpy's F is column-ordered
     c = 0
     for j in range(_N):
         if lam[j] > thr:
             sq = math.sqrt(lam[j])
             for i in range(_N):
-                F[i, c] = V[i, j] * sq
+                FT[c, i] = V[i, j] * sq
             c += 1
     BCN[k, v] = nf
 
@@ -539,13 +538,13 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out)
                 Ym[i] = mean[i] + BCK[k, v, i] * dc
             nf = BCN[k, v]
             if nf > 0:
-                F = BCF[k, v, :_N * nf].reshape((_N, nf))
-                Ym += np.dot(F, _normals(z, cursor, nf))
+                FT = BCF[k, v, :_N * nf].reshape((nf, _N))
+                Ym += np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
         else:
             nb = BNB[k]
             if nb:
-                B = BBF[k, :_N * nb].reshape((_N, nb))
-                Ym = mean + np.dot(B, _normals(z, cursor, nb))
+                BT = BBF[k, :_N * nb].reshape((nb, _N))
+                Ym = mean + np.dot(BT.T, _normals(z, cursor, nb))
             else:
                 Ym = mean + 0.0
             cm = np.dot(e, Ym) + c0
@@ -639,7 +638,11 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
     Yb[:] = np.dot(TPHI[k], Y)
     m = TM[k]
     if noisy and m:
-        add = np.dot(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m))
+        if m > 0:
+            add = np.dot(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m))
+        else:                                       # the eigen-factor, stored transposed
+            m = -m
+            add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
         for i in range(m):
             Yb[TROWS[k, i]] += add[i]
     S[_NSUB] += 1.0
