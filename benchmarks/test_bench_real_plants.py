@@ -5,19 +5,20 @@ Seed 0; compiled code warmed first by a 1 s cell of each, so the ratio is of sim
 compilation. ``make benchmark`` runs it (skipped under ``--benchmark-disable``). Pairs known to
 miss the goal are marked xfail with the reason (the assertion stays the goal):
 
-* ``disturbed``: the disturbance path (plant/multimode/disturbed.py) is Python over numpy, with
-  no compiled interval and no compiled linear-law loop yet;
+* ``disturbed``: compiled since 2026-11-27 (plant/multimode/disturbed_jit.py, and the linear law's
+  loop plant/multimode/disturbed_loop.py), bit-identical to the Python path. The noisy d needs
+  exact Gaussian sub-steps where thesis has closed forms: linear's thesis cell is a noise-free
+  closed-form slide (0.7 µs per 10 ms sample) against ~5 sub-steps and a new Φ(h) per sample;
+  dithered's reflection regime runs in 10 µs sub-steps (316 k per 10 s against 120 k).
 * ``quantized``/``delayed`` with ``linear``: the compiled linear-law loop models the ideal sensor
   and no delay, so linear falls back to the per-sample Python path.
 
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
-1.39. ``disturbed`` was not benchmarked here; from a matrix run (same machine, seeds 0-2, CPU per
-100 s cell): solnic-modern ~5x, pulse-width ~34x, linear ~900x (its thesis cell is the compiled loop).
-After the disturbed path's caches (same loaded machine, seed 0, one process, old and new path
-alternated, CPU per 100 s cell, results bit-identical): dithered 63.0 -> 35.7 s (thesis 0.46 s:
-137x -> 78x), pulse-width 2.51 -> 1.60 s (26x -> 16x), linear 1.12 -> 0.78 s (thesis 0.01 s in the
-compiled loop: ~170x -> ~115x).
+1.39. ``disturbed``/thesis, CPU per 100 s cell, one process, 2026-11-27 (loaded machine):
+before the compiled path linear ~115×, pulse-width 16×, dithered 78×; compiled: linear 0.110 s
+against 0.007 s (15×), solnic-modern 0.60 against 1.38 s (0.44×), pulse-width 0.33 against 0.11 s
+(3.0×), dithered 4.5 against 0.48 s (9.3×).
 """
 
 import pytest
@@ -28,13 +29,15 @@ from benchmarks.cell_cost import cell_cpu
 pytestmark = pytest.mark.slow
 
 _GOAL = 1.5
-_MISSES = {("disturbed", "linear"), ("disturbed", "solnic-modern"), ("disturbed", "pulse-width"),
+_MISSES = {("disturbed", "linear"), ("disturbed", "pulse-width"), ("disturbed", "dithered"),
            ("quantized", "linear"), ("delayed", "linear")}
 
 
 _CASES = [pytest.param(s, c, marks=pytest.mark.xfail(reason="known miss, see module docstring", strict=False)
                        if (s, c) in _MISSES else ())
-          for s in ("disturbed", "quantized", "delayed") for c in ("linear", "solnic-modern", "pulse-width")]
+          for s in ("disturbed", "quantized", "delayed") for c in ("linear", "solnic-modern", "pulse-width")] + [
+    pytest.param("disturbed", "dithered", marks=pytest.mark.xfail(reason="known miss, see module docstring",
+                                                                 strict=False))]
 
 
 @pytest.mark.parametrize("name, controller", _CASES)

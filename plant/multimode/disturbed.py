@@ -616,7 +616,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
     noisy = options.noise and noise is not None
-    ov, C = disturbed_jit.kernel_inputs(params, options)
+    ov, *K = disturbed_jit.kernel_inputs(params, options)
     if not noisy and ov[0] != 0.0:
         ov = ov.copy()
         ov[0] = 0.0
@@ -629,7 +629,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     while True:
         try:
             pos_after = disturbed_jit.interval_kernel(x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
-                                                      ov, C, z, pos, ev, out)
+                                                      ov, *K, z, pos, ev, out)
             break
         except NoiseExhausted:
             z, pos = noise.grow(pos)

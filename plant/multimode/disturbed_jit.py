@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import threading
-from functools import lru_cache
 
 import llvmlite.ir as ir
 import numpy as np
@@ -174,7 +173,7 @@ def _pinv_hermitian(A, rcond):
 
 @njit(cache=True)
 def _closed_form(mode, h, rec, rd, dp, phi, Q):
-    """disturbed._closed_form: Φ(h) and Q(h) into phi and Q (8 × 8)."""
+    """disturbed._closed_form: Φ(h) and Q(h) into phi and Q (8 × 8); rec, rd: 1-element record arrays."""
     bd, sd2 = dp[_BD], dp[_SD2]
     for i in range(_N):
         for j in range(_N):
@@ -197,7 +196,7 @@ def _closed_form(mode, h, rec, rd, dp, phi, Q):
         Q[YD, YD] = sd2 * e1(2.0 * bd * h) / (2.0 * bd)
         return
     P7 = np.empty((7, 7))
-    phi_moving(mode, h, rec, P7)
+    phi_moving(mode, h, rec[0], P7)
     for i in range(7):
         for j in range(7):
             phi[_FROM7[i], _FROM7[j]] = P7[i, j]
@@ -206,11 +205,11 @@ def _closed_form(mode, h, rec, rd, dp, phi, Q):
     phi[Y2, YD] = a * e1(bd * h) / bd
     phi[YD, YD] = math.exp(-bd * h)
     Q4 = np.empty((4, 4))
-    q_moving(mode, h, rec, Q4)
+    q_moving(mode, h, rec[0], Q4)
     for i in range(4):
         for j in range(4):
             Q[_BLOCK[i], _BLOCK[j]] = Q4[i, j]
-    q_moving(1, h, rd, Q4)
+    q_moving(1, h, rd[0], Q4)
     for i in range(3):
         for j in range(3):
             Q[_DBLK[i], _DBLK[j]] += Q4[_D4[i], _D4[j]]
@@ -703,10 +702,65 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
     return False
 
 
+# The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
+# numba's argument typing per call); _views cuts them into the named tables.
+_DP_LEN = 15
+_LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
+             ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
+             ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128))
+_LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
+_SIZE_F = sum(n for _, n in _LAYOUT_F)
+_SIZE_I = sum(n for _, n in _LAYOUT_I)
+
+
 @njit(cache=True)
-def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov, C, z, zpos, ev, out):
+def _views(recs, rds, FB, IB):
+    """The kernel's constants and cache tables as views of the flat buffers (see kernel_inputs)."""
+    nt, nb = _NT, _NB
+    o = 0
+    dp = FB[o:o + _DP_LEN]
+    o += _DP_LEN
+    TK = FB[o:o + nt * 2].reshape((nt, 2))
+    o += nt * 2
+    TPHI = FB[o:o + nt * 64].reshape((nt, _N, _N))
+    o += nt * 64
+    TQ = FB[o:o + nt * 64].reshape((nt, _N, _N))
+    o += nt * 64
+    TB = FB[o:o + nt * 64].reshape((nt, 64))
+    o += nt * 64
+    BK = FB[o:o + nb * 2].reshape((nb, 2))
+    o += nb * 2
+    BPH = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BPW = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BG = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BBF = FB[o:o + nb * 64].reshape((nb, 64))
+    o += nb * 64
+    BCV = FB[o:o + nb * 2].reshape((nb, 2))
+    o += nb * 2
+    BCK = FB[o:o + nb * 16].reshape((nb, 2, _N))
+    o += nb * 16
+    BCF = FB[o:o + nb * 128].reshape((nb, 2, 64))
+    i = 0
+    fa = IB[i:i + 2]
+    i += 2
+    TROWS = IB[i:i + nt * 8].reshape((nt, _N))
+    i += nt * 8
+    TM = IB[i:i + nt]
+    i += nt
+    BNB = IB[i:i + nb]
+    i += nb
+    BCN = IB[i:i + nb * 2].reshape((nb, 2))
+    return (recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN)
+
+
+@njit(cache=True)
+def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
     """disturbed.advance over [t0, t0 + duration): ``out[:7]`` the new state, ``out[7:]`` the work
-    sheet; returns the new read position in ``z`` (from ``zpos``). ``C``: kernel_inputs()."""
+    sheet; returns the new read position in ``z`` (from ``zpos``). (recs, rds, FB, IB): kernel_inputs()."""
+    C = _views(recs, rds, FB, IB)
     dp = C[2]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
@@ -771,38 +825,42 @@ def _constants(params) -> np.ndarray:
     return dp
 
 
-@lru_cache(maxsize=16)
-def _constant_inputs(params):
-    rec = params.kernel_record()
-    rd = rec.copy()
-    rd[0]["beta5"] = 1.0 / params.disturbance_torque_tau
-    rd[0]["sigma5_sq"] = 2.0 * params.disturbance_torque_std ** 2 / params.disturbance_torque_tau
-    rd[0]["sigma2_sq"] = 0.0
-    rd[0]["sigma4_sq"] = 0.0
-    return rec[0], rd[0], _constants(params)
-
-
 def kernel_inputs(params, options) -> tuple:
-    """(options vector, C): interval_kernel's constant inputs; C's caches are this thread's, per params."""
+    """(options vector, recs, rds, FB, IB): interval_kernel's inputs after ``levels, bridge``. FB and
+    IB hold the constants and this thread's cache tables for ``params`` (filled on use; a pure
+    function of the parameters, so sharing them cannot change a result)."""
     memo = getattr(_LOCAL, "memo", None)
     if memo is None:
         memo = _LOCAL.memo = {}
-    C = memo.get(params)
-    if C is None:
+    K = memo.get(params)
+    if K is None:
         if len(memo) > 8:
             memo.clear()
-        rec, rd, dp = _constant_inputs(params)
-        TK = np.full((_NT, 2), -1.0)
-        BK = np.full((_NB, 2), -1.0)
-        C = memo[params] = (rec, rd, dp, _ADDR, TK, np.zeros((_NT, _N, _N)), np.zeros((_NT, _N, _N)),
-                            np.zeros((_NT, _N * _N)), np.zeros((_NT, _N), np.int64), np.zeros(_NT, np.int64),
-                            BK, np.zeros((_NB, _N, _N)), np.zeros((_NB, _N, _N)), np.zeros((_NB, _N, _N)),
-                            np.zeros((_NB, _N * _N)), np.zeros(_NB, np.int64), np.zeros((_NB, 2)),
-                            np.zeros((_NB, 2, _N)), np.zeros((_NB, 2, _N * _N)), np.full((_NB, 2), -2, np.int64))
+        recs = params.kernel_record()
+        rds = recs.copy()
+        rds[0]["beta5"] = 1.0 / params.disturbance_torque_tau
+        rds[0]["sigma5_sq"] = 2.0 * params.disturbance_torque_std ** 2 / params.disturbance_torque_tau
+        rds[0]["sigma2_sq"] = 0.0
+        rds[0]["sigma4_sq"] = 0.0
+        FB = np.zeros(_SIZE_F)
+        FB[:_DP_LEN] = _constants(params)
+        o = _DP_LEN
+        for name, n in _LAYOUT_F[1:]:
+            if name in ("TK", "BK"):
+                FB[o:o + n] = -1.0              # empty slots
+            o += n
+        IB = np.zeros(_SIZE_I, np.int64)
+        IB[:2] = _ADDR
+        o = 2
+        for name, n in _LAYOUT_I[1:]:
+            if name == "BCN":
+                IB[o:o + n] = -2                # conditional laws not computed
+            o += n
+        K = memo[params] = (recs, rds, FB, IB)
     ov = options.__dict__.get("_disturbed_vector")
     if ov is None:
         ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
                        options.bisection_tol, float(options.max_events), options.diverge_error])
         ov.flags.writeable = False
         object.__setattr__(options, "_disturbed_vector", ov)
-    return ov, C
+    return (ov, *K)

@@ -31,8 +31,8 @@ _OK = 0
 
 
 @njit(cache=True)
-def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, ov, KC,
-           z, zpos, margin, ev, out, totals, x1_window, prog):
+def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, ov, recs, rds,
+           FB, IB, z, zpos, margin, ev, out, totals, x1_window, prog):
     """Samples n0 ≤ n < n1 (the layout of :mod:`plant.law_driver`); a kernel status code or NEED_NOISE."""
     n_c = cx.shape[0]
     cxn = np.empty(n_c)
@@ -49,7 +49,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
         level = min(max(-v, -u_max), u_max)
         k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
         pos = disturbed_jit.interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
-                                            levs[:k].copy(), bridge, ov, KC, z, zpos, ev, out)
+                                            levs[:k].copy(), bridge, ov, recs, rds, FB, IB, z, zpos, ev,
+                                            out)
         S = out[N_X:]
         if n >= n_warm:
             x1_window[n - n_warm] = x1
@@ -85,7 +86,7 @@ def run_law(law, params: PlantParams, options: SimOptions, state: PlantState, se
             ) -> tuple[PlantState, dict[str, float], np.ndarray, Status, str]:
     """:func:`plant.law_driver.run_chunks` around the disturbed chunk."""
     noisy = options.noise and noise is not None
-    ov, KC = disturbed_jit.kernel_inputs(params, options)
+    ov, *K = disturbed_jit.kernel_inputs(params, options)
     if not noisy and ov[0] != 0.0:
         ov = ov.copy()
         ov[0] = 0.0
@@ -93,7 +94,7 @@ def run_law(law, params: PlantParams, options: SimOptions, state: PlantState, se
         x = np.zeros(N_X)
         x[:state.x.shape[0]] = state.x
         state = PlantState(state.t, x, state.mode, state.flyback)
-    return run_chunks(_chunk, (ov, KC), law, params, options, state, sensor, n_warm, noise, noisy, deadline,
+    return run_chunks(_chunk, (ov, *K), law, params, options, state, sensor, n_warm, noise, noisy, deadline,
                       n_state=N_X, sheet_size=disturbed_jit.SHEET_SIZE, no_events=_NO_EVENTS, status_ok=_OK,
                       interval_status=_status)
 
