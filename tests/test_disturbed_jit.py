@@ -110,3 +110,18 @@ def test_zero_width_crossing_probability_is_0_without_a_warning():
         assert disturbed._cross_prob(np.float64(0.3), np.float64(0.2), 0.0, 1.0) == 0.0
         assert disturbed._cross_prob(np.float64(0.3), np.float64(-0.2), 0.0, 1.0) == 1.0
         assert disturbed_jit._cross_prob(0.3, 0.2, 0.0, 1.0) == 0.0
+
+
+def test_chatter_divergence_and_bad_levels_are_the_python_paths():
+    statuses = set()
+    for opts in (SimOptions(max_events=3), SimOptions(diverge_error=2e-3)):
+        for seed in range(3):
+            fast = _train(disturbed.advance, _STRONG, seed, 40, DriveType.BRIDGE, opts)
+            assert fast == _train(disturbed.advance_python, _STRONG, seed, 40, DriveType.BRIDGE, opts)
+            statuses |= {r[4].value for r in fast}
+    assert {"chatter", "diverged"} <= statuses
+    s = disturbed.initial_state(_STRONG, 0.0)
+    bad = DriveCommand.hold(0.5 * _STRONG.u_max, DriveType.BRIDGE)
+    for adv in (disturbed.advance, disturbed.advance_python):
+        with pytest.raises(ValueError, match="bridge drive levels must be 0 or ±u_max"):
+            adv(s, bad, _STRONG, NoiseStream.from_seed(0), SimOptions())
