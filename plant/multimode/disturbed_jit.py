@@ -471,36 +471,58 @@ def _cross_prob(va, vb, w, sig2):
 
 
 @njit(cache=True)
-def _stuck_far(w, ks, ax3, ad, u, g, tau3, sig2):
-    x3max = max(ax3, abs(u + g * math.exp(-w / tau3)))
+def _stuck_far(w, ks, ax3, ad, u, g, tau3, sig2, decay):
+    """disturbed._stuck_far's far(w); ``decay`` = exp(−w/τ3) (a rung's from the table)."""
+    x3max = max(ax3, abs(u + g * decay))
     return ks - x3max - ad > FAR_SIGMAS * math.sqrt(sig2 * w)
 
 
 @njit(cache=True)
-def _moving_far(w, v0, slope, curv, a, s2, sd2, s5):
+def _moving_far(w, v0, slope, curv, a, s2, sd2, s5, w3):
+    """disturbed._moving_far's far(w); ``w3`` = w**3 (a rung's from the table)."""
     low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
-    w3 = math.pow(w, 3.0)
     sd = a * (math.sqrt(s2 * w) + math.sqrt(sd2 * w3 / 3.0) + math.sqrt(s5 * w3 / 3.0))
     return low > FAR_SIGMAS * sd
 
 
 @njit(cache=True)
-def _far(kind, w, c):
+def _far(kind, w, c, lad, j):
+    """far(w) of the stuck (kind 0) or moving rule; rung j of the ladder table, or j < 0: w itself."""
     if kind == 0:
-        return _stuck_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6])
-    return _moving_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6])
+        decay = lad[1 + LADDER + j] if j >= 0 else math.exp(-w / c[5])
+        return _stuck_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], decay)
+    w3 = lad[1 + j] if j >= 0 else math.pow(w, 3.0)
+    return _moving_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], w3)
 
 
 @njit(cache=True)
-def _ladder_width(room, sub, kind, c):
+def _ladder_table(lad, sub, tau3):
+    """The rungs' w**3 and exp(−w/τ3), w = sub·2^(LADDER−1), …, 2·sub (the same doubles as the
+    Python path's powers and exponentials of the same widths), kept until ``sub`` changes."""
+    if lad[0] == sub:
+        return
+    w = sub * _TOP
+    j = 0
+    while w > sub:
+        lad[1 + j] = math.pow(w, 3.0)
+        lad[1 + LADDER + j] = math.exp(-w / tau3)
+        w /= 2.0
+        j += 1
+    lad[0] = sub
+
+
+@njit(cache=True)
+def _ladder_width(room, sub, kind, c, lad):
     """disturbed._ladder_width: (width, far)."""
     w = sub * _TOP
-    if sub < room <= w and _far(kind, room, c):
+    if sub < room <= w and _far(kind, room, c, lad, -1):
         return room, True
+    j = 0
     while w > sub:
-        if w <= room and _far(kind, w, c):
+        if w <= room and _far(kind, w, c, lad, j):
             return w, True
         w /= 2.0
+        j += 1
     return min(sub, room), False
 
 
@@ -589,7 +611,7 @@ def _velocity_zero(Y, S, dirn, dp, ov, ev):
 
 
 @njit(cache=True)
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc):
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad):
     """disturbed._segment: one sub-step (or to the next event); True when the interval must stop."""
     rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM = C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9]
     mode = int(S[_MODE])
@@ -608,7 +630,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
         sig2 = sig_d2
         if ks - abs(x3) - abs(d) > 0.0:
             c[0], c[1], c[2], c[3], c[4], c[5], c[6] = ks, abs(x3), abs(d), u, x3 - u, tau3, sig2
-            w, far = _ladder_width(room_fb, sub, 0, c)
+            w, far = _ladder_width(room_fb, sub, 0, c, lad)
         else:
             w, far = min(sub, room_fb), False
         rungs = False
@@ -627,18 +649,19 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
             c[1] = dirn * a * (x3 + d) - a * (kc + x5)
             c[2] = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
             c[3], c[4], c[5], c[6] = a, dp[_S2], dp[_SD2], dp[_S5]
-            w, far = _ladder_width(room_fb, sub, 1, c)
+            w, far = _ladder_width(room_fb, sub, 1, c, lad)
         else:
             w, far = min(sub, room_fb), False
         if reflecting and not far:
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
     k = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
-    Yb[:] = np.dot(TPHI[k], Y)
+    np.dot(TPHI[k], Y, Yb)                          # into Yb: no allocation (BLAS dgemv either way)
     m = TM[k]
     if noisy and m:
         if m > 0:
-            add = np.dot(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m))
+            add = Yc[:m]
+            np.dot(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
         else:                                       # the eigen-factor, stored transposed
             m = -m
             add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
@@ -648,7 +671,8 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
     if _tick(S, 1.0, ov):
         return True
     crossed = False
-    e = np.zeros(_N)
+    for i in range(_N):
+        e[i] = 0.0
     c0 = 0.0
     v = 0
     if mode != 2 and rungs:
@@ -705,9 +729,10 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
 # numba's argument typing per call); _views cuts them into the named tables.
 _DP_LEN = 15
+_LAD_LEN = 1 + 2 * LADDER     # the step ladder's table (_ladder_table), last in FB
 _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
              ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
-             ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128))
+             ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128), ("LAD", _LAD_LEN))
 _LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
 _SIZE_F = sum(n for _, n in _LAYOUT_F)
 _SIZE_I = sum(n for _, n in _LAYOUT_I)
@@ -777,6 +802,9 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
     c = np.empty(7)
     Yb = np.empty(_N)
     Yc = np.empty(_N)
+    e = np.zeros(_N)
+    lad = FB[_SIZE_F - _LAD_LEN:]
+    _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
     k = offsets.shape[0]
     stop = False
     for seg in range(k):
@@ -787,7 +815,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
         if seg > 0 and _event(S, Y, _LEVEL, ov, ev):
             break
         while S[_T] < t_seg_end:
-            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc)
+            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad)
             if stop or S[_STATUS] != _OK:
                 stop = True
                 break
