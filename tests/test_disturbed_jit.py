@@ -125,3 +125,15 @@ def test_chatter_divergence_and_bad_levels_are_the_python_paths():
     for adv in (disturbed.advance, disturbed.advance_python):
         with pytest.raises(ValueError, match="bridge drive levels must be 0 or ±u_max"):
             adv(s, bad, _STRONG, NoiseStream.from_seed(0), SimOptions())
+
+
+def test_kernel_matrix_vector_product_is_numpys_bit_for_bit():
+    """The sub-step's hand-written dgemv order (disturbed_jit._gemv) against numpy's A @ x."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 3, 4, 5, 6, 8):
+        out = np.empty(n)
+        for _ in range(500):
+            A = rng.standard_normal((n, n)) * np.exp(3.0 * rng.standard_normal((n, n)))
+            x = rng.standard_normal(n) * np.exp(3.0 * rng.standard_normal(n))
+            disturbed_jit._gemv(A, x, out)
+            assert np.array_equal(out, A @ x), n

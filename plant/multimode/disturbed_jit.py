@@ -7,9 +7,10 @@ path's, operation for operation, so the results are bit-identical (tests/test_di
 compares whole pulse trains and closed loops, every field, on many seeds):
 
 * scalar expressions are written in the same order (numba does not reassociate or fuse);
-* numpy's small products (Φ·Y, B·z, G·(…), e·Y) and the bridge law's matrix products go through
-  BLAS there; here they are ``np.dot``, which numba sends to scipy's BLAS (the same OpenBLAS
-  kernels on this machine: dgemv, dgemm, ddot agree bit for bit);
+* numpy's small products go through BLAS. The sub-step's Φ·Y and B·z are written out here in
+  OpenBLAS's dgemv order (:func:`_gemv`); the bisection's products (G·(…), e·Y, the column-ordered
+  factors) and the bridge law's matrix products are ``np.dot``, which numba sends to scipy's
+  BLAS (the same OpenBLAS kernels on this machine: dgemv, dgemm, ddot agree bit for bit);
 * ``B @ B.T`` is BLAS ``dsyrk`` in numpy's matmul and the Cholesky factor is LAPACK ``dpotrf``
   on the lower triangle: both are called here by their scipy addresses with numpy's arguments
   (numba's own ``np.linalg.cholesky`` factors the other triangle and rounds differently);
@@ -87,6 +88,52 @@ def _call_ptrs(typingctx, addr, ptrs):
         return context.get_dummy_value()
 
     return sig, codegen
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a·b + c with one rounding (LLVM's llvm.fma.f64), as controllers._fma."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def _gemv(A, x, out):
+    """out = A @ x as numpy computes it for a C-ordered square A of order 1–5 or 8 (the sizes of Φ
+    and of the noise factors), else np.dot. numpy's product is OpenBLAS's dgemv_t (Haswell
+    kernel): four FMA lanes over the first m − m mod 4 terms, summed (l0 + l2) + (l1 + l3), then
+    the remaining terms: y + a·x (one fma), y + fma(a0, x0, a1·x1), y + fma(a2, x2, fma(a0, x0,
+    a1·x1)). Checked bit for bit against numpy (tests/test_disturbed_jit.py); ~20× cheaper than
+    a BLAS call from numba."""
+    n, m = A.shape
+    if n != m or (m > 5 and m != 8):
+        np.dot(A, x, out)
+        return
+    m1 = m - (m & 3)
+    r = m - m1
+    for i in range(n):
+        y = 0.0
+        if m1 > 0:
+            a0 = a1 = a2 = a3 = 0.0
+            for k in range(0, m1, 4):
+                a0 = _fma(A[i, k], x[k], a0)
+                a1 = _fma(A[i, k + 1], x[k + 1], a1)
+                a2 = _fma(A[i, k + 2], x[k + 2], a2)
+                a3 = _fma(A[i, k + 3], x[k + 3], a3)
+            y = (a0 + a2) + (a1 + a3)
+        if r == 1:
+            y = _fma(A[i, m1], x[m1], y)
+        elif r == 2:
+            y = y + _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1])
+        elif r == 3:
+            y = y + _fma(A[i, m1 + 2], x[m1 + 2], _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1]))
+        out[i] = y
 
 
 class RecordFull(Exception):
@@ -656,12 +703,12 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
     k = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
-    np.dot(TPHI[k], Y, Yb)                          # into Yb: no allocation (BLAS dgemv either way)
+    _gemv(TPHI[k], Y, Yb)
     m = TM[k]
     if noisy and m:
         if m > 0:
             add = Yc[:m]
-            np.dot(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
+            _gemv(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
         else:                                       # the eigen-factor, stored transposed
             m = -m
             add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
