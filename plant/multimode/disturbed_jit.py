@@ -313,7 +313,7 @@ def _slot(mode, w, size):
     return key % size
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
     """Slot of (mode, w) in the transition cache, computed on a miss."""
     k = _slot(mode, w, TK.shape[0])
@@ -657,7 +657,7 @@ def _velocity_zero(Y, S, dirn, dp, ov, ev):
     return _event(S, Y, kind, ov, ev)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad):
     """disturbed._segment: one sub-step (or to the next event); True when the interval must stop."""
     rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM = C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9]
