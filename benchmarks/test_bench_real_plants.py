@@ -16,11 +16,11 @@ miss the goal are marked xfail with the reason (the assertion stays the goal):
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
 1.39. ``disturbed``/thesis, CPU per 100 s cell, one process, 2026-11-27 (loaded machine):
-before the compiled path linear ~115×, pulse-width 16×, dithered 78×; compiled (four runs, the
-last through this file): linear 0.11–0.13 s against 0.007 s (15–18×), solnic-modern 0.54–0.60 s
-against 0.44–1.38 s (0.44–1.29×, meets the goal), pulse-width 0.29–0.33 s against 0.10–0.11 s
-(2.9–3.0×), dithered 4.5–4.7 s against 0.46–0.48 s (9.3–10.4×). Most of linear's and
-dithered's cost is inside the compiled loop, and the sub-step count is the method's.
+before the compiled path linear ~115×, pulse-width 16×, dithered 78×; compiled, final version
+(through this file, 05:20): linear 0.089 s against 0.007 s (12.7×), solnic-modern 0.48 against
+0.44 s (1.09×, meets the goal; 0.44–1.29× over five runs), pulse-width 0.24 against 0.10 s
+(2.5×), dithered 3.4 against 0.44 s (7.6×). The cost is inside the compiled loop; the sub-step
+count is the method's (exact Gaussian sub-steps while d is noisy).
 """
 
 import pytest

@@ -16,8 +16,8 @@ compares whole pulse trains and closed loops, every field, on many seeds):
   (numba's own ``np.linalg.cholesky`` factors the other triangle and rounds differently);
 * ``eigh`` is LAPACK ``dsyevd`` in both; the hermitian pseudo-inverse is numpy's recipe.
 
-A machine where numpy's and scipy's OpenBLAS builds select different kernels could break the
-identity (not the statistics); the tests would then fail on bits, not on the distribution.
+A machine whose OpenBLAS selects another dgemv kernel (AVX-512, Zen), or where numpy's and scipy's
+builds differ, could break the identity (not the statistics); the tests would then fail on bits.
 
 Transitions (Φ(h), Q(h), the minimal factor) and bridge laws are cached per (mode, h) in
 direct-mapped tables kept with the plant's parameters (a pure function of them: a miss is
