@@ -17,6 +17,12 @@ from plant.law_driver import NEED_NOISE, run_chunks
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.multimode import disturbed_jit
 from plant.multimode.disturbed import N_X
+# the kernel's work-sheet positions (after the N_X state entries of ``out``)
+from plant.multimode.disturbed_jit import (SHEET_ABS as _IABSS, SHEET_BREAKAWAYS as _NBRKS,
+                                           SHEET_CHARGE as _CHGS, SHEET_DURATION as _DURS, SHEET_EVENTS as _NEVS,
+                                           SHEET_FLYBACK as _FB, SHEET_MODE as _MODE, SHEET_PEAK as _PEAKS,
+                                           SHEET_SQ as _ISQS, SHEET_STATUS as _STATUS, SHEET_SUBSTEPS as _NSUBS,
+                                           SHEET_T as _T, STATUS_OK as _OK)
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
 from plant.state import PlantState, SimOptions, Status
@@ -24,15 +30,11 @@ from plant.state import PlantState, SimOptions, Status
 __all__ = ["run_law"]
 
 _DUR, _PEAK, _IABS, _ISQ, _CHG, _NEV, _NBRK, _NSUB = range(8)     # plant.law_driver.TOTAL_FIELDS
-# work-sheet positions of plant.multimode.disturbed_jit (after the N_X state entries of ``out``)
-_T, _MODE, _FB, _PEAKS, _IABSS, _ISQS, _CHGS, _DURS, _NEVS, _NBRKS, _NSUBS, _STATUS = 0, 1, 2, 4, 5, 6, 7, 8, 9, 10, \
-    12, 13
-_OK = 0
 
 
 @njit(cache=True)
-def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, ov, recs, rds,
-           FB, IB, z, zpos, margin, ev, out, totals, x1_window, prog):
+def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_max, amp, freq, phase, tau, prm, ov,
+           recs, rds, FB, IB, z, zpos, margin, ev, out, totals, x1_window, prog):
     """Samples n0 ≤ n < n1 (the layout of :mod:`plant.law_driver`); a kernel status code or NEED_NOISE."""
     n_c = cx.shape[0]
     cxn = np.empty(n_c)
