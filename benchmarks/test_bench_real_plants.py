@@ -5,8 +5,11 @@ Seed 0; compiled code warmed first by a 1 s cell of each, so the ratio is of sim
 compilation. ``make benchmark`` runs it (skipped under ``--benchmark-disable``). Pairs known to
 miss the goal are marked xfail with the reason (the assertion stays the goal):
 
-* ``disturbed``: the disturbance path (plant/multimode/disturbed.py) is Python over numpy, with
-  no compiled interval and no compiled linear-law loop yet;
+* ``disturbed``: compiled since 2026-11-27 (plant/multimode/disturbed_jit.py, and the linear law's
+  loop plant/multimode/disturbed_loop.py), bit-identical to the Python path. The noisy d needs
+  exact Gaussian sub-steps where thesis has closed forms: linear's thesis cell is a noise-free
+  closed-form slide (0.7 µs per 10 ms sample) against ~5 sub-steps and a new Φ(h) per sample;
+  dithered's reflection regime runs in 10 µs sub-steps (316 k per 10 s against 120 k).
 * ``delayed`` with ``linear``: since issue 27 the linear law runs on ``quantized`` and ``delayed``
   in the compiled-law loop (plant/law_step.py; before, the per-sample Python path: 10.5× and
   13.5×); the delay adds a segment boundary, hence plant work, to every interval, and the ratio
@@ -15,12 +18,12 @@ miss the goal are marked xfail with the reason (the assertion stays the goal):
 
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
-1.39. ``disturbed`` was not benchmarked here; from a matrix run (same machine, seeds 0-2, CPU per
-100 s cell): solnic-modern ~5x, pulse-width ~34x, linear ~900x (its thesis cell is the compiled loop).
-After the disturbed path's caches (same loaded machine, seed 0, one process, old and new path
-alternated, CPU per 100 s cell, results bit-identical): dithered 63.0 -> 35.7 s (thesis 0.46 s:
-137x -> 78x), pulse-width 2.51 -> 1.60 s (26x -> 16x), linear 1.12 -> 0.78 s (thesis 0.01 s in the
-compiled loop: ~170x -> ~115x).
+1.39. ``disturbed``/thesis, CPU per 100 s cell, one process, 2026-11-27 (loaded machine):
+before the compiled path linear ~115×, pulse-width 16×, dithered 78×; compiled, final version
+(through this file, 05:20): linear 0.089 s against 0.007 s (12.7×), solnic-modern 0.48 against
+0.44 s (1.09×, meets the goal; 0.44–1.29× over five runs), pulse-width 0.24 against 0.10 s
+(2.5×), dithered 3.4 against 0.44 s (7.6×). The cost is inside the compiled loop; the sub-step
+count is the method's (exact Gaussian sub-steps while d is noisy).
 """
 
 import pytest
@@ -31,13 +34,15 @@ from benchmarks.cell_cost import cell_cpu
 pytestmark = pytest.mark.slow
 
 _GOAL = 1.5
-_MISSES = {("disturbed", "linear"), ("disturbed", "solnic-modern"), ("disturbed", "pulse-width"),
+_MISSES = {("disturbed", "linear"), ("disturbed", "pulse-width"), ("disturbed", "dithered"),
            ("delayed", "linear")}
 
 
 _CASES = [pytest.param(s, c, marks=pytest.mark.xfail(reason="known miss, see module docstring", strict=False)
                        if (s, c) in _MISSES else ())
-          for s in ("disturbed", "quantized", "delayed") for c in ("linear", "solnic-modern", "pulse-width")]
+          for s in ("disturbed", "quantized", "delayed") for c in ("linear", "solnic-modern", "pulse-width")] + [
+    pytest.param("disturbed", "dithered", marks=pytest.mark.xfail(reason="known miss, see module docstring",
+                                                                 strict=False))]
 
 
 @pytest.mark.parametrize("name, controller", _CASES)

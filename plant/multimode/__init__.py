@@ -12,7 +12,7 @@ whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse``
 response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``em_family`` (the
 Euler–Maruyama reference behind the family seam, for closed-loop comparisons), ``disturbed``
 (the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when
-``disturbance_torque_std`` > 0).
+``disturbance_torque_std`` > 0; compiled in ``disturbed_jit``, its linear-law loop ``disturbed_loop``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 from plant import protocol
-from plant.multimode import disturbed, law_loop, pulse, reference
+from plant.multimode import disturbed, disturbed_loop, law_loop, pulse, reference
 from plant.multimode.em_family import FixedStepFamily
 from plant.multimode.interval import advance
 from plant.params import PlantParams
@@ -48,6 +48,13 @@ class Multimode(PlantFamily):
         if params.disturbance_torque_std != 0.0:
             return disturbed.initial_state(params, x5)
         return super().initial_state(params, x5)
+
+    def law_loop(self, params):
+        """As :meth:`PlantFamily.law_loop`; with the disturbance torque on (ideal sensor, no delay),
+        the disturbed plant's own compiled loop (:mod:`plant.multimode.disturbed_loop`)."""
+        if params.disturbance_torque_std != 0.0 and params.quantization == 0.0 and params.command_delay == 0.0:
+            return disturbed_loop.run_law
+        return super().law_loop(params)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
         if params.disturbance_torque_std != 0.0:

@@ -39,12 +39,14 @@ the bits are those of the first version.
 from __future__ import annotations
 
 import math
+import threading
 from functools import lru_cache
 
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
 from plant.expfun import e1, e2, e4
+from plant.multimode import disturbed_jit
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.noise import noise_factor
 from plant.multimode.segments import torque_integrals
@@ -53,7 +55,7 @@ from plant.params import PlantParams
 from plant.randomness import NoiseExhausted, NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 
-__all__ = ["N_X", "D", "advance", "transition", "initial_state"]
+__all__ = ["N_X", "D", "advance", "advance_python", "transition", "initial_state"]
 
 N_X = 7     # x1, x2, x3, x4, x5, u, d
 D = 6       # index of d in the state vector
@@ -335,10 +337,11 @@ def _moving_far(p, dirn, x2, x3, x5, kc, u, d):
 
 
 def _cross_prob(va, vb, w, sig2):
-    """P(a Brownian bridge from va > 0 to vb over w touches 0); 1 when vb ≤ 0."""
+    """P(a Brownian bridge from va > 0 to vb over w touches 0); 1 when vb ≤ 0, 0 for w = 0 (what
+    exp(−∞) gave, without numpy's divide-by-zero warning)."""
     if vb <= 0.0 or va <= 0.0:
         return 1.0
-    if sig2 <= 0.0:
+    if sig2 <= 0.0 or not w > 0.0:
         return 0.0
     return math.exp(-2.0 * va * vb / (sig2 * w))
 
@@ -533,10 +536,11 @@ def _velocity_zero(Y, run, dirn):
     return run.event(Y, kind)
 
 
-def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise: NoiseStream | None,
-            options: SimOptions = SimOptions(), *, duration: float | None = None,
-            record: bool = False) -> IntervalResult:
-    """One interval of the disturbed plant; the contract of :func:`plant.multimode.interval.advance`."""
+def advance_python(state: PlantState, command: DriveCommand, params: PlantParams, noise: NoiseStream | None,
+                   options: SimOptions = SimOptions(), *, duration: float | None = None,
+                   record: bool = False) -> IntervalResult:
+    """One interval of the disturbed plant in plain Python: the reference of the compiled
+    :func:`advance` (bit-identical, tests/test_disturbed_jit.py)."""
     h = params.sample_period if duration is None else duration
     if not (h > 0 and math.isfinite(h)):
         raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")
@@ -591,3 +595,64 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
         events["kind"] = events["kind"].astype(np.int8)
     return IntervalResult(new, run.status, message, run.peak, run.iabs, run.isq, run.chg, run.dur, run.nev,
                           run.nbrk, run.nstk, run.nsub, events)
+
+
+_NO_EVENTS = np.empty((0, len(EVENT_FIELDS)))
+_NO_NOISE = np.empty(0)
+_SCRATCH = threading.local()
+_STATUS_OF = {1: Status.CHATTER, 2: Status.DIVERGED}
+
+
+def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise: NoiseStream | None,
+            options: SimOptions = SimOptions(), *, duration: float | None = None,
+            record: bool = False) -> IntervalResult:
+    """One interval of the disturbed plant, compiled (:mod:`plant.multimode.disturbed_jit`); the
+    contract of :func:`plant.multimode.interval.advance`, the results of :func:`advance_python`."""
+    h = params.sample_period if duration is None else duration
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")
+    offsets, levels = command.arrays()
+    if offsets[-1] >= h:
+        raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
+    bridge = command.drive is DriveType.BRIDGE
+    noisy = options.noise and noise is not None
+    ov, *K = disturbed_jit.kernel_inputs(params, options)
+    if not noisy and ov[0] != 0.0:
+        ov = ov.copy()
+        ov[0] = 0.0
+    x = np.ascontiguousarray(state.x, dtype=np.float64)
+    out = np.empty(N_X + disturbed_jit.SHEET_SIZE)
+    ev = getattr(_SCRATCH, "events", None) if record else _NO_EVENTS
+    if ev is None:
+        ev = _SCRATCH.events = np.empty((4096, len(EVENT_FIELDS)))
+    z, pos = noise.window() if noisy else (_NO_NOISE, 0)
+    while True:
+        try:
+            pos_after = disturbed_jit.interval_kernel(x, state.mode, state.flyback, state.t, h, offsets, levels, bridge,
+                                                      ov, *K, z, pos, ev, out)
+            break
+        except NoiseExhausted:
+            z, pos = noise.grow(pos)
+        except disturbed_jit.RecordFull:
+            ev = _SCRATCH.events = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
+    if noisy:
+        noise.consumed(pos_after)
+    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec, _) = out[N_X:].tolist()
+    if code == 3:
+        raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")
+    xo = out[:N_X].copy()
+    xo.flags.writeable = False
+    new = PlantState(t, xo, int(mode), flyback != 0.0)
+    status, message = Status.OK, ""
+    if code == 1:
+        status, message = Status.CHATTER, f"more than {options.max_events} events in one interval at t={t:.6f} s"
+    elif code == 2:
+        status, message = Status.DIVERGED, f"|x1| = {abs(xo[0]):.3g} rad at t={t:.6f} s"
+    events = None
+    if record:
+        n = int(nrec)
+        events = {name: ev[:n, i].copy() for i, name in enumerate(EVENT_FIELDS)}
+        events["mode"] = events["mode"].astype(np.int8)
+        events["kind"] = events["kind"].astype(np.int8)
+    return IntervalResult(new, status, message, peak, iabs, isq, chg, dur, int(nev), int(nbrk), int(nstk), int(nsub),
+                          events)

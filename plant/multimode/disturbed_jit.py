@@ -1,0 +1,945 @@
+"""The disturbed plant's interval compiled whole: :mod:`plant.multimode.disturbed`'s algorithm in numba.
+
+The same exact Gaussian sub-steps, step ladder, bridge crossing tests, Skorokhod push and bridge
+bisection as the Python path (its docstring has the method), reading the plant noise from the
+same :class:`~plant.randomness.NoiseStream` at the same positions. The arithmetic is the Python
+path's, operation for operation, so the results are bit-identical (tests/test_disturbed_jit.py
+compares whole pulse trains and closed loops, every field, on many seeds):
+
+* scalar expressions are written in the same order (numba does not reassociate or fuse);
+* numpy's small products go through BLAS. The sub-step's Φ·Y and B·z are written out here in
+  OpenBLAS's dgemv order (:func:`_gemv`); the bisection's products (G·(…), e·Y, the column-ordered
+  factors) and the bridge law's matrix products are ``np.dot``, which numba sends to scipy's
+  BLAS (the same OpenBLAS kernels on this machine: dgemv, dgemm, ddot agree bit for bit);
+* ``B @ B.T`` is BLAS ``dsyrk`` in numpy's matmul and the Cholesky factor is LAPACK ``dpotrf``
+  on the lower triangle: both are called here by their scipy addresses with numpy's arguments
+  (numba's own ``np.linalg.cholesky`` factors the other triangle and rounds differently);
+* ``eigh`` is LAPACK ``dsyevd`` in both; the hermitian pseudo-inverse is numpy's recipe.
+
+A machine whose OpenBLAS selects another dgemv kernel (AVX-512, Zen), or where numpy's and scipy's
+builds differ, could break the identity (not the statistics); the tests would then fail on bits.
+
+Transitions (Φ(h), Q(h), the minimal factor) and bridge laws are cached per (mode, h) in
+direct-mapped tables kept with the plant's parameters (a pure function of them: a miss is
+recomputed, never different).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import llvmlite.ir as ir
+import numpy as np
+from numba import njit, types
+from numba.extending import get_cython_function_address, intrinsic
+
+from plant.expfun import e1, e2, e4
+from plant.multimode.moving import phi_moving, q_moving, substep_peak
+from plant.multimode.segments import torque_integrals
+from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
+from plant.randomness import NoiseExhausted, normal, uniform
+from plant.state import EventKind
+
+__all__ = ["interval_kernel", "kernel_inputs", "SHEET_SIZE"]
+
+Y1, Y2, Y3, Y4, Y5, YD, YKC, YU = range(8)
+_N = 8
+_FROM7 = np.array([Y1, Y2, Y3, Y4, Y5, YKC, YU])
+_BLOCK = np.array([Y1, Y2, Y4, Y5])
+_DBLK = np.array([Y1, Y2, YD])
+_D4 = np.array([0, 1, 3])
+
+# disturbance and plant constants, as the Python path evaluates them (plant.multimode.disturbed)
+(_TAUD, _BD, _SD2, _TAU3, _TAU5, _SIG2MOV, _ALPHA, _BETA3, _BETA4, _SIG4, _UMAX, _KS, _KC, _S2, _S5) = range(15)
+# options
+_O_NOISE, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(6)
+# work sheet (as plant.multimode.interval's, plus the just-broke flag)
+(_T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC,
+ _JUST) = range(16)
+SHEET_SIZE = 16
+_OK, _CHATTER, _DIVERGED, _BAD_LEVEL = 0, 1, 2, 3
+# work-sheet positions for compiled callers (plant.multimode.disturbed_loop)
+SHEET_T, SHEET_MODE, SHEET_FLYBACK, SHEET_PEAK, SHEET_ABS, SHEET_SQ = _T, _MODE, _FB, _PEAK, _IABS, _ISQ
+SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS, SHEET_BREAKAWAYS, SHEET_SUBSTEPS = _CHG, _DUR, _NEV, _NBRK, _NSUB
+SHEET_STATUS, STATUS_OK = _STATUS, _OK
+_LEVEL, _FLYBACK_END, _BREAKAWAY, _REGIME_END, _STICK, _REVERSAL, _REFLECTION = (int(k) for k in EventKind)
+_TOP = 2.0 ** (LADDER - 1)
+
+_NT = 1024          # transition cache slots
+_NB = 256           # bridge-law cache slots
+
+# LAPACK dpotrf and BLAS dsyrk of scipy, called through their addresses passed in at run time
+# (an address baked into the code would stop numba from caching the compiled kernel)
+_ADDR = np.array([get_cython_function_address("scipy.linalg.cython_lapack", "dpotrf"),
+                  get_cython_function_address("scipy.linalg.cython_blas", "dsyrk")], dtype=np.int64)
+_ADDR.flags.writeable = False
+_POTRF, _SYRK = 0, 1
+
+
+@intrinsic
+def _call_ptrs(typingctx, addr, ptrs):
+    """Call the void C function at ``addr`` with the pointers ``ptrs`` (a tuple of integers)."""
+    n = len(ptrs)
+    sig = types.void(addr, ptrs)
+
+    def codegen(context, builder, signature, args):
+        i8p = ir.IntType(8).as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [i8p] * n)
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        vals = [builder.inttoptr(builder.extract_value(args[1], i), i8p) for i in range(n)]
+        builder.call(fn, vals)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a·b + c with one rounding (LLVM's llvm.fma.f64), as controllers._fma."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def _gemv(A, x, out):
+    """out = A @ x as numpy computes it for a C-ordered square A of order 1–5 or 8 (the sizes of Φ
+    and of the noise factors), else np.dot. numpy's product is OpenBLAS's dgemv_t (Haswell
+    kernel): four FMA lanes over the first m − m mod 4 terms, summed (l0 + l2) + (l1 + l3), then
+    the remaining terms: y + a·x (one fma), y + fma(a0, x0, a1·x1), y + fma(a2, x2, fma(a0, x0,
+    a1·x1)). Checked bit for bit against numpy (tests/test_disturbed_jit.py); ~20× cheaper than
+    a BLAS call from numba."""
+    n, m = A.shape
+    if n != m or (m > 5 and m != 8):
+        np.dot(A, x, out)
+        return
+    m1 = m - (m & 3)
+    r = m - m1
+    for i in range(n):
+        y = 0.0
+        if m1 > 0:
+            a0 = a1 = a2 = a3 = 0.0
+            for k in range(0, m1, 4):
+                a0 = _fma(A[i, k], x[k], a0)
+                a1 = _fma(A[i, k + 1], x[k + 1], a1)
+                a2 = _fma(A[i, k + 2], x[k + 2], a2)
+                a3 = _fma(A[i, k + 3], x[k + 3], a3)
+            y = (a0 + a2) + (a1 + a3)
+        if r == 1:
+            y = _fma(A[i, m1], x[m1], y)
+        elif r == 2:
+            y = y + _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1])
+        elif r == 3:
+            y = y + _fma(A[i, m1 + 2], x[m1 + 2], _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1]))
+        out[i] = y
+
+
+class RecordFull(Exception):
+    """The event buffer is full (the caller enlarges it and runs the interval again)."""
+
+
+# --- numpy's linear algebra, bit for bit --------------------------------------------------------
+
+@njit(cache=True)
+def _cholesky(D, L, fa):
+    """numpy.linalg.cholesky(D) into L (LAPACK dpotrf, 'L', on D in column order); False when D is
+    not positive definite (numpy's LinAlgError)."""
+    n = D.shape[0]
+    buf = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            buf[i, j] = D[j, i]
+    uplo = np.array([76], np.uint8)                 # 'L'
+    nn = np.array([n], np.int32)
+    info = np.zeros(1, np.int32)
+    _call_ptrs(fa[_POTRF], (uplo.ctypes.data, nn.ctypes.data, buf.ctypes.data, nn.ctypes.data, info.ctypes.data))
+    if info[0] != 0:
+        return False
+    for i in range(n):
+        for j in range(n):
+            L[i, j] = buf[j, i] if j <= i else 0.0
+    return True
+
+
+@njit(cache=True)
+def _aat(B, fa):
+    """B @ B.T as numpy's matmul computes it (BLAS dsyrk, the other triangle mirrored)."""
+    m, k = B.shape
+    C = np.zeros((m, m))
+    if k == 0:
+        return C
+    uplo = np.array([76], np.uint8)                 # 'L' of the column-order view = numpy's upper
+    tr = np.array([84], np.uint8)                   # 'T'
+    mm = np.array([m], np.int32)
+    kk = np.array([k], np.int32)
+    one = np.array([1.0])
+    zero = np.array([0.0])
+    Bc = np.ascontiguousarray(B)
+    _call_ptrs(fa[_SYRK], (uplo.ctypes.data, tr.ctypes.data, mm.ctypes.data, kk.ctypes.data, one.ctypes.data,
+                           Bc.ctypes.data, kk.ctypes.data, zero.ctypes.data, C.ctypes.data, mm.ctypes.data))
+    for i in range(m):
+        for j in range(i):
+            C[i, j] = C[j, i]
+    return C
+
+
+@njit(cache=True)
+def _pinv_hermitian(A, rcond):
+    """numpy.linalg.pinv(A, rcond, hermitian=True): eigh, |λ| sorted descending, 1/|λ| above the cutoff."""
+    s, u = np.linalg.eigh(A)
+    n = s.shape[0]
+    sgn = np.empty(n)
+    for i in range(n):
+        sgn[i] = math.copysign(1.0, s[i])
+        s[i] = abs(s[i])
+    sidx = np.argsort(s)[::-1]
+    s2 = np.empty(n)
+    sg2 = np.empty(n)
+    u2 = np.empty((n, n))
+    for j in range(n):
+        s2[j] = s[sidx[j]]
+        sg2[j] = sgn[sidx[j]]
+        for i in range(n):
+            u2[i, j] = u[i, sidx[j]]
+    top = s2[0]
+    for j in range(1, n):
+        top = max(top, s2[j])
+    cutoff = rcond * top
+    for j in range(n):
+        s2[j] = 1.0 / s2[j] if s2[j] > cutoff else 0.0
+    left = np.empty((n, n))                         # transpose(vt) = u·sgn
+    right = np.empty((n, n))                        # s[:, None]·uᵀ
+    for i in range(n):
+        for j in range(n):
+            left[i, j] = u2[i, j] * sg2[j]
+            right[i, j] = s2[i] * u2[j, i]
+    return np.dot(left, right)
+
+
+@njit(cache=True)
+def _closed_form(mode, h, rec, rd, dp, phi, Q):
+    """disturbed._closed_form: Φ(h) and Q(h) into phi and Q (8 × 8); rec, rd: 1-element record arrays."""
+    bd, sd2 = dp[_BD], dp[_SD2]
+    for i in range(_N):
+        for j in range(_N):
+            phi[i, j] = 0.0
+            Q[i, j] = 0.0
+    if mode == 2:
+        b3, b4, s4 = dp[_BETA3], dp[_BETA4], dp[_SIG4]
+        y = b4 * h
+        E = e1(y)
+        for i in range(_N):
+            phi[i, i] = 1.0
+        phi[Y1, Y4] = -E / b4
+        phi[Y4, Y4] = 1.0 - E
+        phi[Y3, Y3] = math.exp(-b3 * h)
+        phi[Y3, YU] = e1(b3 * h)
+        phi[YD, YD] = math.exp(-bd * h)
+        Q[Y1, Y1] = s4 * e4(y) / math.pow(b4, 3.0)
+        Q[Y1, Y4] = Q[Y4, Y1] = -s4 * E * E / (2.0 * b4 * b4)
+        Q[Y4, Y4] = s4 * E * (2.0 - E) / (2.0 * b4)
+        Q[YD, YD] = sd2 * e1(2.0 * bd * h) / (2.0 * bd)
+        return
+    P7 = np.empty((7, 7))
+    phi_moving(mode, h, rec[0], P7)
+    for i in range(7):
+        for j in range(7):
+            phi[_FROM7[i], _FROM7[j]] = P7[i, j]
+    a = dp[_ALPHA]
+    phi[Y1, YD] = a * e2(bd * h) / (bd * bd)
+    phi[Y2, YD] = a * e1(bd * h) / bd
+    phi[YD, YD] = math.exp(-bd * h)
+    Q4 = np.empty((4, 4))
+    q_moving(mode, h, rec[0], Q4)
+    for i in range(4):
+        for j in range(4):
+            Q[_BLOCK[i], _BLOCK[j]] = Q4[i, j]
+    q_moving(1, h, rd[0], Q4)
+    for i in range(3):
+        for j in range(3):
+            Q[_DBLK[i], _DBLK[j]] += Q4[_D4[i], _D4[j]]
+
+
+@njit(cache=True)
+def _noise_factor(Q, rows, Bflat, fa):
+    """plant.multimode.noise.noise_factor(Q): the non-zero rows and the factor of their block
+    (Cholesky, else the scaled eigen-factor, stored transposed and flagged by returning −m); returns m."""
+    m = 0
+    for i in range(_N):
+        nz = False
+        for j in range(_N):
+            if Q[i, j] != 0.0:
+                nz = True
+        if nz:
+            rows[m] = i
+            m += 1
+    if m == 0:
+        return 0
+    D = np.empty((m, m))
+    for i in range(m):
+        for j in range(m):
+            D[i, j] = Q[rows[i], rows[j]]
+    B = Bflat[:m * m].reshape((m, m))
+    if _cholesky(D, B, fa):
+        return m
+    d = np.empty(m)
+    for i in range(m):
+        d[i] = math.sqrt(abs(D[i, i]))
+        if d[i] == 0:
+            d[i] = 1.0
+    Ds = np.empty((m, m))
+    for i in range(m):
+        for j in range(m):
+            Ds[i, j] = D[i, j] / (d[i] * d[j])
+    Sy = np.empty((m, m))
+    for i in range(m):
+        for j in range(m):
+            Sy[i, j] = 0.5 * (Ds[i, j] + Ds[j, i])
+    lam, V = np.linalg.eigh(Sy)
+    for i in range(m):
+        for j in range(m):
+            B[j, i] = (V[i, j] * math.sqrt(max(lam[j], 0.0))) * d[i]      # stored as Bᵀ (numpy's is column-ordered)
+    return -m
+
+
+# --- the caches --------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _slot(mode, w, size):
+    fr, ex = math.frexp(w)
+    key = int(fr * 1073741824.0) * 31 + ex * 7 + mode
+    return key % size
+
+
+@njit(cache=True, inline="always")
+def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
+    """Slot of (mode, w) in the transition cache, computed on a miss."""
+    k = _slot(mode, w, TK.shape[0])
+    if TK[k, 0] == mode and TK[k, 1] == w:
+        return k
+    _closed_form(mode, w, rec, rd, dp, TPHI[k], TQ[k])
+    TM[k] = _noise_factor(TQ[k], TROWS[k], TB[k], fa)
+    TK[k, 0], TK[k, 1] = mode, w
+    return k
+
+
+@njit(cache=True)
+def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN):
+    """Slot of (mode, w) in the bridge cache: disturbed._bridge_law (Matheron's rule)."""
+    k = _slot(mode, w, BK.shape[0])
+    if BK[k, 0] == mode and BK[k, 1] == w:
+        return k
+    kf = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    Qw = TQ[kf].copy()
+    BPW[k] = TPHI[kf]
+    kh = _trans(mode, w / 2, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    Qh = TQ[kh].copy()
+    Ph = TPHI[kh].copy()
+    BPH[k] = Ph
+    M = np.dot(Qh, Ph.T)
+    G = np.zeros((_N, _N))
+    rows = np.empty(_N, np.int64)
+    r = 0
+    for i in range(_N):
+        if Qw[i, i] > 0.0:
+            rows[r] = i
+            r += 1
+    if r:
+        sc = np.empty(r)
+        for i in range(r):
+            sc[i] = math.sqrt(Qw[rows[i], rows[i]])
+        A = np.empty((r, r))
+        for i in range(r):
+            for j in range(r):
+                A[i, j] = Qw[rows[i], rows[j]] / (sc[i] * sc[j])
+        inv = _pinv_hermitian(A, 1e-13)
+        T1 = np.empty((_N, r))
+        for i in range(_N):
+            for j in range(r):
+                T1[i, j] = M[i, rows[j]] / sc[j]
+        T2 = np.dot(T1, inv)
+        for i in range(_N):
+            for j in range(r):
+                G[i, rows[j]] = T2[i, j] / sc[j]
+    GM = np.dot(G, M.T)
+    S = np.empty((_N, _N))
+    for i in range(_N):
+        for j in range(_N):
+            S[i, j] = Qh[i, j] - GM[i, j]
+    Sy = np.empty((_N, _N))
+    for i in range(_N):
+        for j in range(_N):
+            Sy[i, j] = 0.5 * (S[i, j] + S[j, i])
+    lam, V = np.linalg.eigh(Sy)
+    top = 0.0
+    for j in range(_N):
+        top = max(top, lam[j])
+    thr = 1e-14 * max(top, 1e-300)
+    nb = 0
+    for j in range(_N):
+        if lam[j] > thr:
+            nb += 1
+    BbT = BBF[k, :_N * nb].reshape((nb, _N))       # Bᵀ: numpy's B is column-ordered (eigh's V)
+    c = 0
+    for j in range(_N):
+        if lam[j] > thr:
+            sq = math.sqrt(max(lam[j], 0.0))
+            for i in range(_N):
+                BbT[c, i] = V[i, j] * sq
+            c += 1
+    BNB[k] = nb
+    BG[k] = G
+    BCN[k, 0] = BCN[k, 1] = -2
+    BK[k, 0], BK[k, 1] = mode, w
+    return k
+
+
+@njit(cache=True)
+def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
+    """disturbed._conditional for bridge slot k and barrier variant v (cached): var, gain, factor."""
+    if BCN[k, v] != -2:
+        return
+    nb = BNB[k]
+    S = _aat(BBF[k, :_N * nb].reshape((nb, _N)).T, fa)
+    Se = np.dot(S, e)
+    var = np.dot(e, Se)
+    BCV[k, v] = var
+    if not var > 0.0:
+        BCN[k, v] = -1
+        return
+    for i in range(_N):
+        BCK[k, v, i] = Se[i] / var
+    R = np.empty((_N, _N))
+    for i in range(_N):
+        for j in range(_N):
+            R[i, j] = S[i, j] - Se[i] * Se[j] / var
+    Sy = np.empty((_N, _N))
+    for i in range(_N):
+        for j in range(_N):
+            Sy[i, j] = 0.5 * (R[i, j] + R[j, i])
+    lam, V = np.linalg.eigh(Sy)
+    top = 0.0
+    for j in range(_N):
+        top = max(top, lam[j])
+    thr = 1e-14 * max(top, 1e-300)
+    nf = 0
+    for j in range(_N):
+        if lam[j] > thr:
+            nf += 1
+    FT = BCF[k, v, :_N * nf].reshape((nf, _N))     # Fᵀ: numpy's F is column-ordered
+    c = 0
+    for j in range(_N):
+        if lam[j] > thr:
+            sq = math.sqrt(lam[j])
+            for i in range(_N):
+                FT[c, i] = V[i, j] * sq
+            c += 1
+    BCN[k, v] = nf
+
+
+# --- one interval ------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _normals(z, cursor, n):
+    i = cursor[0]
+    if i + n > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[0] = i + n
+    return z[i:i + n]
+
+
+@njit(cache=True)
+def _tick(S, n, ov):
+    S[_COUNT] += n
+    if S[_COUNT] > ov[_O_MAXEV]:
+        S[_STATUS] = _CHATTER
+        return True
+    return False
+
+
+@njit(cache=True)
+def _event(S, Y, kind, ov, ev):
+    S[_NEV] += 1.0
+    if ev.shape[0] > 0:
+        n = int(S[_NREC])
+        if n >= ev.shape[0]:
+            raise RecordFull()
+        ev[n, 0] = S[_T]
+        ev[n, 1] = Y[Y1]
+        ev[n, 2] = Y[Y2]
+        ev[n, 3] = Y[Y3]
+        ev[n, 4] = S[_MODE]
+        ev[n, 5] = Y[YU]
+        ev[n, 6] = kind
+        S[_NREC] = n + 1
+    return _tick(S, 1.0, ov)
+
+
+@njit(cache=True)
+def _torque(S, x3, u, h, bridge, dp):
+    if h <= 0.0:
+        return
+    integral, absolute, square = torque_integrals(x3, u, h, dp[_TAU3])
+    S[_IABS] += absolute
+    S[_ISQ] += square
+    S[_CHG] += (u / dp[_UMAX]) * integral if bridge else absolute
+    S[_DUR] += h
+
+
+@njit(cache=True)
+def _apply_level(Y, S, level, bridge, dp):
+    umax = dp[_UMAX]
+    if not bridge:
+        Y[YU] = min(max(level, -umax), umax)
+        S[_FB] = 0.0
+        return True
+    if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
+        return False
+    if level > 0:
+        Y[YU], S[_FB] = umax, 0.0
+    elif level < 0:
+        Y[YU], S[_FB] = -umax, 0.0
+    elif Y[Y3] != 0.0:
+        Y[YU], S[_FB] = -math.copysign(umax, Y[Y3]), 1.0
+    else:
+        Y[YU], S[_FB] = 0.0, 0.0
+    return True
+
+
+@njit(cache=True)
+def _cross_prob(va, vb, w, sig2):
+    if vb <= 0.0 or va <= 0.0:
+        return 1.0
+    if sig2 <= 0.0 or not w > 0.0:
+        return 0.0
+    return math.exp(-2.0 * va * vb / (sig2 * w))
+
+
+@njit(cache=True)
+def _stuck_far(w, ks, ax3, ad, u, g, tau3, sig2, decay):
+    """disturbed._stuck_far's far(w); ``decay`` = exp(−w/τ3) (a rung's from the table)."""
+    x3max = max(ax3, abs(u + g * decay))
+    return ks - x3max - ad > FAR_SIGMAS * math.sqrt(sig2 * w)
+
+
+@njit(cache=True)
+def _moving_far(w, v0, slope, curv, a, s2, sd2, s5, w3):
+    """disturbed._moving_far's far(w); ``w3`` = w**3 (a rung's from the table)."""
+    low = min(v0, v0 + slope * w - 0.5 * curv * w * w)
+    sd = a * (math.sqrt(s2 * w) + math.sqrt(sd2 * w3 / 3.0) + math.sqrt(s5 * w3 / 3.0))
+    return low > FAR_SIGMAS * sd
+
+
+@njit(cache=True)
+def _far(kind, w, c, lad, j):
+    """far(w) of the stuck (kind 0) or moving rule; rung j of the ladder table, or j < 0: w itself."""
+    if kind == 0:
+        decay = lad[1 + LADDER + j] if j >= 0 else math.exp(-w / c[5])
+        return _stuck_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], decay)
+    w3 = lad[1 + j] if j >= 0 else math.pow(w, 3.0)
+    return _moving_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], w3)
+
+
+@njit(cache=True)
+def _ladder_table(lad, sub, tau3):
+    """The rungs' w**3 and exp(−w/τ3), w = sub·2^(LADDER−1), …, 2·sub (the same doubles as the
+    Python path's powers and exponentials of the same widths), kept until ``sub`` changes."""
+    if lad[0] == sub:
+        return
+    w = sub * _TOP
+    j = 0
+    while w > sub:
+        lad[1 + j] = math.pow(w, 3.0)
+        lad[1 + LADDER + j] = math.exp(-w / tau3)
+        w /= 2.0
+        j += 1
+    lad[0] = sub
+
+
+@njit(cache=True)
+def _ladder_width(room, sub, kind, c, lad):
+    """disturbed._ladder_width: (width, far)."""
+    w = sub * _TOP
+    if sub < room <= w and _far(kind, room, c, lad, -1):
+        return room, True
+    j = 0
+    while w > sub:
+        if w <= room and _far(kind, w, c, lad, j):
+            return w, True
+        w /= 2.0
+        j += 1
+    return min(sub, room), False
+
+
+@njit(cache=True)
+def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out):
+    """disturbed._bisect: the offset of the first crossing; the state there into ``out``."""
+    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN = C
+    t0 = 0.0
+    Ya = Ya0.copy()
+    Yb = Yb0.copy()
+    while w > tol:
+        k = _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
+        Ph, Pw, G = BPH[k], BPW[k], BG[k]
+        diff = Yb - np.dot(Pw, Ya)
+        mean = np.dot(Ph, Ya) + np.dot(G, diff)
+        _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN)
+        var = BCV[k, v]
+        mu = np.dot(e, mean) + c0
+        a = np.dot(e, Ya) + c0
+        b = np.dot(e, Yb) + c0
+        half = w / 2
+        if not noisy:
+            Ym = mean
+            cm = np.dot(e, Ym) + c0
+        elif var > 0.0:
+            sd = math.sqrt(var)
+            if a > 0.0 and b > 0.0 and sig2 > 0.0:
+                cm = hitting_midpoint(a, b, mu, sd, sig2 * half, z, cursor)
+            else:
+                cm = mu + sd * normal(z, cursor)
+            dc = cm - mu
+            Ym = np.empty(_N)
+            for i in range(_N):
+                Ym[i] = mean[i] + BCK[k, v, i] * dc
+            nf = BCN[k, v]
+            if nf > 0:
+                FT = BCF[k, v, :_N * nf].reshape((nf, _N))
+                Ym += np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
+        else:
+            nb = BNB[k]
+            if nb:
+                BT = BBF[k, :_N * nb].reshape((nb, _N))
+                Ym = mean + np.dot(BT.T, _normals(z, cursor, nb))
+            else:
+                Ym = mean + 0.0
+            cm = np.dot(e, Ym) + c0
+        pl = _cross_prob(a, cm, half, sig2)
+        pr = _cross_prob(cm, b, half, sig2)
+        pc = 1.0 - (1.0 - pl) * (1.0 - pr)
+        S[_NSUB] += 1.0
+        if pl >= 1.0 or (pl > 0.0 and uniform(z, cursor) * pc < pl):
+            Yb = Ym
+        else:
+            Ya = Ym
+            t0 = t0 + half
+        w = half
+    out[:] = Yb
+    return t0 + w
+
+
+@njit(cache=True)
+def _breakaway(Y, S, g, ov, ev):
+    Y[Y2] = 0.0
+    S[_MODE] = 3.0 if g > 0 else 1.0
+    S[_NBRK] += 1.0
+    S[_JUST] = 1.0
+    return _event(S, Y, _BREAKAWAY, ov, ev)
+
+
+@njit(cache=True)
+def _velocity_zero(Y, S, dirn, dp, ov, ev):
+    g = Y[Y3] + Y[YD]
+    ks = max(dp[_KS] + Y[Y5], 0.0)
+    Y[Y2] = 0.0
+    if dirn * g > ks:
+        kind = _REFLECTION
+    elif -dirn * g > ks:
+        S[_MODE] = 1.0 if S[_MODE] == 3.0 else 3.0
+        S[_NBRK] += 1.0
+        kind = _REVERSAL
+    else:
+        S[_MODE] = 2.0
+        S[_NSTK] += 1.0
+        kind = _STICK
+    return _event(S, Y, kind, ov, ev)
+
+
+@njit(cache=True, inline="always")
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad):
+    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop."""
+    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM = C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9]
+    mode = int(S[_MODE])
+    room = t_end - S[_T]
+    x2, x3, x5, d, u = Y[Y2], Y[Y3], Y[Y5], Y[YD], Y[YU]
+    tau3 = dp[_TAU3]
+    h_fb = math.inf if S[_FB] == 0.0 else tau3 * math.log1p(abs(x3) / dp[_UMAX])
+    room_fb = min(room, h_fb)
+    ks = max(dp[_KS] + x5, 0.0)
+    sub = ov[_O_SUB]
+    if mode == 2:
+        dirn = 0.0
+        g = x3 + d
+        if abs(g) > ks:
+            return _breakaway(Y, S, g, ov, ev)
+        sig2 = sig_d2
+        if ks - abs(x3) - abs(d) > 0.0:
+            c[0], c[1], c[2], c[3], c[4], c[5], c[6] = ks, abs(x3), abs(d), u, x3 - u, tau3, sig2
+            w, far = _ladder_width(room_fb, sub, 0, c, lad)
+        else:
+            w, far = min(sub, room_fb), False
+        rungs = False
+    else:
+        dirn = 1.0 if mode == 3 else -1.0
+        kc = dp[_KC] if dp[_KC] + x5 >= 0.0 else -x5
+        Y[YKC] = kc
+        reflecting = dirn * (x3 + d) >= ks
+        sig2 = dp[_SIG2MOV] if noisy else 0.0
+        if S[_JUST] != 0.0:
+            reflecting = True
+            S[_JUST] = 0.0
+        if dirn * x2 > 0.0:
+            a = dp[_ALPHA]
+            c[0] = dirn * x2
+            c[1] = dirn * a * (x3 + d) - a * (kc + x5)
+            c[2] = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
+            c[3], c[4], c[5], c[6] = a, dp[_S2], dp[_SD2], dp[_S5]
+            w, far = _ladder_width(room_fb, sub, 1, c, lad)
+        else:
+            w, far = min(sub, room_fb), False
+        if reflecting and not far:
+            w = min(ov[_O_RSUB], room_fb)
+        rungs = reflecting and not far
+    k = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    _gemv(TPHI[k], Y, Yb)
+    m = TM[k]
+    if noisy and m:
+        if m > 0:
+            add = Yc[:m]
+            _gemv(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
+        else:                                       # the eigen-factor, stored transposed
+            m = -m
+            add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
+        for i in range(m):
+            Yb[TROWS[k, i]] += add[i]
+    S[_NSUB] += 1.0
+    if _tick(S, 1.0, ov):
+        return True
+    crossed = False
+    for i in range(_N):
+        e[i] = 0.0
+    c0 = 0.0
+    v = 0
+    if mode != 2 and rungs:
+        va, vb = dirn * Y[Y2], dirn * Yb[Y2]
+        if sig2 > 0.0:
+            mm = 0.5 * (va + vb - math.sqrt(math.pow(vb - va, 2.0) - 2.0 * sig2 * w * math.log(uniform(z, cursor))))
+        else:
+            mm = min(va, vb)
+        if mm < 0.0:
+            Yb[Y2] -= dirn * mm
+            Yb[Y1] -= dirn * mm * w / 2.0
+    else:
+        if mode == 2:
+            ga, gb = Y[Y3] + Y[YD], Yb[Y3] + Yb[YD]
+            up = _cross_prob(ks - ga, ks - gb, w, sig2)
+            dn = _cross_prob(ks + ga, ks + gb, w, sig2)
+            sgn = -1.0 if up >= dn else 1.0
+            e[Y3] = e[YD] = sgn
+            prob = 1.0 - (1.0 - up) * (1.0 - dn)
+            c0 = ks
+            v = 0 if sgn < 0.0 else 1
+        else:
+            e[Y2] = dirn
+            prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+        if prob >= 1.0 or (prob > 0.0 and not far and uniform(z, cursor) < prob):
+            crossed = True
+    if crossed:
+        w = _bisect(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, C, Yc)
+        Yb[:] = Yc
+        if S[_STATUS] != _OK:
+            return True
+    _torque(S, x3, u, w, bridge, dp)
+    if mode != 2:
+        S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
+    else:
+        S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
+    Y[:] = Yb
+    Y[Y3] = u + (x3 - u) * math.exp(-w / tau3)
+    S[_T] += w
+    if crossed:
+        if mode == 2:
+            return _breakaway(Y, S, Y[Y3] + Y[YD], ov, ev)
+        return _velocity_zero(Y, S, dirn, dp, ov, ev)
+    if w == h_fb and h_fb <= room:
+        Y[Y3] = 0.0
+        Y[YU] = 0.0
+        S[_FB] = 0.0
+        return _event(S, Y, _FLYBACK_END, ov, ev)
+    if w == room:
+        S[_T] = t_end
+    return False
+
+
+# The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
+# numba's argument typing per call); _views cuts them into the named tables.
+_DP_LEN = 15
+_LAD_LEN = 1 + 2 * LADDER     # the step ladder's table (_ladder_table), last in FB
+_LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
+             ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
+             ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128), ("LAD", _LAD_LEN))
+_LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
+_SIZE_F = sum(n for _, n in _LAYOUT_F)
+_SIZE_I = sum(n for _, n in _LAYOUT_I)
+
+
+@njit(cache=True)
+def _views(recs, rds, FB, IB):
+    """The kernel's constants and cache tables as views of the flat buffers (see kernel_inputs)."""
+    nt, nb = _NT, _NB
+    o = 0
+    dp = FB[o:o + _DP_LEN]
+    o += _DP_LEN
+    TK = FB[o:o + nt * 2].reshape((nt, 2))
+    o += nt * 2
+    TPHI = FB[o:o + nt * 64].reshape((nt, _N, _N))
+    o += nt * 64
+    TQ = FB[o:o + nt * 64].reshape((nt, _N, _N))
+    o += nt * 64
+    TB = FB[o:o + nt * 64].reshape((nt, 64))
+    o += nt * 64
+    BK = FB[o:o + nb * 2].reshape((nb, 2))
+    o += nb * 2
+    BPH = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BPW = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BG = FB[o:o + nb * 64].reshape((nb, _N, _N))
+    o += nb * 64
+    BBF = FB[o:o + nb * 64].reshape((nb, 64))
+    o += nb * 64
+    BCV = FB[o:o + nb * 2].reshape((nb, 2))
+    o += nb * 2
+    BCK = FB[o:o + nb * 16].reshape((nb, 2, _N))
+    o += nb * 16
+    BCF = FB[o:o + nb * 128].reshape((nb, 2, 64))
+    i = 0
+    fa = IB[i:i + 2]
+    i += 2
+    TROWS = IB[i:i + nt * 8].reshape((nt, _N))
+    i += nt * 8
+    TM = IB[i:i + nt]
+    i += nt
+    BNB = IB[i:i + nb]
+    i += nb
+    BCN = IB[i:i + nb * 2].reshape((nb, 2))
+    return (recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN)
+
+
+@njit(cache=True)
+def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
+    """disturbed.advance over [t0, t0 + duration): ``out[:7]`` the new state, ``out[7:]`` the work
+    sheet; returns the new read position in ``z`` (from ``zpos``). (recs, rds, FB, IB): kernel_inputs()."""
+    C = _views(recs, rds, FB, IB)
+    dp = C[2]
+    noisy = ov[_O_NOISE] != 0.0
+    sig_d2 = dp[_SD2] if noisy else 0.0
+    S = out[7:]
+    for i in range(SHEET_SIZE):
+        S[i] = 0.0
+    S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
+    cursor = np.empty(1, np.int64)
+    cursor[0] = zpos
+    Y = np.empty(_N)
+    Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5] = x[0], x[1], x[2], x[3], x[4]
+    Y[YD] = x[6] if x.shape[0] > 6 else 0.0
+    Y[YKC], Y[YU] = dp[_KC], x[5]
+    c = np.empty(7)
+    Yb = np.empty(_N)
+    Yc = np.empty(_N)
+    e = np.zeros(_N)
+    lad = FB[_SIZE_F - _LAD_LEN:]
+    _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
+    k = offsets.shape[0]
+    stop = False
+    for seg in range(k):
+        t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
+        if not _apply_level(Y, S, levels[seg], bridge, dp):
+            S[_STATUS] = _BAD_LEVEL
+            break
+        if seg > 0 and _event(S, Y, _LEVEL, ov, ev):
+            break
+        while S[_T] < t_seg_end:
+            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad)
+            if stop or S[_STATUS] != _OK:
+                stop = True
+                break
+            if not (abs(Y[Y1]) <= ov[_O_DIVERGE]):
+                S[_STATUS] = _DIVERGED
+                stop = True
+                break
+        if stop:
+            break
+    if S[_STATUS] == _OK:
+        S[_T] = t0 + duration
+    out[0], out[1], out[2], out[3], out[4], out[5], out[6] = Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5], Y[YU], Y[YD]
+    return cursor[0]
+
+
+# --- Python side -------------------------------------------------------------------------------
+
+_LOCAL = threading.local()
+
+
+def _constants(params) -> np.ndarray:
+    p = params
+    dp = np.empty(15)
+    dp[_TAUD] = p.disturbance_torque_tau
+    dp[_BD] = 1.0 / p.disturbance_torque_tau
+    dp[_SD2] = 2.0 * p.disturbance_torque_std ** 2 / p.disturbance_torque_tau
+    dp[_TAU3] = p.motor_time_constant
+    dp[_TAU5] = p.correlated_friction_tau
+    dp[_SIG2MOV] = p.alpha ** 2 * p.sigma2_sq
+    dp[_ALPHA] = p.alpha
+    dp[_BETA3], dp[_BETA4], dp[_SIG4] = p.beta3, p.beta4, p.sigma4_sq
+    dp[_UMAX], dp[_KS], dp[_KC] = p.u_max, p.stiction, p.coulomb
+    dp[_S2], dp[_S5] = p.sigma2_sq, p.sigma5_sq
+    dp.flags.writeable = False
+    return dp
+
+
+def kernel_inputs(params, options) -> tuple:
+    """(options vector, recs, rds, FB, IB): interval_kernel's inputs after ``levels, bridge``. FB and
+    IB hold the constants and this thread's cache tables for ``params`` (filled on use; a pure
+    function of the parameters, so sharing them cannot change a result)."""
+    memo = getattr(_LOCAL, "memo", None)
+    if memo is None:
+        memo = _LOCAL.memo = {}
+    K = memo.get(params)
+    if K is None:
+        if len(memo) > 8:
+            memo.clear()
+        recs = params.kernel_record()
+        rds = recs.copy()
+        rds[0]["beta5"] = 1.0 / params.disturbance_torque_tau
+        rds[0]["sigma5_sq"] = 2.0 * params.disturbance_torque_std ** 2 / params.disturbance_torque_tau
+        rds[0]["sigma2_sq"] = 0.0
+        rds[0]["sigma4_sq"] = 0.0
+        FB = np.zeros(_SIZE_F)
+        FB[:_DP_LEN] = _constants(params)
+        o = _DP_LEN
+        for name, n in _LAYOUT_F[1:]:
+            if name in ("TK", "BK"):
+                FB[o:o + n] = -1.0              # empty slots
+            o += n
+        IB = np.zeros(_SIZE_I, np.int64)
+        IB[:2] = _ADDR
+        o = 2
+        for name, n in _LAYOUT_I[1:]:
+            if name == "BCN":
+                IB[o:o + n] = -2                # conditional laws not computed
+            o += n
+        K = memo[params] = (recs, rds, FB, IB)
+    ov = options.__dict__.get("_disturbed_vector")
+    if ov is None:
+        ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
+                       options.bisection_tol, float(options.max_events), options.diverge_error])
+        ov.flags.writeable = False
+        object.__setattr__(options, "_disturbed_vector", ov)
+    return (ov, *K)
