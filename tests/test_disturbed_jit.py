@@ -8,6 +8,13 @@ reference (plant.multimode.disturbed.advance_python), bit for bit.
 * closed loops: the runner's Python loop with the Python step, with the compiled step, and the
   compiled linear-law loop give identical rows;
 * the zero-width crossing probability warns no more and is still 0.
+
+The bits are numpy's only where this machine's OpenBLAS sums as the kernel does (Haswell/Zen
+dgemv order; see docs/plant.md): :func:`_blas_sums_as_the_kernel` probes that once. Elsewhere
+(e.g. an AVX-512 SkylakeX kernel, tried here with OPENBLAS_CORETYPE=SkylakeX) the kernel's
+linear algebra is still checked to 1e-12 of each matrix's largest entry, and the bit-for-bit comparisons with the
+numpy reference are skipped with that reason — the compiled path's law is checked against
+Euler–Maruyama in tests/test_disturbance_torque.py either way.
 """
 
 from __future__ import annotations
@@ -27,10 +34,38 @@ from plant.randomness import NoiseStream
 from plant.state import SimOptions
 
 _SCEN = builtin_scenarios()["disturbed"]
+
+
+def _blas_sums_as_the_kernel() -> bool:
+    """Whether numpy's BLAS on this machine gives the kernel's bits (gemv, Cholesky, B·Bᵀ)."""
+    rng = np.random.default_rng(2)
+    for n in (2, 3, 5, 8):
+        for _ in range(50):
+            A = rng.standard_normal((n, n)) * np.exp(3.0 * rng.standard_normal((n, n)))
+            x = rng.standard_normal(n)
+            out = np.empty(n)
+            disturbed_jit._gemv(A, x, out)
+            S = A @ A.T + 1e-3 * np.eye(n)
+            L = np.empty((n, n))
+            disturbed_jit._cholesky(S, L, disturbed_jit._ADDR)
+            if not (np.array_equal(out, A @ x) and np.array_equal(L, np.linalg.cholesky(S))
+                    and np.array_equal(disturbed_jit._aat(A, disturbed_jit._ADDR), A @ A.T)):
+                return False
+    return True
+
+
+_SAME_BLAS = _blas_sums_as_the_kernel()
+_NEEDS_SAME_BLAS = pytest.mark.skipif(
+    not _SAME_BLAS, reason="this machine's OpenBLAS sums in another order than the kernel's (Haswell/Zen) "
+                           "dgemv: the compiled path is not numpy's bit for bit here (module docstring)")
 _STRONG = PlantParams(disturbance_torque_std=1.2, disturbance_torque_tau=0.005)
 
 
 def test_kernel_linear_algebra_is_numpys_bit_for_bit():
+    """Bit for bit where the BLAS sums as the kernel does; elsewhere to 1e-12 of the largest entry
+    (these matrices span ~10 decades, so entrywise relative agreement is not a backward-stable
+    algorithm's promise)."""
+    same = np.array_equal if _SAME_BLAS else (lambda a, b: np.allclose(a, b, rtol=0.0, atol=1e-12 * np.abs(b).max()))
     rng = np.random.default_rng(5)
     addr = disturbed_jit._ADDR
     for n in (1, 2, 3, 5, 8):
@@ -39,9 +74,9 @@ def test_kernel_linear_algebra_is_numpys_bit_for_bit():
             S = A @ A.T + 1e-3 * np.eye(n)
             L = np.empty((n, n))
             assert disturbed_jit._cholesky(S, L, addr)
-            assert np.array_equal(L, np.linalg.cholesky(S))
+            assert same(L, np.linalg.cholesky(S))
             B = np.ascontiguousarray(A[:, : rng.integers(1, n + 1)])
-            assert np.array_equal(disturbed_jit._aat(B, addr), B @ B.T)
+            assert same(disturbed_jit._aat(B, addr), B @ B.T)
             H = 0.5 * (S + S.T) - 0.1 * np.trace(S) * np.eye(n)
             assert np.array_equal(disturbed_jit._pinv_hermitian(H, 1e-13), np.linalg.pinv(H, 1e-13, hermitian=True))
     singular = np.array([[1.0, 1.0], [1.0, 1.0]]) - np.array([[0.0, 0.0], [0.0, 1e-300]])
@@ -67,6 +102,7 @@ def _train(adv, p, seed, n, drive, opts, x5=0.1):
     return out
 
 
+@_NEEDS_SAME_BLAS
 @pytest.mark.parametrize("p", [_SCEN.params, _STRONG], ids=["disturbed", "strong"])
 @pytest.mark.parametrize("drive", [DriveType.BRIDGE, DriveType.LINEAR])
 def test_pulse_trains_are_the_python_path_bit_for_bit(p, drive):
@@ -80,6 +116,7 @@ def test_pulse_trains_are_the_python_path_bit_for_bit(p, drive):
     assert events > 20          # the trains do break loose, stick and reverse
 
 
+@_NEEDS_SAME_BLAS
 @pytest.mark.parametrize("controller", ["linear", "pulse-width"])
 def test_closed_loops_are_the_python_path_bit_for_bit(controller, monkeypatch):
     fam = get_family("multimode")
@@ -112,6 +149,7 @@ def test_zero_width_crossing_probability_is_0_without_a_warning():
         assert disturbed_jit._cross_prob(0.3, 0.2, 0.0, 1.0) == 0.0
 
 
+@_NEEDS_SAME_BLAS
 def test_chatter_divergence_and_bad_levels_are_the_python_paths():
     statuses = set()
     for opts in (SimOptions(max_events=3), SimOptions(diverge_error=2e-3)):
@@ -128,7 +166,8 @@ def test_chatter_divergence_and_bad_levels_are_the_python_paths():
 
 
 def test_kernel_matrix_vector_product_is_numpys_bit_for_bit():
-    """The sub-step's hand-written dgemv order (disturbed_jit._gemv) against numpy's A @ x."""
+    """The sub-step's hand-written dgemv order (disturbed_jit._gemv) against numpy's A @ x: bit for
+    bit where the BLAS sums as the kernel does, to 1e-13 of the terms' scale everywhere."""
     rng = np.random.default_rng(11)
     for n in (1, 2, 3, 4, 5, 6, 8):
         out = np.empty(n)
@@ -136,4 +175,7 @@ def test_kernel_matrix_vector_product_is_numpys_bit_for_bit():
             A = rng.standard_normal((n, n)) * np.exp(3.0 * rng.standard_normal((n, n)))
             x = rng.standard_normal(n) * np.exp(3.0 * rng.standard_normal(n))
             disturbed_jit._gemv(A, x, out)
-            assert np.array_equal(out, A @ x), n
+            if _SAME_BLAS:
+                assert np.array_equal(out, A @ x), n
+            else:
+                assert np.all(np.abs(out - A @ x) <= 1e-13 * (np.abs(A) @ np.abs(x))), n
