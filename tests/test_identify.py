@@ -187,3 +187,59 @@ def test_axis_loop_runs_the_fitted_matrix_as_is(tmp_path):
     assert len(written["controllers"]) >= 7 and written["seeds"] == [0, 1]      # the quick matrix's controllers
     assert set(rows["scenario"]) == {"axis"} and (rows["status"] == "ok").all()
     assert len(rows) == len(written["controllers"]) * len(written["seeds"])
+
+
+# ---------------------------------------------------------------- frontier --matrix on identify's file
+
+def _identified_axis(tmp_path):
+    """axis.toml as `identify` writes it, from a short log of a hidden multimode axis."""
+    plan = design_experiment(ExperimentOptions(repeats=1))
+    hidden = get_family("multimode").Params().replace(coulomb=1.2, stiction=1.7, inertia=0.45)
+    log, _ = simulate_log(plan, "multimode", hidden, 31)
+    write_log(log, tmp_path / "log.csv")
+    out = _inproc("identify", tmp_path / "log.csv", "--out", tmp_path / "axis.toml", "--bootstrap", "0")
+    assert out.returncode == 0, out.stderr
+    return tmp_path / "axis.toml"
+
+
+def test_frontier_takes_the_identified_matrix(tmp_path, monkeypatch):
+    """`frontier --matrix axis.toml`: the file as identify wrote it is completed from the registry
+    (its scenario, seeds and run length kept); a tiny copy of it (2 s, one seed, two controllers)
+    runs through the real command; a bad file is one line naming it, exit 2."""
+    import pandas as pd
+
+    import controllers.base as cb
+    from bench.frontier import frontier_matrix_data
+    from bench.matrix import parse_matrix
+
+    axis = _identified_axis(tmp_path)
+    written = tomllib.loads(axis.read_text())
+    data = frontier_matrix_data(True, axis)
+    assert data["scenarios"] == written["scenarios"] and data["matrix"]["scenarios"] == ["axis"]
+    assert data["matrix"]["seeds"] == written["matrix"]["seeds"] and data["matrix"]["duration_s"] == 100
+    assert set(written["matrix"]["controllers"]) | set(cb.available_controllers()) == set(data["matrix"]["controllers"])
+    assert any(data.get("sweep", {}).values())          # knobs swept, as the built-in frontier
+    parse_matrix(data, str(axis), check_resets=False)
+
+    text = axis.read_text()
+    for old, new in (("duration_s = 100", "duration_s = 2"), ("warmup_s = 20", "warmup_s = 1"),
+                     ("seeds = [0, 1]", "seeds = [0]")):
+        assert old in text
+        text = text.replace(old, new)
+    text = re.sub(r"controllers = \[.*\]", 'controllers = ["linear", "oracle-pulse"]', text)
+    (tmp_path / "tiny.toml").write_text(text)
+    full = cb.available_controllers()
+    monkeypatch.setattr(cb, "available_controllers", lambda: {k: full[k] for k in ("linear", "oracle-pulse")})
+    res = _inproc("frontier", "--matrix", tmp_path / "tiny.toml", "--quick", "--out", tmp_path / "fr")
+    assert res.returncode == 0, res.stderr
+    df = pd.read_parquet(tmp_path / "fr" / "results.parquet")
+    assert set(df["scenario"]) == {"axis"} and (df["status"] == "ok").all()
+    assert {"linear", "oracle-pulse"} <= {c.split("[")[0] for c in df["controller"]} and df["controller"].nunique() > 2
+    assert (tmp_path / "fr" / "report.html").is_file()
+
+    (tmp_path / "bad.toml").write_text(axis.read_text().replace("seeds = [0, 1]", 'seeds = "zero"'))
+    for bad, needle in ((tmp_path / "bad.toml", "bad.toml"), (tmp_path / "none.toml", "none.toml")):
+        res = _inproc("frontier", "--matrix", bad, "--out", tmp_path / "fr2")
+        assert res.returncode == 2 and "Traceback" not in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1 and needle in res.stderr, res.stderr
+        assert not (tmp_path / "fr2").exists()
