@@ -243,3 +243,24 @@ def test_frontier_takes_the_identified_matrix(tmp_path, monkeypatch):
         assert res.returncode == 2 and "Traceback" not in res.stderr
         assert len(res.stderr.strip().splitlines()) == 1 and needle in res.stderr, res.stderr
         assert not (tmp_path / "fr2").exists()
+
+
+# ---------------------------------------------------------------- --family auto
+
+def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_moves_better():
+    """The held-out rule on logs with sensor noise only (σ1 = 5 µrad, no friction noise), so the
+    generating law is the only structure: a stribeck log with a strong curve (v_s = 20 mrad/s,
+    b = 2) is stribeck; a multimode log is multimode (stribeck nests it: not separable → simpler)."""
+    from plant.identification.fit import choose_family
+
+    plan = design_experiment(ExperimentOptions(repeats=1))
+    quiet = dict(friction_noise_psd=0.0, correlated_friction_std=0.0)
+    for family, extra in (("stribeck", dict(stribeck_velocity=0.02, viscous=2.0)), ("multimode", {})):
+        p = get_family(family).Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, **quiet, **extra)
+        log, _ = simulate_log(plan, family, p, 2024)
+        fit, choice = choose_family(log, ("multimode", "stribeck"), bootstrap=0)
+        assert choice.family == fit.family == family, (family, choice)
+        assert set(choice.score) == {"multimode", "stribeck"} and choice.excess[choice.best] == 0.0
+        other = ({"multimode", "stribeck"} - {family}).pop()
+        if family == "stribeck":      # the richer family wins by more than 2 standard errors over moves
+            assert choice.excess[other] > 2 * choice.excess_se[other] > 0
