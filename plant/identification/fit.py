@@ -116,8 +116,16 @@ def _sigma1(log: AxisLog, segs: list[tuple[int, int]]) -> tuple[float, int]:
     return math.sqrt(ss / dof), dof
 
 
+class _OutOfTime(Exception):
+    """A fold fit ran past its CPU budget (:data:`_FOLD_BUDGET_S`)."""
+
+
 class _Model:
-    """The log's moves, simulated noise-free for a parameter vector."""
+    """The log's moves, simulated noise-free for a parameter vector. With a ``deadline``
+    (``time.process_time``), :meth:`residual` remembers the best point seen and raises
+    :class:`_OutOfTime` once past it."""
+
+    deadline: float = math.inf
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -154,6 +162,8 @@ class _Model:
         if lugre:   # bristle ring-down time 1/(ζ·ω0) ≤ 4/ω0 bounds the motion a velocity still makes
             ring = 4.0 / math.sqrt(p.bristle_stiffness / p.inertia)
         for (s, e), off, zero in zip(self.segs, self.offsets, self.zero):
+            if time.process_time() > self.deadline:
+                raise _OutOfTime
             state = fam.initial_state(p, 0.0)
             x1 = np.empty(e - s)
             k = 0
@@ -183,7 +193,12 @@ class _Model:
         pred = self.predict(z)
         if pred is None:
             return np.full(self.rows.size, 1e3)
-        return (self.log.y[self.rows] - pred) / scale
+        r = (self.log.y[self.rows] - pred) / scale
+        if self.deadline < math.inf:
+            cost = float(r @ r)
+            if cost < getattr(self, "best_cost", math.inf):
+                self.best_z, self.best_cost = np.array(z, dtype=float), cost
+        return r
 
 
 def _start(model: _Model, sigma1: float) -> np.ndarray:
@@ -382,6 +397,7 @@ class FamilyChoice:
     cpu: dict
 
 
+_FOLD_BUDGET_S = 8.0   # CPU seconds per fold fit of a richer family; then its best point so far
 # The start grid of each family's extras (:func:`_fold_fit`).
 _GRID = {"stribeck_velocity": (1e-3, 4e-3, 1.6e-2, 4e-2), "viscous": (0.05, 0.5, 2.0),
          "bristle_stiffness": (1e5, 3e5, 1e6), "shaft_stiffness": (1e4, 2e4, 4e4, 1e5)}
@@ -415,21 +431,24 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
         grid = [np.concatenate([core, np.log(point)]) for point in itertools.product(*(_GRID[n] for n in names))]
         costs = [float(np.sum(model.residual(z0, scale) ** 2)) for z0 in grid]
         starts = [grid[int(np.argmin(costs))]]
-    best, best_cost = None, math.inf
-    for z in starts:
-        w = scale
+    if core is not None:
+        model.deadline = time.process_time() + _FOLD_BUDGET_S
+    z = starts[0]
+    try:
         for _ in range(2 if scale_of is None else 1):
-            sol = optimize.least_squares(model.residual, z, args=(w,), method="trf", diff_step=1e-5,
+            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
                                          x_scale=1.0, max_nfev=40 * len(z), xtol=1e-8, ftol=1e-10)
             z = sol.x
-            r = sol.fun * w
+            r = sol.fun * scale
             ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
             if scale_of is None:
-                w = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
-        cost = float(np.sum(model.residual(z, scale) ** 2))
-        if cost < best_cost:
-            best, best_cost, best_ms = z, cost, ms
-    return best, np.sqrt(np.maximum(best_ms, sigma1 ** 2))
+                scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
+    except _OutOfTime:        # the best point seen within the budget stands for the family
+        z = model.best_z
+        model.deadline = math.inf
+        r = model.residual(z, scale) * scale
+        ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
+    return z, np.sqrt(np.maximum(ms, sigma1 ** 2))
 
 
 def _held_out(log: AxisLog, family: str, base, z: np.ndarray, test: list[int]) -> np.ndarray:
