@@ -434,9 +434,12 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
     if core is not None:
         model.deadline = time.process_time() + _FOLD_BUDGET_S
     z = starts[0]
+    # each parameter within a factor 30 of its start: a two-mass fold fit that wandered off spent
+    # minutes in one plant step (a stiff shaft), beyond the budget's reach
+    box = (z - math.log(30.0), z + math.log(30.0)) if core is not None else (-np.inf, np.inf)
     try:
         for _ in range(2 if scale_of is None else 1):
-            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
+            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
                                          x_scale=1.0, max_nfev=40 * len(z), xtol=1e-8, ftol=1e-10)
             z = sol.x
             r = sol.fun * scale
