@@ -478,6 +478,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     family's score can tie multimode's when its extra law leaves no trace in the log: the
     chosen family is the simplest whose mean paired excess over the best is within
     2 standard errors over moves (a one-standard-error-style rule: not separable → simpler).
+    A richer family's fold fit keeps each parameter within a factor 30 of its start and has
+    8 CPU seconds (:data:`_FOLD_BUDGET_S`); past them its best point so far stands.
 
     Returns
     -------
