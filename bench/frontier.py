@@ -11,6 +11,10 @@ declare ``knobs`` yet. :func:`frontier_matrix_data` completes them from the regi
   explicit sweep; one without knobs keeps the file's sweep, or runs at its defaults;
 * real controllers also keep their default point (``include_default``).
 
+``--matrix FILE`` takes the matrix from FILE instead (e.g. the ``axis.toml`` that ``identify``
+writes): its controllers, scenarios, seeds, run length and sweeps, completed from the registry
+the same way (``--quick`` then thins the knobs as above). A bad FILE is one line naming it, exit 2.
+
 The completed matrix is written to ``DIR/frontier-matrix.toml`` (what ran, for provenance and
 ``solnic-bench run --matrix`` reuse) and run like any matrix: same store, resume, executors; rerun
 traces are off unless ``--traces``.
@@ -46,12 +50,19 @@ def thin(values: tuple | list) -> list:
     return [values[0], values[len(values) // 2], values[-1]]
 
 
-def frontier_matrix_data(quick: bool = False) -> dict[str, Any]:
-    """The frontier matrix as TOML data, completed from the controller registry (module doc)."""
+def frontier_matrix_data(quick: bool = False, source: Path | None = None) -> dict[str, Any]:
+    """The frontier matrix as TOML data, completed from the controller registry (module doc);
+    ``source``: a user's matrix file instead of the built-in one (validated first:
+    :class:`bench.matrix.MatrixError` names the file and line)."""
     from controllers.base import available_controllers
 
-    path = frontier_matrix_path(quick)
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    if source is None:
+        data = tomllib.loads(frontier_matrix_path(quick).read_text(encoding="utf-8"))
+    else:
+        from bench.matrix import load_matrix
+
+        load_matrix(source, check_resets=False)            # file:line errors before any completion
+        data = tomllib.loads(Path(source).read_text(encoding="utf-8-sig"))
     matrix = data["matrix"]
     sweep = data.setdefault("sweep", {})
     names = list(matrix["controllers"])
@@ -134,14 +145,16 @@ def make_frontier_command(run: Callable[..., None]) -> Callable[..., None]:
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="dask scheduler address (default: a LocalCluster)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes (default: CPU count)."),
         traces: bool = typer.Option(False, "--traces", help="Also write a rerun trace per cell (off: thousands of cells)."),
+        matrix: Optional[Path] = typer.Option(None, "--matrix", help="A matrix file instead of the built-in "
+                                              "frontier (e.g. identify's axis.toml); completed from the registry."),
     ) -> None:
         """Every registered controller over its knob, with the oracle floor and the noise sweeps:
         DIR/results.{parquet,csv}, DIR/frontier-matrix.toml, DIR/report.html with a frontier section."""
         from bench.matrix import parse_matrix
 
         out = out_dir(out_value)
-        data = frontier_matrix_data(quick)
-        source = frontier_matrix_path(quick)
+        data = frontier_matrix_data(quick) if matrix is None else frontier_matrix_data(quick, matrix)
+        source = frontier_matrix_path(quick) if matrix is None else matrix
         parse_matrix(data, str(source), check_resets=False)   # a bad registry knob is a user error now; run() resets
         writable_dir(out)
         path = write_completed_matrix(out, "frontier-matrix.toml", to_toml(

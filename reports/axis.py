@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from html import escape
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,9 +27,9 @@ from plant.drive import DriveType
 from plant.identification.experiment import WHY
 
 if TYPE_CHECKING:
-    from plant.identification.fit import AxisFit
+    from plant.identification.fit import AxisFit, FamilyChoice
 
-__all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page"]
+__all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page", "choice_lines"]
 
 _UNITS = {"coulomb": "ozf·in", "stiction": "ozf·in", "inertia": "ozf·in·s²", "motor_time_constant": "s",
           "measurement_noise_std": "rad", "stribeck_velocity": "rad/s", "viscous": "ozf·in·s/rad",
@@ -97,7 +98,14 @@ def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def fit_page(fit: AxisFit, log, log_name: str, bics: dict[str, float] | None) -> str:
+def choice_lines(choice: FamilyChoice) -> list[str]:
+    """One line per family: held-out score, paired excess over the best ± its standard error."""
+    return [f"{f}: held-out score {choice.score[f]:.3f} ln rad², excess over {choice.best} "
+            f"{choice.excess[f]:+.3f} ± {choice.excess_se[f]:.3f}" + ("  (chosen)" if f == choice.family else "")
+            for f in sorted(choice.score, key=choice.score.get)]
+
+
+def fit_page(fit: AxisFit, log, log_name: str, choice: FamilyChoice | None) -> str:
     """Self-contained HTML: the estimates and measured against simulated y."""
     t = log.t
     import plotly
@@ -111,8 +119,8 @@ def fit_page(fit: AxisFit, log, log_name: str, bics: dict[str, float] | None) ->
     rows = "".join(f"<tr><td>{n}</td><td>{fit.estimates[n]:.6g}</td><td>{fit.std[n]:.3g}</td>"
                    f"<td>[{fit.interval[n][0]:.6g}, {fit.interval[n][1]:.6g}]</td><td>{_UNITS.get(n, '')}</td></tr>"
                    for n in fit.estimates)
-    bic = "" if not bics else "<h2>Family choice (BIC, lower is better)</h2><ul>" + "".join(
-        f"<li>{f}: {b:.1f}</li>" for f, b in sorted(bics.items(), key=lambda kv: kv[1])) + "</ul>"
+    bic = "" if not choice else (f"<h2>Family choice (--family auto)</h2><p>Rule: {escape(choice.rule)}.</p><ul>"
+                                 + "".join(f"<li>{escape(line)}</li>" for line in choice_lines(choice)) + "</ul>")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>identify {log_name}</title>"
             f"<script>{plotly.offline.get_plotlyjs()}</script></head><body>"
             f"<h1>Identified axis: {fit.family}</h1><p>{fit.method}; {fit.n_moves} moves, {fit.n_samples} samples, "
@@ -125,7 +133,8 @@ def fit_page(fit: AxisFit, log, log_name: str, bics: dict[str, float] | None) ->
 def identify_command(
     log_path: Path = typer.Argument(..., metavar="LOG", help="The recorded log (CSV or Parquet, SPEC §11)."),
     family: str = typer.Option(None, "--family", show_default=False,
-                               help=f"{'|'.join(FAMILY_FREE)}|auto (auto: least BIC); default: Acker's exact plant."),
+                               help=f"{'|'.join(FAMILY_FREE)}|auto (auto: held-out prediction error over moves, "
+                                    "the simpler family when not separable); default: Acker's exact plant."),
     out: Path = typer.Option(Path("axis.toml"), "--out", help="Matrix file with the scenario 'axis'."),
     html: Path = typer.Option(None, "--html", help="Fit page (default: OUT with .html)."),
     bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),
@@ -145,10 +154,10 @@ def identify_command(
         log = read_log(log_path)
     except LogError as exc:
         raise UserError(str(exc)) from None
-    bics = None
+    choice = None
     try:
         if family == "auto":
-            fit, bics = choose_family(log, bootstrap=bootstrap, seed=seed)
+            fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed)
         else:
             fit = fit_log(log, family, bootstrap=bootstrap, seed=seed)
     except (ValueError, RuntimeError) as exc:
@@ -160,12 +169,14 @@ def identify_command(
         lo, hi = fit.interval[n]
         table.add_row(n, f"{fit.estimates[n]:.6g}", f"{fit.std[n]:.2g}", f"[{lo:.5g}, {hi:.5g}]", _UNITS.get(n, ""))
     out_console.print(table)
-    if bics:
-        out_console.print("BIC: " + ", ".join(f"{f} {b:.1f}" for f, b in sorted(bics.items(), key=lambda kv: kv[1])))
+    if choice:
+        out_console.print(f"family: {choice.family} ({choice.rule})")
+        for line in choice_lines(choice):
+            out_console.print("  " + line)
     html = html or out.with_suffix(".html")
     try:
         out.write_text(fitted_matrix_toml(fit, log_path.name))
-        html.write_text(fit_page(fit, log, log_path.name, bics))
+        html.write_text(fit_page(fit, log, log_path.name, choice))
     except OSError as exc:
         raise UserError(f"{out}: cannot write: {exc.strerror or exc}") from None
     out_console.print(f"matrix: {out} (scenario 'axis'; fit in {fit.seconds:.1f} s)\nfit page: {html}")

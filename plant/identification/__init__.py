@@ -5,7 +5,7 @@
 * :mod:`plant.identification.experiment` — the excitation plan a user plays on the axis;
 * :mod:`plant.identification.simulate` — a log simulated from any family (tests, examples);
 * :mod:`plant.identification.fit` — the family's parameters from a log (weighted least squares
-  on the noise-free simulated response, cluster-robust Gauss–Newton covariance, BIC).
+  on the noise-free simulated response, parametric bootstrap; ``auto``: held-out error over moves).
 """
 
 import importlib
