@@ -364,16 +364,25 @@ def _barrier(p, mode, dirn, Ya, Yb, w, sig2):
 
 
 def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
+    """:func:`bridge_bisect` on this plant's steps."""
+    memo = run.memo
+    return bridge_bisect(lambda h: _bridge_law(memo, p, mode, h), e, c0, Ya, Yb, w, tol, sig2, draws, run)
+
+
+def bridge_bisect(law, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     """Locate the first crossing of c = e·Y + c0 through 0 inside (0, w], given that there is one:
     (offset, state there). Each midpoint is drawn from its Gaussian law given both ends
     (Matheron's rule), c first and conditioned on a crossing (the exact sampler
-    :func:`plant.multimode.zero_velocity.hitting_midpoint`), then the rest given c."""
+    :func:`plant.multimode.zero_velocity.hitting_midpoint`), then the rest given c.
+
+    ``law(h)`` is the step of width h carrying ``_bridge`` = (Φ(h/2), G, factor of Σ) and the
+    ``_given`` cache (:func:`_bridge_law`; the two-mass family passes its own); ``run.nsub``
+    counts the levels; ``draws`` None is the noise-free path (its mean)."""
     t0 = 0.0
     cursor = np.zeros(1, dtype=np.int64)
-    memo = run.memo
     ekey = e.tobytes()
     while w > tol:
-        full = _bridge_law(memo, p, mode, w)
+        full = law(w)
         Ph, G, B = full._bridge
         mean = Ph @ Ya + G @ (Yb - full.phi @ Ya)
         given = full._given.get(ekey)
@@ -403,13 +412,13 @@ def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
             if F is not None:
                 Ym += F @ draws.normals(F.shape[1])
         else:
-            Ym = mean + (B @ draws.normals(B.shape[1]) if draws is not None and B.shape[1] else 0.0)
+            Ym = mean + (B @ draws.normals(B.shape[1]) if B.shape[1] else 0.0)
             cm = float(e @ Ym) + c0
         pl = _cross_prob(a, cm, half, sig2)
         pr = _cross_prob(cm, b, half, sig2)
         pc = 1.0 - (1.0 - pl) * (1.0 - pr)
         run.nsub += 1
-        if pl >= 1.0 or (pl > 0.0 and draws.uniform() * pc < pl):
+        if pl >= 1.0 or (pl > 0.0 and draws is not None and draws.uniform() * pc < pl):
             Yb = Ym
         else:
             Ya, t0 = Ym, t0 + half

@@ -52,10 +52,10 @@ from functools import lru_cache
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.disturbed import _apply_level, _breakaway, _conditional, _cross_prob, _Draws, _Run, _Step
+from plant.multimode.disturbed import _apply_level, _breakaway, _cross_prob, _Draws, _Run, _Step, bridge_bisect
 from plant.multimode.moving import substep_peak
-from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
-from plant.randomness import NoiseExhausted, NoiseStream
+from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER
+from plant.randomness import NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass import interval as compiled
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
@@ -190,53 +190,8 @@ def _barrier_vector(p, sgn):
 
 def _bisect(p, mode, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     """First crossing of c = e·Y + c0 through 0 in (0, w], given one: (offset, state there)
-    (plant.multimode.disturbed._bisect on this plant's steps)."""
-    t0 = 0.0
-    cursor = np.zeros(1, dtype=np.int64)
-    ekey = e.tobytes()
-    while w > tol:
-        full = _bridge_law(p, mode, w)
-        Ph, G, B = full._bridge
-        mean = Ph @ Ya + G @ (Yb - full.phi @ Ya)
-        given = full._given.get(ekey)
-        if given is None:
-            given = full._given[ekey] = _conditional(B, e)
-        var, k, F = given
-        mu = float(e @ mean) + c0
-        a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
-        half = w / 2
-        if draws is None:
-            Ym = mean
-            cm = float(e @ Ym) + c0
-        elif var > 0.0:
-            sd = math.sqrt(var)
-            if a > 0.0 and b > 0.0 and sig2 > 0.0:
-                while True:
-                    cursor[0] = draws.pos
-                    try:
-                        cm = hitting_midpoint(a, b, mu, sd, sig2 * half, draws.z, cursor)
-                        break
-                    except NoiseExhausted:
-                        draws.z, draws.pos = draws.noise.grow(draws.pos)
-                draws.pos = int(cursor[0])
-            else:
-                cm = mu + sd * float(draws.normals(1)[0])
-            Ym = mean + k * (cm - mu)
-            if F is not None:
-                Ym += F @ draws.normals(F.shape[1])
-        else:
-            Ym = mean + (B @ draws.normals(B.shape[1]) if B.shape[1] else 0.0)
-            cm = float(e @ Ym) + c0
-        pl = _cross_prob(a, cm, half, sig2)
-        pr = _cross_prob(cm, b, half, sig2)
-        pc = 1.0 - (1.0 - pl) * (1.0 - pr)
-        run.nsub += 1
-        if pl >= 1.0 or (pl > 0.0 and draws is not None and draws.uniform() * pc < pl):
-            Yb = Ym
-        else:
-            Ya, t0 = Ym, t0 + half
-        w = half
-    return t0 + w, Yb
+    (plant.multimode.disturbed.bridge_bisect on this plant's steps)."""
+    return bridge_bisect(lambda h: _bridge_law(p, mode, h), e, c0, Ya, Yb, w, tol, sig2, draws, run)
 
 
 @lru_cache(maxsize=16)
