@@ -257,12 +257,27 @@ class _Run:
         self.dur += h
 
 
-def _apply_level(Y, run, level, bridge):
+def _apply_level(Y, run, level, bridge, iu=YU, i3=Y3):
+    """The level in force from now (SPEC §2's drives): clipped on the amplifier; on the bridge
+    ±u_max or 0, a 0 with torque left starting the flyback. ``iu``, ``i3``: where u and x3 sit in
+    ``Y`` (this plant's layout by default; the stribeck and lugre paths pass theirs). False for
+    a bridge level that is neither."""
     umax = run.p.u_max
     if not bridge:
-        Y[YU] = min(max(level, -umax), umax)
+        Y[iu] = min(max(level, -umax), umax)
         run.fb = False
         return True
+    if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
+        return False
+    if level > 0:
+        Y[iu], run.fb = umax, False
+    elif level < 0:
+        Y[iu], run.fb = -umax, False
+    elif Y[i3] != 0.0:
+        Y[iu], run.fb = -math.copysign(umax, Y[i3]), True
+    else:
+        Y[iu], run.fb = 0.0, False
+    return True
     if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
         return False
     if level > 0:

@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
+from plant.multimode.disturbed import _apply_level as _level
 from plant.multimode.segments import torque_integrals
 from plant.multimode.stuck import stuck_propagate
 from plant.multimode.zero_velocity import hitting_midpoint
@@ -136,11 +137,8 @@ class _Run:
 
 
 def _apply_level(X, run, level, bridge):
-    umax = run.p.u_max
-    if not bridge:
-        X[AU] = min(max(level, -umax), umax)
-        run.fb = False
-        return True
+    """plant.multimode.disturbed._apply_level on this path's layout."""
+    return _level(X, run, level, bridge, AU, A3)
     if level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
         return False
     if level > 0:
