@@ -148,6 +148,11 @@ def _ignore_signals_while_exiting() -> None:
             _signal.signal(sig, _signal.SIG_IGN)
         except (ValueError, OSError):   # not the main thread (tests): nothing to protect
             pass
+    # CPython marks a KeyboardInterrupt "unhandled" when it leaves any ``exec`` of a string (scipy
+    # and dataclasses build functions that way during lazy imports), even if a caller catches it;
+    # under ``python -m`` the interpreter then kills itself with SIGINT at exit (-2, not our 130).
+    # Each string ``exec`` clears that mark on entry: one empty ``exec`` clears a stale one.
+    exec("pass")  # noqa: S102 - constant string, see above
 
 if __name__ == "__main__":
     main()
