@@ -61,8 +61,10 @@ def frontier_matrix_data(quick: bool = False, source: Path | None = None) -> dic
     else:
         from bench.matrix import load_matrix
 
-        load_matrix(source, check_resets=False)            # file:line errors before any completion
+        parsed = load_matrix(source, check_resets=False)   # file:line errors before any completion
         data = tomllib.loads(Path(source).read_text(encoding="utf-8-sig"))
+        if parsed.plugin_dirs:   # the completed file lives in DIR: keep finding the plugins where they are
+            data["matrix"]["plugin_dirs"] = [str(Path(d).resolve()) for d in parsed.plugin_dirs]
     matrix = data["matrix"]
     sweep = data.setdefault("sweep", {})
     names = list(matrix["controllers"])

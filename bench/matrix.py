@@ -11,6 +11,7 @@ Schema (public API, documented in the README)::
     time_limit_s = 600        # optional, wall-clock limit per cell [s] (default 600)
     plugins = ["my_module"]   # optional, modules imported first (they may register controllers);
                               # the matrix file's directory is searched before sys.path
+    plugin_dirs = ["../lib"]  # optional, where to search instead (relative to the matrix file)
 
     [scenarios.heavy-load]    # optional custom scenario: a base plus PlantParams overrides
     base = "thesis"           # (also duration_s, warmup_s, description)
@@ -59,7 +60,7 @@ MAX_TIME_LIMIT_S = 7 * 86400.0     # a week of wall clock per cell
 MAX_SAMPLES = 20_000_000           # samples of one run (~16 bytes each in the runner: 320 MB)
 _MAX_MATRIX_BYTES = 1_000_000
 _MATRIX_KEYS = ("controllers", "scenarios", "seeds", "duration_s", "warmup_s", "time_limit_s", "plugins",
-                "description")
+                "plugin_dirs", "description")
 _PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantParams)}
 
 
@@ -198,6 +199,23 @@ def _field_of(message: str, prefix: str) -> str | None:
     return m.group(1) if m else None
 
 
+def _plugin_dirs(source: str, m: dict[str, Any], base_dir: Path | None) -> tuple[str, ...]:
+    """The directories searched for ``plugins``: ``plugin_dirs`` relative to the matrix file's
+    directory (absolute ones as they are), by default that directory itself."""
+    dirs = m.get("plugin_dirs", ["."])
+    if not isinstance(dirs, list) or not dirs or not all(isinstance(d, str) and d for d in dirs):
+        raise _fail(source, "matrix.plugin_dirs", f"must be a non-empty list of directories, got {dirs!r}")
+    if base_dir is None and "plugin_dirs" not in m:
+        return ()
+    out = []
+    for i, d in enumerate(dirs):
+        path = Path(d) if Path(d).is_absolute() or base_dir is None else Path(base_dir) / d
+        if not path.is_dir():
+            raise _fail(source, f"matrix.plugin_dirs[{i}]", f"{d!r}: no such directory ({path})")
+        out.append(str(path.resolve()) if "plugin_dirs" in m else str(path))
+    return tuple(out)
+
+
 def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Path | None = None,
                  check_resets: bool = True, text: str | None = None) -> Matrix:
     """Validate parsed TOML ``data`` (see the module docstring). ``source`` labels messages;
@@ -219,7 +237,7 @@ def parse_matrix(data: dict[str, Any], source: str = "<matrix>", *, base_dir: Pa
     plugins = m.get("plugins", [])
     if not isinstance(plugins, list) or not all(isinstance(p, str) and p for p in plugins):
         raise _fail(source, "matrix.plugins", f"must be a list of module names, got {plugins!r}")
-    plugin_dirs = (str(base_dir),) if base_dir is not None and plugins else ()
+    plugin_dirs = _plugin_dirs(source, m, base_dir) if plugins or "plugin_dirs" in m else ()
     limit = _number(source, "matrix.time_limit_s", m.get("time_limit_s", DEFAULT_TIME_LIMIT_S),
                     positive=True, allow_zero=False)
     if limit > MAX_TIME_LIMIT_S:

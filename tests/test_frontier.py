@@ -276,3 +276,41 @@ def test_budget_table_skips_points_that_failed_a_seed():
                            point("costly", 0.05, 5e-6, ok=5)])
     rows = budget_table(points, "thesis", n_budgets=2)
     assert [r["best"]["controller"] for r in rows] == ["good", "costly"]
+
+
+def test_a_completed_user_matrix_still_finds_its_plugins(tmp_path):
+    """``frontier --matrix FILE`` writes the completed matrix into DIR; its plugins live next to
+    FILE. Before: the completed file searched DIR, so re-running it (``run --matrix
+    DIR/frontier-matrix.toml``, a resume, a dask worker) failed with ModuleNotFoundError."""
+    name = f"frontier_plugin_{tmp_path.name.replace('-', '_')}"
+    home, out = tmp_path / "axis", tmp_path / "out"
+    home.mkdir(), out.mkdir()
+    (home / f"{name}.py").write_text("from controllers.base import register\n"
+                                     "from controllers.linear import LinearController\n\n"
+                                     f"@register('{name.replace('_', '-')}')\n"
+                                     "class Mine(LinearController):\n    pass\n")
+    source = home / "m.toml"
+    source.write_text(f'[matrix]\nplugins = ["{name}"]\ncontrollers = ["linear"]\nscenarios = ["thesis"]\n'
+                      'seeds = [0]\nduration_s = 1\nwarmup_s = 0.2\n')
+    completed = out / "frontier-matrix.toml"
+    completed.write_text(to_toml(frontier_matrix_data(True, source)))
+    from controllers.base import _REGISTRY
+
+    try:
+        sys.modules.pop(name, None)                 # as a fresh process sees it
+        _REGISTRY.pop(name.replace("_", "-"), None)
+        sys.path[:] = [p for p in sys.path if p not in (str(home), str(home.resolve()))]
+        parsed = load_matrix(completed, check_resets=False)
+        assert parsed.plugin_dirs == (str(home.resolve()),)
+        assert sys.modules[name].__file__ == str((home / f"{name}.py").resolve())
+    finally:
+        _REGISTRY.pop(name.replace("_", "-"), None)
+        sys.modules.pop(name, None)
+
+
+def test_plugin_dirs_name_a_missing_directory(tmp_path):
+    (tmp_path / "m.toml").write_text('[matrix]\nplugins = ["x"]\nplugin_dirs = ["lib", "gone"]\n'
+                                     'controllers = ["linear"]\nscenarios = ["thesis"]\nseeds = [0]\n')
+    (tmp_path / "lib").mkdir()
+    with pytest.raises(MatrixError, match=r"m\.toml: matrix\.plugin_dirs\[1\]: 'gone': no such directory"):
+        load_matrix(tmp_path / "m.toml", check_resets=False)
