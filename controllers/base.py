@@ -237,20 +237,14 @@ def register(name: str) -> Callable[[_C], _C]:
     return deco
 
 
-def _load_builtin() -> None:
-    # Importing the package registers the built-in controllers.
-    import controllers  # noqa: F401
-
-
 def available_controllers() -> dict[str, type[Controller]]:
-    """Registered controllers by name, sorted."""
-    _load_builtin()
+    """Registered controllers by name, sorted. (The built-ins are registered by the package's
+    ``__init__``, which Python runs before this module whenever ``controllers.base`` is imported.)"""
     return dict(sorted(_REGISTRY.items()))
 
 
 def get_controller(name: str) -> type[Controller]:
     """The class registered as ``name``; ``ValueError`` lists the known names otherwise."""
-    _load_builtin()
     try:
         return _REGISTRY[name]
     except KeyError:

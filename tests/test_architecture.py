@@ -143,10 +143,7 @@ def test_cycle_finder_finds_a_known_cycle(monkeypatch):
 
 @pytest.mark.parametrize("layer", [
     "plant",
-    pytest.param("controllers", marks=pytest.mark.xfail(strict=True, reason=(
-        "controllers.base._load_builtin imports the package `controllers` to register the built-ins, "
-        "whose __init__ imports controllers.linear ... which import controllers.base: a cycle left to "
-        "the controllers refactoring (issue 21); remove this mark when it is gone"))),
+    "controllers",
     "bench",
     "reports",
 ])
