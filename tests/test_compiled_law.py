@@ -260,3 +260,41 @@ def test_a_lead_path_outside_the_compiled_kernels_is_fed_in_and_not_compiled():
     ua = [a.step(v).segments[0][1] for v in y]
     ub = [b.step(v).segments[0][1] for v in y]
     np.testing.assert_allclose(ub, ua, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name, scenario, seed", [
+    ("observer-pid", "thesis", 21), ("reset-pid", "delayed", 22), ("friction-ff-pid", "stribeck", 23),
+])
+def test_an_interval_that_runs_out_of_noise_is_undone_and_redone(monkeypatch, name, scenario, seed):
+    """The compiled law loop's ``NoiseExhausted`` branch: with a 64-normal block and no margin,
+    every interval that reaches the end of the buffer runs off it; the loop restores the controller's state,
+    grows the buffer and redoes the interval. The rows must be the Python loop's (whose noise
+    comes in 8192-normal blocks: the stream's normals do not depend on the blocking)."""
+    import bench.runner as runner
+    import plant.law_driver as driver
+    from plant.randomness import NoiseExhausted, NoiseStream
+
+    python, _, _ = _run(make_controller(name), scenario, seed, compiled=False)
+    exhausted = []
+    wrapped: dict = {}
+    specialised = driver._specialised
+
+    def counting(chunk, args):
+        fn = specialised(chunk, args)
+        if fn not in wrapped:
+            def call(*a, _fn=fn):
+                try:
+                    return _fn(*a)
+                except NoiseExhausted:
+                    exhausted.append(1)
+                    raise
+            wrapped[fn] = call
+        return wrapped[fn]
+
+    monkeypatch.setattr(driver, "_LAST", {})
+    monkeypatch.setattr(driver, "_specialised", counting)
+    monkeypatch.setattr(driver, "NOISE_MARGIN", 0)
+    monkeypatch.setattr(runner, "NoiseStream", lambda rng: NoiseStream(rng, block=64))
+    compiled, n_python_steps, _ = _run(make_controller(name), scenario, seed)
+    assert n_python_steps == 0 and len(exhausted) >= 3            # the compiled loop ran and redid intervals
+    assert _row(compiled) == _row(python)
