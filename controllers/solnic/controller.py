@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Controller, register
+from controllers.law import CompiledLaw
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 from controllers.models.acker import max_on_time
@@ -67,6 +68,7 @@ from controllers.models.acker import max_on_time
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
+from controllers.solnic import idle_step as _idle
 from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_noise
@@ -210,12 +212,90 @@ class SolnicController(Controller):
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
                            cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
                            undecided_cycles=0, grid_handover_cycle=0, braked_pulses=0)
+        self._idle: CompiledLaw | None = None
         self._ready = True
+
+    # ------------------------------------------------------------------ the compiled idle sample
+    def compiled_law(self) -> CompiledLaw | None:
+        """The idle sample compiled (:mod:`controllers.solnic.idle_step`), for the faithful
+        estimators only (no joint EKF, grid or noise-aware model); None otherwise.
+
+        While it is in use the state lives in its array between Python samples: ``step``
+        imports it first and exports it after (a hand-back is the Python path's sample).
+        """
+        o = self.options
+        if (not self._ready or self.joint is not None or self.grid is not None or o.noise_aware_model
+                or type(self.mode2) is not Mode2Filter or self._n != 0):
+            return None
+        p = np.empty(_idle.N_PARAMS)
+        p[_idle.TS], p[_idle.R] = self.params.sample_period, self.mode2.R
+        p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(self.mode2.tau4, self.mode2.sigma4_sq)
+        p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
+        self._idle = CompiledLaw(_idle.idle_step, np.zeros(_idle.N_STATE), p, DriveType.BRIDGE, 1)
+        self._plan_key: tuple[float, float, float] | None = None
+        self._export_idle()
+        return self._idle
+
+    def _export_idle(self) -> None:
+        """The state into the idle step's array, with the plan of the next sample cached."""
+        s, m = self._idle.state, self.mode2
+        s[_idle.N], s[_idle.X1], s[_idle.X4] = self._n, m.x1, m.x4
+        s[_idle.P11], s[_idle.P14], s[_idle.P44], s[_idle.FT] = m.p11, m.p14, m.p44, m.t
+        s[_idle.HAS_ANCHOR] = m._anchor is not None
+        s[_idle.C0], s[_idle.C1] = m._anchor if m._anchor is not None else (0.0, 0.0)
+        s[_idle.HAS_MOTION] = m._motion is not None
+        s[_idle.M0], s[_idle.M1] = m._motion if m._motion is not None else (0.0, 0.0)
+        s[_idle.MMEAN], s[_idle.MVAR] = m.motion_mean, m.motion_var
+        s[_idle.T_MAX], s[_idle.SINCE] = self._t_max, self._samples_since_launch
+        s[_idle.USED], s[_idle.REJECTED] = self.counts["samples_used"], self.counts["samples_rejected"]
+        s[_idle.POST:_idle.POST + 5] = self._posterior
+        s[_idle.DUE] = self._pending is not None and self._outcome_sets_next_size()
+        s[_idle.PLAN_USED] = 0.0
+        self._exported_n = self._n
+        # the plan of the next sample: Δt_u of the schedule as it stands, Δc_p,cond and the
+        # current-zero time of that pulse with the current k̂ (without the predictor's side
+        # effects: they are replayed by _import_idle if an idle sample used the plan)
+        s[_idle.PLAN_OK], self._plan_key = 0.0, None
+        dtu = self.schedule.next_dtu()
+        if dtu > 0:
+            dtu = min(dtu, self.dtu_max)
+            pred = self.predictor.conditional_peek(self.friction.ks, self.friction.kc, dtu)
+            if pred is not None:
+                s[_idle.DC_PLAN], s[_idle.DURATION] = abs(pred.delta_c), pred.t_current_zero
+                s[_idle.PLAN_OK], self._plan_key = 1.0, (self.friction.ks, self.friction.kc, dtu)
+
+    def _import_idle(self) -> None:
+        """The objects from the idle step's array, if compiled samples ran since the export."""
+        s = self._idle.state
+        if s[_idle.N] == self._exported_n:
+            return
+        m = self.mode2
+        self._n = self._exported_n = int(s[_idle.N])
+        m.x1, m.x4, m.p11, m.p14, m.p44, m.t = (float(v) for v in s[_idle.X1:_idle.FT + 1])
+        if m._anchor is not None:
+            m._anchor = (float(s[_idle.C0]), float(s[_idle.C1]))
+        if m._motion is not None:
+            m._motion = (float(s[_idle.M0]), float(s[_idle.M1]))
+            m.motion_mean, m.motion_var = float(s[_idle.MMEAN]), float(s[_idle.MVAR])
+        self._samples_since_launch = int(s[_idle.SINCE])
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(s[_idle.USED]), int(s[_idle.REJECTED])
+        self._posterior = tuple(float(v) for v in s[_idle.POST:_idle.POST + 5])
+        if s[_idle.PLAN_USED] != 0.0:
+            self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
+        s[_idle.PLAN_USED] = 0.0
 
     # ------------------------------------------------------------------ per sample
     def step(self, y: float) -> DriveCommand:
         if not self._ready:
             raise RuntimeError("SolnicController.step called before reset")
+        if self._idle is None:
+            return self._step(y)
+        self._import_idle()
+        command = self._step(y)
+        self._export_idle()
+        return command
+
+    def _step(self, y: float) -> DriveCommand:
         t = self._n * self.params.sample_period
         self._n += 1
         self.mode2.predict(t)
@@ -525,6 +605,8 @@ class SolnicController(Controller):
     def internals(self) -> dict[str, float]:
         if not self._ready:
             return {}
+        if self._idle is not None:
+            self._import_idle()
         P = self.friction.P
         sch = self.schedule
         return {
@@ -549,6 +631,8 @@ class SolnicController(Controller):
         """``pulse`` and ``phase:<size>`` launch instants [s] (:mod:`controllers.solnic.series`)."""
         if not self._ready:
             return {}
+        if self._idle is not None:
+            self._import_idle()
         cycles = [(e["t_a"], int(e["size"])) for e in self.log]
         if self._pending is not None:
             cycles.append((self._pending.t_a, int(self._pending.size)))
@@ -561,6 +645,8 @@ class SolnicController(Controller):
     def summary(self) -> dict[str, Any]:
         if not self._ready:
             return {"preset": self.preset, "a_c": self.options.a_c}
+        if self._idle is not None:
+            self._import_idle()
         out: dict[str, Any] = {
             "preset": self.preset, "a_c": self.options.a_c,
             "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,

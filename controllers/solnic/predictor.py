@@ -373,6 +373,23 @@ class Predictor:
         memo[key] = pred
         return pred
 
+    def conditional_peek(self, ks: float, kc: float, dt_u: float) -> PulsePrediction | None:
+        """:meth:`conditional` (sign +1, default shrink) without its side effects on the memo
+        and the model-run count; None where it would raise (or with an injected model)."""
+        key = (float(ks), float(kc), float(dt_u), 1, 1e-6, self.brake_margin)
+        hit = self.__dict__.get("_conditional_memo", {}).get(key)
+        if hit is not None or not self._compiled or not (dt_u >= 0 and math.isfinite(dt_u)):
+            return hit
+        runs = self.n_model_runs
+        try:
+            r, ks_u, kc_u, _ = _conditional_kernel(float(ks), float(kc), float(dt_u), *self._constants,
+                                                   *self._brake_args(), 1e-6)
+            return self._prediction(r, ks if ks_u == ks else ks_u, kc if kc_u == kc else kc_u, dt_u, 1)
+        except (EstimateOutOfRange, ControllerDiverged):
+            return None
+        finally:
+            self.n_model_runs = runs
+
     def predicted_motion(self, ks: float, kc: float, dt_u: float) -> float:
         """|Δc_p| only (no partials), for cost curves."""
         if dt_u <= 0:

@@ -1,0 +1,174 @@
+"""solnic's idle sample as one compiled step: the ``compiled_law`` hook with a hand-back per pulse cycle.
+
+Between pulses a faithful solnic sample (:meth:`SolnicController.step
+<controllers.solnic.controller.SolnicController.step>`) is: the time update of the mode-2
+filter (3-22), (4-11) to t = n·τs, the measurement update past t_max (5-11), the posterior
+moments, and the trigger test of section 7.2 (:func:`~controllers.solnic.strategy.plan_trigger`)
+against the Δc_p,cond of the next pulse — which answers "off" on all samples but the one that
+launches. :func:`idle_step` does exactly that arithmetic on a float64 state array (layout
+below) in the same order of floating-point operations, and *hands the sample back* (returns 0,
+:mod:`plant.law_step`) wherever the Python logic must run: a trigger that fires (pulse launch,
+the cycle's evaluation (5-13)–(5-18), the optimiser (6-1)–(6-10)), a due set-boundary
+evaluation, a Δt_u or a prediction the cached plan cannot give. That is one or two hand-backs
+per pulse cycle (~12 samples on thesis).
+
+The plan's Δc_p,cond and current-zero time are constant between hand-backs (k̂ and the size
+schedule change only in the Python logic): the controller caches them in the array after each
+Python sample (:meth:`~controllers.solnic.controller.SolnicController._export_idle`), and the
+Python path reads the state back before it runs (``_import_idle``). The predictor's memo and
+model-run count, which the Python sample would touch at the first idle sample, are replayed at
+that import (the prediction is the same pure function of (k̂s, k̂c, Δt_u)), so the summary is
+the Python path's too.
+
+Only the faithful estimators run here (two filters, no grid, no noise-aware model, i.e.
+``solnic``); ``solnic-modern``'s joint EKF moves k̂ at every sample and keeps the Python path.
+Bit-identity is tested against the recorded (Python) path, tests/test_solnic_idle_step.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+__all__ = ["idle_step", "mode2_coefficients", "N_STATE", "N_PARAMS"]
+
+# state s: the sample count, the mode-2 filter, the controller's counters, the cached plan
+(N, X1, X4, P11, P14, P44, FT, HAS_ANCHOR, C0, C1, HAS_MOTION, M0, M1, MMEAN, MVAR, T_MAX, SINCE, USED,
+ REJECTED, POST, _P1, _P2, _P3, _P4, DUE, PLAN_OK, DC_PLAN, DURATION, PLAN_USED) = range(29)
+N_STATE = 29
+# params p: τs, R = σ1², τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4, evaluation_samples, overshoot_factor
+TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT = range(9)
+N_PARAMS = 9
+
+
+def mode2_coefficients(tau4: float, sigma4_sq: float) -> tuple[float, float, float, float, float]:
+    """(τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4): the constant factors of
+    :func:`~controllers.solnic.mode2_filter.mode2_transition`, formed as it forms them."""
+    return tau4, 1.0 / tau4, sigma4_sq * tau4**3, -sigma4_sq * tau4**2, sigma4_sq * tau4
+
+
+@njit(cache=True)
+def _e1(x):
+    return -math.expm1(-x)
+
+
+@njit(cache=True)
+def _f3(x):
+    """:func:`controllers.solnic.mode2_filter._f3` (the same series and the same sums)."""
+    if x < 0.1:
+        total = 0.0
+        term = x * x / 2.0
+        for n in range(3, 30):
+            term *= x / n
+            sgn = 1.0 if (n + 1) % 2 == 0 else -1.0
+            total += sgn * (2.0 ** (n - 1) - 2.0) * term
+            if abs(term) * 2.0 ** n < 1e-18 * abs(total):
+                break
+        return total
+    return x - 2.0 * _e1(x) + _e1(2.0 * x) / 2.0
+
+
+@njit(cache=True)
+def _fires(x1, x4, x4_std, delta_c, horizon, earliest, duration, overshoot_factor):
+    """Whether :func:`~controllers.solnic.strategy.plan_trigger` returns a trigger (x4_significance 2)."""
+    half = abs(delta_c) / 2.0
+    o0 = earliest if earliest > 0.0 else 0.0
+    if not (abs(x4) >= 2.0 * x4_std and x4 != 0.0):
+        if abs(x1) >= half and x1 != 0.0:
+            return o0 >= earliest and o0 + duration <= horizon
+        return False
+    d = 1.0 if x4 > 0 else -1.0
+    if d * x1 >= overshoot_factor * abs(delta_c) and abs(delta_c) > 0:
+        return o0 >= earliest and o0 + duration <= horizon
+    wait = (d * x1 + half) / abs(x4)
+    o = 0.0
+    if wait > o:
+        o = wait
+    if earliest > o:
+        o = earliest
+    return o >= earliest and o + duration <= horizon
+
+
+@njit(cache=True)
+def idle_step(s, p, y, offs, levs):
+    """One solnic sample if it is idle (the bridge off: k = 1, level 0), else 0 (hand back).
+
+    The mode-2 filter's predict/update (:class:`~controllers.solnic.mode2_filter.Mode2Filter`,
+    anchor and motion covariances included) and the controller's bookkeeping, in its order.
+    """
+    n = s[N]
+    t = n * p[TS]
+    # Mode2Filter.predict(t)
+    h = t - s[FT]
+    if h < -1e-12:
+        return 0
+    if h > 0:
+        x = p[B4] * h
+        e = _e1(x)
+        f12 = -p[TAU4] * e
+        f22 = 1.0 - e
+        q11 = p[Q11C] * _f3(x)
+        q14 = p[Q14C] * e * e / 2.0
+        q44 = p[Q44C] * _e1(2.0 * x) / 2.0
+        if s[HAS_ANCHOR] != 0.0:
+            c1 = s[C1]
+            s[C0] = s[C0] + f12 * c1
+            s[C1] = f22 * c1
+        if s[HAS_MOTION] != 0.0:
+            m1 = s[M1]
+            s[M0] = s[M0] + f12 * m1
+            s[M1] = f22 * m1
+        x4, p14, p44 = s[X4], s[P14], s[P44]
+        s[X1] += f12 * x4
+        s[X4] = f22 * x4
+        a11 = s[P11] + f12 * p14
+        a12 = p14 + f12 * p44
+        s[P11] = a11 + f12 * a12 + q11
+        s[P14] = f22 * a12 + q14
+        s[P44] = f22 * f22 * p44 + q44
+        s[FT] = t
+    s[N] = n + 1.0
+    if t >= s[T_MAX] and math.isfinite(y):
+        # Mode2Filter.update(y)
+        innovation = y - s[X1]
+        p11, p14, p44 = s[P11], s[P14], s[P44]
+        S = p11 + p[R]
+        k1 = p11 / S
+        k4 = p14 / S
+        if s[HAS_ANCHOR] != 0.0:
+            c0, c1 = s[C0], s[C1]
+            s[C0] = c0 - k1 * c0
+            s[C1] = c1 - k4 * c0
+        if s[HAS_MOTION] != 0.0:
+            m0, m1 = s[M0], s[M1]
+            k_d = m0 / S
+            s[MMEAN] += k_d * innovation
+            s[MVAR] -= k_d * m0
+            s[M0] = m0 - k1 * m0
+            s[M1] = m1 - k4 * m0
+        s[X1] += k1 * innovation
+        s[X4] += k4 * innovation
+        s[P11] = p11 - k1 * p11
+        s[P14] = p14 - k1 * p14
+        s[P44] = p44 - k4 * p14
+        s[USED] += 1.0
+        s[SINCE] += 1.0
+    else:
+        s[REJECTED] += 1.0
+    s[POST], s[POST + 1], s[POST + 2], s[POST + 3], s[POST + 4] = s[X1], s[X4], s[P11], s[P14], s[P44]
+    if s[DUE] != 0.0 and s[SINCE] >= p[EVAL_SAMPLES]:
+        return 0                                  # the set-boundary evaluation
+    if s[PLAN_OK] == 0.0:
+        return 0                                  # no cached plan: Python plans
+    earliest = s[T_MAX] - t
+    if not earliest > 0.0:
+        earliest = 0.0
+    p44 = s[P44]
+    x4_std = math.sqrt(0.0 if 0.0 > p44 else p44)   # max(p44, 0.0), NaN kept
+    if _fires(s[X1], s[X4], x4_std, s[DC_PLAN], p[TS], earliest, s[DURATION], p[OVERSHOOT]):
+        return 0                                  # a pulse (and the pending cycle's evaluation)
+    s[PLAN_USED] = 1.0
+    offs[0] = 0.0
+    levs[0] = 0.0
+    return 1
