@@ -231,7 +231,7 @@ class SolnicController(Controller):
         p[_idle.TS], p[_idle.R] = self.params.sample_period, self.mode2.R
         p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(self.mode2.tau4, self.mode2.sigma4_sq)
         p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
-        self._idle = CompiledLaw(_idle.idle_step, np.zeros(_idle.N_STATE), p, DriveType.BRIDGE, 1)
+        self._idle = CompiledLaw(_idle.idle_step_address(), np.zeros(_idle.N_STATE), p, DriveType.BRIDGE, 1)
         self._plan_key: tuple[float, float, float] | None = None
         self._export_idle()
         return self._idle
