@@ -29,7 +29,7 @@ def _row(r):
 
 def _run(name, scenario, seed, duration, **kw):
     sc = builtin_scenarios()[scenario]
-    c = make_controller(name)
+    c = make_controller(name) if isinstance(name, str) else name
     calls = []
     step = c.step
     c.step = lambda y: calls.append(1) or step(y)          # counts the Python samples
@@ -52,9 +52,29 @@ def test_compiled_solnic_rows_are_the_python_rows(scenario, seed):
         assert 10 < pulses and n_python <= 3 * pulses + 5          # hand-backs per pulse cycle, not per sample
 
 
-def test_solnic_modern_keeps_the_python_path():
-    compiled, n_python, _ = _run("solnic-modern", "thesis", 0, 3.0)
-    python, _, _ = _run("solnic-modern", "thesis", 0, 3.0, compiled=False)
+@pytest.mark.parametrize("scenario, seed, duration", [("thesis", 0, 20.0), ("quantized", 1, 12.0),
+                                                      ("delayed", 2, 12.0), ("stribeck", 3, 12.0),
+                                                      ("compliant", 4, 12.0)])
+def test_compiled_solnic_modern_rows_are_the_python_rows(scenario, seed, duration):
+    """The joint EKF's idle step, through the grid's start-up and (thesis, 20 s) past its
+    hand-over to the joint EKF with braking pulses; the predictor's model runs included."""
+    compiled, n_python, c = _run("solnic-modern", scenario, seed, duration)
+    recorded, _, _ = _run("solnic-modern", scenario, seed, duration, record=True)
+    python, _, cp = _run("solnic-modern", scenario, seed, duration, compiled=False)
+    assert compiled.status == "ok"
+    assert _row(compiled) == _row(recorded) == _row(python)
+    assert n_python < 0.3 * duration * 100                        # most samples ran compiled
+    if scenario == "thesis":
+        assert c.summary()["grid_handover_cycle"] > 0 and c.grid is None      # past the hand-over
+        assert c.summary()["braked_pulses"] > 0
+    assert c.predictor.n_model_runs == cp.predictor.n_model_runs
+    assert c.joint._since == cp.joint._since                      # what no_motion would replay
+
+
+def test_options_the_idle_step_does_not_cover_keep_the_python_path():
+    c = make_controller("solnic-modern", noise_aware_model=False)
+    compiled, n_python, _ = _run(c, "thesis", 0, 3.0)
+    python, _, _ = _run(make_controller("solnic-modern", noise_aware_model=False), "thesis", 0, 3.0, compiled=False)
     assert n_python == 300 and _row(compiled) == _row(python)
 
 

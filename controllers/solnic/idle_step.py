@@ -40,6 +40,9 @@ import math
 from numba import njit
 from numba.experimental.function_type import _get_wrapper_address
 
+from controllers.solnic.filter_kernels import joint_predict, joint_update
+from controllers.solnic.noise_model import _GL_X, _GL_W, _coasting_moments, _pulse_noise
+from controllers.solnic.predictor import _conditional_kernel
 from plant.law_step import STEP_SIGNATURE, STEP_TYPE
 
 __all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "StepAddress", "N_STATE", "N_PARAMS"]
@@ -213,3 +216,136 @@ def idle_step_address() -> StepAddress:
     if not _ADDRESS:
         _ADDRESS.append(StepAddress(idle_step))
     return _ADDRESS[0]
+
+
+# -- solnic-modern: the joint EKF's idle sample -------------------------------------------------
+# state: the sample count, filter time, counters and posterior as above (same indices up to
+# PLAN_USED), then the plan's inputs, the joint Gaussian z (5) and P (5×5), the samples since
+# the last pulse (for JointFilter.no_motion), and the keys of the predictor's memo.
+(J_DTU, J_PEAK, J_BRAKE, J_MARGIN, J_GRID, J_GP_OK, J_GP_DC, J_RUNS, J_SNAP, J_NS, J_MCOUNT, J_MK, J_MK0,
+ J_CLEARED) = range(29, 43)
+J_Z = 43
+J_P = J_Z + 5
+J_SBUF = J_P + 25
+N_SINCE = 128                     # (t, y) pairs kept in the array; more: the sample is handed back
+J_MTAB = J_SBUF + 2 * N_SINCE
+N_MEMO = 258                      # Predictor.conditional's memo holds ≤ 257 keys (cleared past 256)
+N_JOINT_STATE = J_MTAB + 3 * N_MEMO
+# params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants
+(J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX) = range(9, 17)
+N_JOINT_PARAMS = 17
+
+
+@njit(cache=True)
+def _transition(p, h):
+    """(Φ12, Φ22, q11, q14, q44) of :func:`~controllers.solnic.mode2_filter.mode2_transition`."""
+    x = p[B4] * h
+    e = _e1(x)
+    return -p[TAU4] * e, 1.0 - e, p[Q11C] * _f3(x), p[Q14C] * e * e / 2.0, p[Q44C] * _e1(2.0 * x) / 2.0
+
+
+@njit(cache=True)
+def _memo_hit(s, ks, kc, dtu):
+    for i in range(int(s[J_MK])):
+        j = J_MTAB + 3 * i
+        if s[j] == ks and s[j + 1] == kc and s[j + 2] == dtu:
+            return True
+    return False
+
+
+@njit(cache=True)
+def joint_idle_step(s, p, y, offs, levs):
+    """solnic-modern's sample if it is idle, else 0 (hand back): the joint EKF's predict and
+    update (:class:`~controllers.solnic.joint_filter.JointFilter`, its compiled kernels), the
+    prediction of the next pulse at this sample's k̂ (:meth:`Predictor.conditional
+    <controllers.solnic.predictor.Predictor.conditional>`, its memo and model-run count
+    emulated), its w2 bias (:func:`~controllers.solnic.noise_model.pulse_noise` or
+    :func:`~controllers.solnic.noise_model.braked_pulse_noise`) or the grid's cached
+    predictive, and the trigger test."""
+    z = s[J_Z:J_Z + 5]
+    P = s[J_P:J_P + 25].reshape((5, 5))
+    n = s[N]
+    t = n * p[TS]
+    h = t - s[FT]
+    if h < -1e-12:
+        return 0
+    if h > 0:
+        f12, f22, q11, q14, q44 = _transition(p, h)
+        joint_predict(z, P, f12, f22, q11, q14, q44)
+        s[FT] = t
+    s[N] = n + 1.0
+    if t >= s[T_MAX] and math.isfinite(y):
+        if s[J_SNAP] != 0.0:
+            k = int(s[J_NS])
+            if k >= N_SINCE:
+                return 0
+            s[J_SBUF + 2 * k] = s[FT]
+            s[J_SBUF + 2 * k + 1] = y
+            s[J_NS] = k + 1.0
+        joint_update(z, P, p[R], y)
+        kc = z[2]
+        if not (0.0 <= kc and kc <= z[3] and z[3] < p[J_UMAX]):
+            return 0                              # JointFilter._valid: conditioning in Python
+        s[USED] += 1.0
+        s[SINCE] += 1.0
+    else:
+        s[REJECTED] += 1.0
+    s[POST], s[POST + 1], s[POST + 2], s[POST + 3], s[POST + 4] = z[0], z[1], P[0, 0], P[0, 1], P[1, 1]
+    if s[DUE] != 0.0 and s[SINCE] >= p[EVAL_SAMPLES]:
+        return 0
+    if s[PLAN_OK] == 0.0:
+        return 0
+    earliest = s[T_MAX] - t
+    if not earliest > 0.0:
+        earliest = 0.0
+    ks, kc, dtu = z[3], z[2], s[J_DTU]
+    hit = _memo_hit(s, ks, kc, dtu)
+    r, ks_u, kc_u, runs0 = _conditional_kernel(ks, kc, dtu, p[J_U], p[J_T3], p[J_ALPHA], p[J_FD],
+                                               s[J_BRAKE] != 0.0, s[J_MARGIN], p[J_S2], p[J_CAP],
+                                               p[J_MINRATIO], 1e-6)
+    if r[0] != 0:
+        return 0                                  # Predictor._prediction raises: in Python
+    if not hit:
+        if s[J_MCOUNT] > 256:                     # memo.clear()
+            s[J_MCOUNT] = 0.0
+            s[J_MK] = 0.0
+            s[J_CLEARED] = 1.0
+        j = J_MTAB + 3 * int(s[J_MK])
+        s[j], s[j + 1], s[j + 2] = ks, kc, dtu
+        s[J_MK] += 1.0
+        s[J_MCOUNT] += 1.0
+        s[J_RUNS] += runs0 + r[1]
+    dc, tb, tcz, t_stop, t_off = r[2], r[3], r[4], r[5], r[10]
+    dc_plan = abs(dc)
+    if s[J_GRID] != 0.0 and s[J_GP_OK] != 0.0:
+        dc_plan = s[J_GP_DC]                      # the grid's predictive (w2 bias included)
+    else:                                         # SolnicController._pulse_noise(pred, dtu)[0]
+        cap = s[J_PEAK] * (1.0 - 1e-6)
+        ksn = cap if cap < ks else ks
+        kcn = ksn if ksn < kc else kc
+        s2 = p[J_S2]
+        bias = 0.0
+        if tb >= 0.0 and s2 > 0 and t_stop > tb:
+            al, U, tau = p[J_ALPHA], p[J_U], p[J_T3]
+            if t_off >= 0.0 and t_stop > tcz and kcn > 0:
+                bias = _coasting_moments(al, U, tau, s2, ksn, kcn, dtu, tb, tcz, t_stop,
+                                         U * -math.expm1(-dtu / tau), _GL_X, _GL_W, al * kcn * (t_stop - tcz))[0]
+            else:
+                bias = _pulse_noise(al, U, tau, s2, ksn, kcn, dtu, tb, tcz, t_stop, _GL_X, _GL_W)[0]
+        dc_plan += bias
+    x4_std = math.sqrt(0.0 if 0.0 > P[1, 1] else P[1, 1])
+    if _fires(z[0], z[1], x4_std, dc_plan, p[TS], earliest, tcz, p[OVERSHOOT]):
+        return 0
+    offs[0] = 0.0
+    levs[0] = 0.0
+    return 1
+
+
+_JOINT_ADDRESS: list[StepAddress] = []
+
+
+def joint_idle_step_address() -> StepAddress:
+    """:func:`joint_idle_step` as a :class:`StepAddress` (made once per process)."""
+    if not _JOINT_ADDRESS:
+        _JOINT_ADDRESS.append(StepAddress(joint_idle_step))
+    return _JOINT_ADDRESS[0]
