@@ -114,3 +114,19 @@ def test_compiled_mode2_transition_is_the_filters():
         assert (s[idle.C0], s[idle.C1]) == f._anchor and (s[idle.M0], s[idle.M1]) == f._motion
         Phi, Q = mode2_transition(h, tau4, s4)
         assert Phi[0, 1] != 0.0 and Q[0, 0] > 0.0      # the step did something
+
+
+@pytest.mark.parametrize("name, options", [
+    ("solnic", {"braking_pulse": True}),
+    ("solnic", {"dce_variance": "independent", "dc_measurement": "data-only"}),
+    ("solnic", {"friction_constraints": "distribution", "motion_decision": "three-way"}),
+    ("solnic", {"legacy_set_boundary": True, "a_c": 1e-6}),
+    ("solnic", {"preset": "high-error-cost"}),
+    ("solnic-modern", {"friction_grid": False}),
+    ("solnic-modern", {"braking_pulse": False, "censored_no_motion": True}),
+])
+def test_option_variants_compiled_are_the_python_rows(name, options):
+    compiled, n_python, _ = _run(make_controller(name, **options), "thesis", 6, 10.0)
+    python, _, _ = _run(make_controller(name, **options), "thesis", 6, 10.0, compiled=False)
+    assert compiled.status == "ok" and n_python < 500
+    assert _row(compiled) == _row(python)
