@@ -257,17 +257,13 @@ class SolnicController(Controller):
             self._export_joint()
             return
         s, m = self._idle.state, self.mode2
-        s[_idle.N], s[_idle.X1], s[_idle.X4] = self._n, m.x1, m.x4
-        s[_idle.P11], s[_idle.P14], s[_idle.P44], s[_idle.FT] = m.p11, m.p14, m.p44, m.t
-        s[_idle.HAS_ANCHOR] = m._anchor is not None
-        s[_idle.C0], s[_idle.C1] = m._anchor if m._anchor is not None else (0.0, 0.0)
-        s[_idle.HAS_MOTION] = m._motion is not None
-        s[_idle.M0], s[_idle.M1] = m._motion if m._motion is not None else (0.0, 0.0)
-        s[_idle.MMEAN], s[_idle.MVAR] = m.motion_mean, m.motion_var
-        s[_idle.T_MAX], s[_idle.SINCE] = self._t_max, self._samples_since_launch
-        s[_idle.USED], s[_idle.REJECTED] = self.counts["samples_used"], self.counts["samples_rejected"]
-        s[_idle.POST:_idle.POST + 5] = self._posterior
-        s[_idle.DUE] = self._pending is not None and self._outcome_sets_next_size()
+        anchor, motion = m._anchor, m._motion
+        s[_idle.N:_idle.DUE + 1] = (                # the layout's order, N … DUE
+            self._n, m.x1, m.x4, m.p11, m.p14, m.p44, m.t,
+            anchor is not None, *(anchor if anchor is not None else (0.0, 0.0)),
+            motion is not None, *(motion if motion is not None else (0.0, 0.0)), m.motion_mean, m.motion_var,
+            self._t_max, self._samples_since_launch, self.counts["samples_used"], self.counts["samples_rejected"],
+            *self._posterior, self._pending is not None and self._outcome_sets_next_size())
         s[_idle.PLAN_USED] = 0.0
         self._exported_n = self._n
         # the plan of the next sample: Δt_u of the schedule as it stands, Δc_p,cond and the
@@ -291,10 +287,9 @@ class SolnicController(Controller):
         s[_idle.J_Z:_idle.J_Z + 5] = j.z
         s[_idle.J_P:_idle.J_P + 25] = j.P.ravel()
         s[_idle.J_SNAP], s[_idle.J_NS] = j._snapshot is not None, 0.0
-        s[_idle.T_MAX], s[_idle.SINCE] = self._t_max, self._samples_since_launch
-        s[_idle.USED], s[_idle.REJECTED] = self.counts["samples_used"], self.counts["samples_rejected"]
-        s[_idle.POST:_idle.POST + 5] = self._posterior
-        s[_idle.DUE] = self._pending is not None and self._outcome_sets_next_size()
+        s[_idle.T_MAX:_idle.DUE + 1] = (self._t_max, self._samples_since_launch, self.counts["samples_used"],
+                                        self.counts["samples_rejected"], *self._posterior,
+                                        self._pending is not None and self._outcome_sets_next_size())
         self._exported_n = self._n
         # the memo's keys with this brake margin (the others cannot be hit, but count in its size)
         memo = pr.__dict__.setdefault("_conditional_memo", {})
@@ -348,9 +343,10 @@ class SolnicController(Controller):
             buf = s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist()
             j._since.extend(zip(buf[0::2], buf[1::2]))
         s[_idle.J_NS] = 0.0
-        self._samples_since_launch = int(s[_idle.SINCE])
-        self.counts["samples_used"], self.counts["samples_rejected"] = int(s[_idle.USED]), int(s[_idle.REJECTED])
-        self._posterior = tuple(float(v) for v in s[_idle.POST:_idle.POST + 5])
+        since, used, rejected, *post = s[_idle.SINCE:_idle.POST + 5].tolist()
+        self._samples_since_launch = int(since)
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
+        self._posterior = tuple(post)
         # the predictor's memo and model runs as the idle samples' conditional() calls left them
         pr.n_model_runs += int(s[_idle.J_RUNS])
         memo = pr.__dict__.setdefault("_conditional_memo", {})
@@ -375,16 +371,17 @@ class SolnicController(Controller):
             self._import_joint()
             return
         m = self.mode2
-        self._n = self._exported_n = int(s[_idle.N])
-        m.x1, m.x4, m.p11, m.p14, m.p44, m.t = (float(v) for v in s[_idle.X1:_idle.FT + 1])
+        (n, m.x1, m.x4, m.p11, m.p14, m.p44, m.t, _, c0, c1, _, m0, m1, mean, var, _, since, used, rejected,
+         *post) = s[_idle.N:_idle.POST + 5].tolist()
+        self._n = self._exported_n = int(n)
         if m._anchor is not None:
-            m._anchor = (float(s[_idle.C0]), float(s[_idle.C1]))
+            m._anchor = (c0, c1)
         if m._motion is not None:
-            m._motion = (float(s[_idle.M0]), float(s[_idle.M1]))
-            m.motion_mean, m.motion_var = float(s[_idle.MMEAN]), float(s[_idle.MVAR])
-        self._samples_since_launch = int(s[_idle.SINCE])
-        self.counts["samples_used"], self.counts["samples_rejected"] = int(s[_idle.USED]), int(s[_idle.REJECTED])
-        self._posterior = tuple(float(v) for v in s[_idle.POST:_idle.POST + 5])
+            m._motion = (m0, m1)
+            m.motion_mean, m.motion_var = mean, var
+        self._samples_since_launch = int(since)
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
+        self._posterior = tuple(post)
         if s[_idle.PLAN_USED] != 0.0:
             self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
         s[_idle.PLAN_USED] = 0.0
