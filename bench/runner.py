@@ -283,7 +283,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                     claw = None              # the Python path's delay raises at the next sample
                     continue
                 run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline, n0=n,
-                            sums=dataclasses.asdict(totals), x1_window=x1_window,
+                            sums=vars(totals).copy(), x1_window=x1_window,
                             pending=None if pending is None else pending.arrays())
                 state = loop.state = run.state
                 n = loop.n = run.n_done

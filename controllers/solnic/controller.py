@@ -51,6 +51,7 @@ initial estimate (a factor-of-two error is one sigma).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -60,6 +61,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Controller, register
+from controllers.law import CompiledLaw
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 from controllers.models.acker import max_on_time
@@ -67,10 +69,11 @@ from controllers.models.acker import max_on_time
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
+from controllers.solnic import idle_step as _idle
 from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_noise
-from controllers.solnic.predictor import Predictor, PulsePrediction
+from controllers.solnic.predictor import LAZY, Predictor, PulsePrediction, peak_torque
 from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.series import cycle_event_times, log_series
 from controllers.solnic.strategy import (LARGE, MEDIUM, SMALL, STARTUP_RAISE, STARTUP_SETTLE,
@@ -210,12 +213,191 @@ class SolnicController(Controller):
                            cycles_evaluated=0, significant_cycles=0, friction_updates=0,
                            cost_evaluations=0, startup_cycles=0, shrinks=0, clipped_updates=0,
                            undecided_cycles=0, grid_handover_cycle=0, braked_pulses=0)
+        self._idle: CompiledLaw | None = None
         self._ready = True
+
+    # ------------------------------------------------------------------ the compiled idle sample
+    def compiled_law(self) -> CompiledLaw | None:
+        """The idle sample compiled (:mod:`controllers.solnic.idle_step`): the faithful
+        estimators' (two filters, no grid, no noise-aware model) or the joint EKF's with the
+        noise-aware model (``solnic-modern``, grid or not); None for other option sets.
+
+        While it is in use the state lives in its array between Python samples: ``step``
+        imports it first and exports it after (a hand-back is the Python path's sample).
+        """
+        o = self.options
+        if not self._ready or self._n != 0:
+            return None
+        joint = self.joint is not None
+        if joint:
+            if not (type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled):
+                return None
+            f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
+        else:
+            if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
+                return None
+            f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, _idle.N_STATE, _idle.idle_step_address()
+        p = np.empty(n_p)
+        p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
+        p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(f.tau4, f.sigma4_sq)
+        p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
+        if joint:
+            U, t3, a, fd = self.predictor._constants
+            s2, cap, min_ratio = self.predictor._brake_constants
+            p[_idle.J_U:_idle.J_UMAX + 1] = U, t3, a, fd, s2, cap, min_ratio, f.u_max
+        self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 1)
+        self._plan_key: tuple[float, float, float] | None = None
+        self._memo_seen = (0, 0)
+        self._export_idle()
+        return self._idle
+
+    def _export_idle(self) -> None:
+        """The state into the idle step's array, with the plan of the next sample cached."""
+        if self.joint is not None:
+            self._export_joint()
+            return
+        s, m = self._idle.state, self.mode2
+        anchor, motion = m._anchor, m._motion
+        s[_idle.N:_idle.DUE + 1] = (                # the layout's order, N … DUE
+            self._n, m.x1, m.x4, m.p11, m.p14, m.p44, m.t,
+            anchor is not None, *(anchor if anchor is not None else (0.0, 0.0)),
+            motion is not None, *(motion if motion is not None else (0.0, 0.0)), m.motion_mean, m.motion_var,
+            self._t_max, self._samples_since_launch, self.counts["samples_used"], self.counts["samples_rejected"],
+            *self._posterior, self._pending is not None and self._outcome_sets_next_size())
+        s[_idle.PLAN_USED] = 0.0
+        self._exported_n = self._n
+        # the plan of the next sample: Δt_u of the schedule as it stands, Δc_p,cond and the
+        # current-zero time of that pulse with the current k̂ (without the predictor's side
+        # effects: they are replayed by _import_idle if an idle sample used the plan)
+        s[_idle.PLAN_OK], self._plan_key = 0.0, None
+        dtu = self.schedule.next_dtu()
+        if dtu > 0:
+            dtu = min(dtu, self.dtu_max)
+            pred = self.predictor.conditional_peek(self.friction.ks, self.friction.kc, dtu)
+            if pred is not None:
+                s[_idle.DC_PLAN], s[_idle.DURATION] = abs(pred.delta_c), pred.t_current_zero
+                s[_idle.PLAN_OK], self._plan_key = 1.0, (self.friction.ks, self.friction.kc, dtu)
+
+    def _export_joint(self) -> None:
+        """:meth:`_export_idle` for :func:`~controllers.solnic.idle_step.joint_idle_step`: the
+        joint Gaussian, the keys of the predictor's memo, the Δt_u (and the grid's cached
+        predictive) of the next sample."""
+        s, j, pr = self._idle.state, self.joint, self.predictor
+        s[_idle.N], s[_idle.FT] = self._n, j.t
+        s[_idle.J_Z:_idle.J_Z + 5] = j.z
+        s[_idle.J_P:_idle.J_P + 25] = j.P.ravel()
+        s[_idle.J_SNAP], s[_idle.J_NS] = j._snapshot is not None, 0.0
+        s[_idle.T_MAX:_idle.DUE + 1] = (self._t_max, self._samples_since_launch, self.counts["samples_used"],
+                                        self.counts["samples_rejected"], *self._posterior,
+                                        self._pending is not None and self._outcome_sets_next_size())
+        self._exported_n = self._n
+        # the memo's keys with this brake margin (the others cannot be hit, but count in its size)
+        memo = pr.__dict__.setdefault("_conditional_memo", {})
+        clears, n_seen = self._memo_seen
+        if clears != pr.memo_clears or len(memo) < n_seen:
+            n_seen, s[_idle.J_MK] = 0, 0.0
+        mk = int(s[_idle.J_MK])
+        if len(memo) > n_seen:
+            margin = pr.brake_margin
+            new = [k for k in itertools.islice(reversed(memo), len(memo) - n_seen)][::-1]
+            for key in new:
+                if key[3] == 1 and key[4] == 1e-6 and key[5] == margin:
+                    s[_idle.J_MTAB + 3 * mk:_idle.J_MTAB + 3 * mk + 3] = key[:3]
+                    mk += 1
+        if margin_changed := (s[_idle.J_MARGIN] != (-1.0 if pr.brake_margin is None else pr.brake_margin)):
+            mk = 0                                          # the hand-over: rebuild for the new margin
+            for key in memo:
+                if key[3] == 1 and key[4] == 1e-6 and key[5] == pr.brake_margin:
+                    s[_idle.J_MTAB + 3 * mk:_idle.J_MTAB + 3 * mk + 3] = key[:3]
+                    mk += 1
+        del margin_changed
+        self._memo_seen = (pr.memo_clears, len(memo))
+        s[_idle.J_MK] = s[_idle.J_MK0] = mk
+        s[_idle.J_MCOUNT], s[_idle.J_CLEARED], s[_idle.J_RUNS] = len(memo), 0.0, 0.0
+        brake, margin = pr._brake_args()[:2]
+        s[_idle.J_BRAKE], s[_idle.J_MARGIN] = brake, (margin if brake else -1.0)
+        s[_idle.PLAN_OK] = s[_idle.J_GRID] = s[_idle.J_GP_OK] = 0.0
+        dtu = self.schedule.next_dtu()
+        if not dtu > 0:
+            return
+        dtu = min(dtu, self.dtu_max)
+        s[_idle.J_DTU], s[_idle.J_PEAK] = dtu, peak_torque(self.params, dtu)
+        if self.grid is not None:
+            s[_idle.J_GRID] = 1.0
+            gp = (self._grid_memo.get(dtu) if (self.grid.version, len(self.grid.obs)) == self._grid_key
+                  else None)
+            if gp is None:
+                return                                      # computed from this sample's prediction: in Python
+            if gp.p_motion > 0:
+                s[_idle.J_GP_OK], s[_idle.J_GP_DC] = 1.0, gp.dc_mean
+        s[_idle.PLAN_OK] = 1.0
+
+    def _import_joint(self) -> None:
+        s, j, pr = self._idle.state, self.joint, self.predictor
+        self._n = self._exported_n = int(s[_idle.N])
+        j.t = float(s[_idle.FT])
+        j.z[:] = s[_idle.J_Z:_idle.J_Z + 5]
+        j.P[:] = s[_idle.J_P:_idle.J_P + 25].reshape(5, 5)
+        ns = int(s[_idle.J_NS])
+        if ns:
+            buf = s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist()
+            j._since.extend(zip(buf[0::2], buf[1::2]))
+        s[_idle.J_NS] = 0.0
+        since, used, rejected, *post = s[_idle.SINCE:_idle.POST + 5].tolist()
+        self._samples_since_launch = int(since)
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
+        self._posterior = tuple(post)
+        # the predictor's memo and model runs as the idle samples' conditional() calls left them
+        pr.n_model_runs += int(s[_idle.J_RUNS])
+        memo = pr.__dict__.setdefault("_conditional_memo", {})
+        mk0, mk = int(s[_idle.J_MK0]), int(s[_idle.J_MK])
+        if s[_idle.J_CLEARED] != 0.0:
+            memo.clear()
+            pr.memo_clears += 1
+            mk0 = 0
+        tail = (1, 1e-6, pr.brake_margin)
+        tab = s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist()
+        for i in range(0, len(tab), 3):
+            memo[(tab[i], tab[i + 1], tab[i + 2], *tail)] = LAZY
+        s[_idle.J_MK0], s[_idle.J_CLEARED], s[_idle.J_RUNS] = mk, 0.0, 0.0
+        self._memo_seen = (pr.memo_clears, len(memo))
+
+    def _import_idle(self) -> None:
+        """The objects from the idle step's array, if compiled samples ran since the export."""
+        s = self._idle.state
+        if s[_idle.N] == self._exported_n:
+            return
+        if self.joint is not None:
+            self._import_joint()
+            return
+        m = self.mode2
+        (n, m.x1, m.x4, m.p11, m.p14, m.p44, m.t, _, c0, c1, _, m0, m1, mean, var, _, since, used, rejected,
+         *post) = s[_idle.N:_idle.POST + 5].tolist()
+        self._n = self._exported_n = int(n)
+        if m._anchor is not None:
+            m._anchor = (c0, c1)
+        if m._motion is not None:
+            m._motion = (m0, m1)
+            m.motion_mean, m.motion_var = mean, var
+        self._samples_since_launch = int(since)
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
+        self._posterior = tuple(post)
+        if s[_idle.PLAN_USED] != 0.0:
+            self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
+        s[_idle.PLAN_USED] = 0.0
 
     # ------------------------------------------------------------------ per sample
     def step(self, y: float) -> DriveCommand:
         if not self._ready:
             raise RuntimeError("SolnicController.step called before reset")
+        if self._idle is None:
+            return self._step(y)
+        self._import_idle()
+        command = self._step(y)
+        self._export_idle()
+        return command
+
+    def _step(self, y: float) -> DriveCommand:
         t = self._n * self.params.sample_period
         self._n += 1
         self.mode2.predict(t)
@@ -525,6 +707,8 @@ class SolnicController(Controller):
     def internals(self) -> dict[str, float]:
         if not self._ready:
             return {}
+        if self._idle is not None:
+            self._import_idle()
         P = self.friction.P
         sch = self.schedule
         return {
@@ -549,6 +733,8 @@ class SolnicController(Controller):
         """``pulse`` and ``phase:<size>`` launch instants [s] (:mod:`controllers.solnic.series`)."""
         if not self._ready:
             return {}
+        if self._idle is not None:
+            self._import_idle()
         cycles = [(e["t_a"], int(e["size"])) for e in self.log]
         if self._pending is not None:
             cycles.append((self._pending.t_a, int(self._pending.size)))
@@ -561,6 +747,8 @@ class SolnicController(Controller):
     def summary(self) -> dict[str, Any]:
         if not self._ready:
             return {"preset": self.preset, "a_c": self.options.a_c}
+        if self._idle is not None:
+            self._import_idle()
         out: dict[str, Any] = {
             "preset": self.preset, "a_c": self.options.a_c,
             "ks_hat": self.friction.ks, "kc_hat": self.friction.kc,

@@ -46,6 +46,7 @@ from controllers.models.acker import closed_form_kernel
 __all__ = ["PulsePrediction", "Predictor", "peak_torque"]
 
 ResponseFn = Callable[..., Any]
+LAZY = object()     # a conditional() memo entry made by a compiled sample: computed when first read
 
 
 def peak_torque(params: PlantParams, dt_u: float) -> float:
@@ -236,6 +237,7 @@ class Predictor:
         self._cache: OrderedDict[tuple[float, float, float], tuple[float, float | None, float, float]] = OrderedDict()
         self._cache_size = int(cache_size)
         self.n_model_runs = 0
+        self.memo_clears = 0                        # times conditional()'s memo was cleared
         self._constants = (float(params.u_max), float(params.motor_time_constant), float(params.alpha),
                            self.fd_step)
         # brake_timing's defaults: s² = α²σ2² and t_cz2 capped at 0.8 τs
@@ -355,6 +357,8 @@ class Predictor:
         memo = self.__dict__.setdefault("_conditional_memo", {})
         hit = memo.get(key)
         if hit is not None:
+            if hit is LAZY:                   # memoised by a compiled sample: its value, uncounted
+                hit = memo[key] = self._uncounted(ks, kc, dt_u, sign, shrink)
             return hit
         if self._compiled:
             _check(sign, dt_u)
@@ -370,8 +374,31 @@ class Predictor:
                     pred = self.predict(ks_c, min(kc, ks_c), dt_u, sign)
         if len(memo) > 256:
             memo.clear()
+            self.memo_clears += 1
         memo[key] = pred
         return pred
+
+    def _uncounted(self, ks: float, kc: float, dt_u: float, sign: int, shrink: float) -> PulsePrediction:
+        """The compiled path of :meth:`conditional`, without touching the model-run count."""
+        runs = self.n_model_runs
+        try:
+            r, ks_u, kc_u, _ = _conditional_kernel(float(ks), float(kc), float(dt_u), *self._constants,
+                                                   *self._brake_args(), float(shrink))
+            return self._prediction(r, ks if ks_u == ks else ks_u, kc if kc_u == kc else kc_u, dt_u, sign)
+        finally:
+            self.n_model_runs = runs
+
+    def conditional_peek(self, ks: float, kc: float, dt_u: float) -> PulsePrediction | None:
+        """:meth:`conditional` (sign +1, default shrink) without its side effects on the memo
+        and the model-run count; None where it would raise (or with an injected model)."""
+        key = (float(ks), float(kc), float(dt_u), 1, 1e-6, self.brake_margin)
+        hit = self.__dict__.get("_conditional_memo", {}).get(key)
+        if (hit is not None and hit is not LAZY) or not self._compiled or not (dt_u >= 0 and math.isfinite(dt_u)):
+            return hit
+        try:
+            return self._uncounted(ks, kc, dt_u, 1, 1e-6)
+        except (EstimateOutOfRange, ControllerDiverged):
+            return None
 
     def predicted_motion(self, ks: float, kc: float, dt_u: float) -> float:
         """|Δc_p| only (no partials), for cost curves."""
