@@ -1,8 +1,15 @@
 """A controller's report series and its peak error per labelled phase, from the protocol hooks.
 
 Which controllers get a series: those that override
-:meth:`~controllers.base.Controller.report_series` (their cells are always recorded). Nothing
-here knows a controller by name.
+:meth:`~controllers.base.Controller.report_series`, on the cells whose series the report reads
+(:func:`bench.driver.reads_series`; every cell when the caller does not say). Nothing here
+knows a controller by name.
+
+Which runs are recorded (:func:`records_run`): a cell whose series is written, and a cell of a
+controller that may label phases (it overrides ``event_times``), whose per-phase peaks need x1
+at the samples and plant events. Every other cell runs unrecorded, so a controller with a
+compiled step takes the compiled loop; its row has no phase columns either way (a controller
+without ``event_times`` labels no phase), so its row is the recorded run's, bit for bit.
 
 Layout (``DIR/series/<cell>.parquet``, read by :mod:`reports.inputs`), one row per sample
 instant:
@@ -34,7 +41,7 @@ import pandas as pd
 
 from bench.runner import RunResult
 
-__all__ = ["wants_series", "figure_series", "phase_peaks", "PHASE_PREFIX"]
+__all__ = ["wants_series", "records_run", "figure_series", "phase_peaks", "PHASE_PREFIX"]
 
 PHASE_PREFIX = "phase:"
 _NO_PERCENT = {"x1", "y"}
@@ -45,6 +52,17 @@ def wants_series(controller: Any) -> bool:
     from controllers.base import Controller
 
     return type(controller).report_series is not Controller.report_series
+
+
+def records_run(controller: Any, write_series: bool) -> bool:
+    """Whether a cell of ``controller`` that has a report series must run recorded: its series is
+    written (``write_series``), or its class overrides ``event_times`` (it may label phases, and
+    :func:`phase_peaks` needs the samples and plant events)."""
+    from controllers.base import Controller
+
+    if not wants_series(controller):
+        return False
+    return write_series or type(controller).event_times is not Controller.event_times
 
 
 def _ratio_pct(num: np.ndarray, den: np.ndarray) -> np.ndarray:
