@@ -5,11 +5,11 @@ Which controllers get a series: those that override
 (:func:`bench.driver.reads_series`; every cell when the caller does not say). Nothing here
 knows a controller by name.
 
-Which runs are recorded (:func:`records_run`): a cell whose series is written, and a cell of a
-controller that may label phases (it overrides ``event_times``), whose per-phase peaks need x1
-at the samples and plant events. Every other cell runs unrecorded, so a controller with a
-compiled step takes the compiled loop; its row has no phase columns either way (a controller
-without ``event_times`` labels no phase), so its row is the recorded run's, bit for bit.
+Which runs are recorded: a cell whose series is written. Every other cell runs unrecorded, so
+a controller with a compiled step takes the compiled loop; for a controller that may label
+phases (it overrides ``event_times``) the run keeps t and x1 at the samples and plant events
+(``run_closed_loop(x1_log=True)``, also in the compiled loop), which is all :func:`phase_peaks`
+reads, so the row is the recorded run's, bit for bit (:func:`logs_x1`).
 
 Layout (``DIR/series/<cell>.parquet``, read by :mod:`reports.inputs`), one row per sample
 instant:
@@ -41,7 +41,7 @@ import pandas as pd
 
 from bench.runner import RunResult
 
-__all__ = ["wants_series", "records_run", "figure_series", "phase_peaks", "PHASE_PREFIX"]
+__all__ = ["wants_series", "logs_x1", "figure_series", "phase_peaks", "PHASE_PREFIX"]
 
 PHASE_PREFIX = "phase:"
 _NO_PERCENT = {"x1", "y"}
@@ -54,15 +54,13 @@ def wants_series(controller: Any) -> bool:
     return type(controller).report_series is not Controller.report_series
 
 
-def records_run(controller: Any, write_series: bool) -> bool:
-    """Whether a cell of ``controller`` that has a report series must run recorded: its series is
-    written (``write_series``), or its class overrides ``event_times`` (it may label phases, and
-    :func:`phase_peaks` needs the samples and plant events)."""
+def logs_x1(controller: Any) -> bool:
+    """Whether an unrecorded cell of ``controller`` keeps t and x1 at its samples and plant events:
+    it has a report series and its class overrides ``event_times`` (it may label phases, whose
+    peaks :func:`phase_peaks` takes from those points)."""
     from controllers.base import Controller
 
-    if not wants_series(controller):
-        return False
-    return write_series or type(controller).event_times is not Controller.event_times
+    return wants_series(controller) and type(controller).event_times is not Controller.event_times
 
 
 def _ratio_pct(num: np.ndarray, den: np.ndarray) -> np.ndarray:

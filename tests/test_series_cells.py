@@ -10,6 +10,8 @@ reference's exactly.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -155,11 +157,56 @@ def test_a_non_figure_cell_takes_the_compiled_loop_with_the_same_row(tmp_path, m
     assert strip == {k: v for k, v in other.items() if k not in RUNTIME_COLUMNS}
 
 
-def test_a_phase_controller_stays_recorded_without_its_series(tmp_path, monkeypatch, phased):
-    """Its per-phase peaks need x1 at the samples and plant events: recorded (Python), no file."""
-    calls = _counting_steps(monkeypatch, phased)
+def test_a_phase_controller_takes_the_compiled_loop_and_keeps_its_peaks(tmp_path, monkeypatch, phased):
+    """Its per-phase peaks come from the x1 log of the compiled loop: the recorded run's values."""
     sc = builtin_scenarios()["stribeck"].with_durations(DURATION, WARMUP)
     cell = Cell(ControllerSpec(phased.name, phased.name), sc, 1)
-    row = run_cell(cell, tmp_path, False, False)
-    assert len(calls) == 300 and row["status"] == "ok" and row["peak_error_near_rad"] > 0
-    assert not (tmp_path / "series").exists()
+    recorded = run_cell(cell, tmp_path / "a", False, True)
+    calls = _counting_steps(monkeypatch, phased)
+    row = run_cell(cell, tmp_path / "b", False, False)
+    assert len(calls) == 0 and row["status"] == "ok" and row["peak_error_near_rad"] > 0
+    assert not (tmp_path / "b" / "series").exists()
+    strip = lambda r: {k: v for k, v in r.items() if k not in RUNTIME_COLUMNS}   # noqa: E731
+    assert strip(row) == {k: v for k, v in strip(recorded).items() if k != "peak_error_none_rad"} | \
+        {"peak_error_none_rad": row["peak_error_none_rad"]}
+    assert math.isnan(row["peak_error_none_rad"]) and math.isnan(recorded["peak_error_none_rad"])
+
+
+@pytest.mark.parametrize("scenario, tiny", [("thesis", ""), ("stribeck", "events"), ("lugre", ""),
+                                            ("compliant", "events"), ("delayed", "scratch"), ("quantized", "")])
+def test_the_x1_log_is_the_recorded_samples_and_events(scenario, tiny, monkeypatch):
+    """t and x1 of every sample and plant event, compiled, equal the recorded run's exactly; with
+    tiny buffers the log grows, and where an interval has two events the kernel's one-row event
+    scratch overflows and the sample is redone."""
+    import bench.runner as runner
+    from plant.law_driver import X1Log
+
+    made = []
+
+    class _Tiny(X1Log):
+        def __init__(self, n):
+            super().__init__(n)
+            self.events, self.scratch = np.empty((2, 2)), np.empty((1, self.scratch.shape[1]))
+            made.append(self)
+
+    if tiny:
+        monkeypatch.setattr(runner, "X1Log", _Tiny)
+    sc = builtin_scenarios()[scenario]
+    kw = dict(duration_s=DURATION, warmup_s=WARMUP, seed=3, family=sc.family, model=sc.model)
+    rec = runner.run_closed_loop(sc.params, _Phased(), record=True, **kw)
+    c = _Phased()
+    calls = []
+    step = c.step
+    c.step = lambda y: calls.append(1) or step(y)
+    log = runner.run_closed_loop(sc.params, c, x1_log=True, **kw)
+    assert calls == [] and log.status == rec.status == "ok"
+    assert rec.events["t"].size > 10                                   # the plant had events to log
+    for part in ("samples", "events"):
+        a, b = getattr(rec, part), getattr(log, part)
+        assert set(b) == {"t", "x1"}
+        np.testing.assert_array_equal(b["t"], a["t"])
+        np.testing.assert_array_equal(b["x1"], a["x1"])
+    assert {k: v for k, v in log.metrics.items() if k not in RUNTIME_COLUMNS} == \
+        {k: v for k, v in rec.metrics.items() if k not in RUNTIME_COLUMNS}
+    if tiny:                                                           # the growth paths were taken
+        assert made[0].events.shape[0] > 2 and (made[0].scratch.shape[0] > 1) == (tiny == "scratch")
