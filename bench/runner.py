@@ -30,6 +30,8 @@ interval's plant events (keys :data:`plant.state.EVENT_FIELDS`), ``internals(val
 every controller step, and ``close()`` at the end. ``record=True`` collects everything in
 memory (:class:`MemoryRecorder`) and returns it as arrays in the :class:`RunResult`; a
 streaming recorder (``bench.traces``) writes it to disk instead.
+``x1_log=True`` keeps only t and x1 at the samples and plant events (what the per-phase peaks
+of :mod:`bench.series` read), also on the compiled loop of a family with ``compiled_loop_logs``.
 """
 
 from __future__ import annotations
@@ -269,6 +271,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         n, law, claw, cloop, done = 0, None, None, None, False
         if rec is None and not privileged and compiled:
             fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
+            if log is not None and not fam.compiled_loop_logs:
+                cloop = None                 # a family loop that cannot keep the x1 log: Python
             law = controller.linear_law() if (fast or cloop) else None
             if law is not None and fast and log is None:
                 state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,

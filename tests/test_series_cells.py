@@ -210,3 +210,21 @@ def test_the_x1_log_is_the_recorded_samples_and_events(scenario, tiny, monkeypat
         {k: v for k, v in rec.metrics.items() if k not in RUNTIME_COLUMNS}
     if tiny:                                                           # the growth paths were taken
         assert made[0].events.shape[0] > 2 and (made[0].scratch.shape[0] > 1) == (tiny == "scratch")
+
+
+def test_a_family_loop_without_the_log_leaves_the_run_to_python(monkeypatch):
+    """A family whose compiled loop cannot keep the x1 log (``compiled_loop_logs`` False, e.g. a
+    plugin family's): the run steps every sample from Python and logs the same points."""
+    from bench.runner import run_closed_loop
+    from plant.protocol import get_family
+
+    sc = builtin_scenarios()["thesis"]
+    monkeypatch.setattr(get_family(sc.family), "compiled_loop_logs", False)
+    kw = dict(duration_s=DURATION, warmup_s=WARMUP, seed=4, family=sc.family, model=sc.model)
+    rec = run_closed_loop(sc.params, _Phased(), record=True, **kw)
+    calls = _counting_steps(monkeypatch, _Phased)
+    log = run_closed_loop(sc.params, _Phased(), x1_log=True, **kw)
+    assert len(calls) == 300 and log.status == "ok"
+    for part in ("samples", "events"):
+        for key in ("t", "x1"):
+            np.testing.assert_array_equal(getattr(log, part)[key], getattr(rec, part)[key])
