@@ -273,17 +273,20 @@ def failure_row(cell: Cell, kind: str, message: str, wall_s: float = math.nan) -
     return row
 
 
-def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
+def run_cell(cell: Cell, out_dir: str | Path, traces: bool, series: bool = True) -> dict[str, Any]:
     """Run one cell, write its artifacts under ``out_dir`` and return its results row.
 
     Artifacts: ``out_dir/traces/<cell>.rrd`` when ``traces`` (streamed while the cell runs,
-    :class:`bench.traces.TraceRecorder`); ``out_dir/series/<cell>.parquet`` for controllers with
-    a report series (``report_series`` hook). Both are written atomically. The row has the columns of
+    :class:`bench.traces.TraceRecorder`); ``out_dir/series/<cell>.parquet`` when ``series`` and
+    the controller has a report series (``report_series`` hook). Both are written atomically.
+    Only a cell that writes its series is recorded; otherwise a controller with a compiled step
+    takes the compiled loop, keeping t and x1 for its phase peaks (:func:`bench.series.logs_x1`),
+    with the same row. The row has the columns of
     :data:`LEADING_COLUMNS` plus the controller's scalar summary, prefixed ``ctl_``. A row whose
     status is not ``ok`` has NaN metrics.
     """
     from bench.runner import MemoryRecorder, run_closed_loop
-    from bench.series import figure_series, wants_series
+    from bench.series import figure_series, logs_x1, phase_peaks, wants_series
     from bench.traces import TeeRecorder, TraceRecorder
 
     from bench.names import check_cell_id
@@ -298,8 +301,10 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         controller = cell.controller.build()
         row["controller_family"] = type(controller).family
         row["privileged"] = bool(type(controller).privileged)
-        series = wants_series(controller)
-        memory = MemoryRecorder() if series else None
+        has_series = wants_series(controller)
+        write = series and has_series
+        memory = MemoryRecorder() if write else None
+        x1_log = has_series and not write and logs_x1(controller)
         if traces:
             trace = TraceRecorder(out / "traces" / f"{cell.cell_id}.rrd", recording_id=cell.cell_id)
         recorder = TeeRecorder(trace, memory) if (trace or memory) else None
@@ -307,7 +312,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         row.update({f"mismatch_{k}": v for k, v in factors.items()})
         result = run_closed_loop(truth, controller, family=cell.scenario.family, model=cell.scenario.model_params(),
                                  duration_s=cell.duration_s, warmup_s=cell.warmup_s, seed=cell.seed,
-                                 recorder=recorder, time_limit_s=cell.time_limit_s)
+                                 recorder=recorder, time_limit_s=cell.time_limit_s, x1_log=x1_log)
         row["status"], row["message"] = result.status, result.message
         if result.status == "error":
             row["error_kind"] = "time_limit" if result.message.startswith("time limit") else "run"
@@ -321,12 +326,14 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool) -> dict[str, Any]:
         if isinstance(corrections, (int, float)) and not isinstance(corrections, bool):
             row["n_corrections"] = corrections
         row.update({f"ctl_{k}": v for k, v in summary.items() if v is not _SKIP})
-        if series:
+        if write:
             samples, events, internals = memory.arrays()
             result = dataclasses.replace(result, samples=samples, events=events, internals=internals)
             frame, peaks = figure_series(result, controller, cell.warmup_s)
             row.update(peaks)
             _write_parquet(frame, out / "series" / f"{cell.cell_id}.parquet")
+        elif has_series:    # the peaks without the frame: figure_series's call on the x1 log
+            row.update(phase_peaks(result, controller.event_times(), cell.warmup_s))
     except BaseException as exc:  # noqa: BLE001 — a failing cell is a result (STYLE §8), whatever it raised
         artifact = row["status"] != "error" or isinstance(exc, _TraceLost) or (trace is not None and trace.error)
         row["status"], row["message"] = "error", ("artifact: " if artifact else "") + _error_message(exc)

@@ -40,7 +40,7 @@ from bench.scenarios import builtin_scenarios
 from bench.store import ResultsStore
 from plant.params import as_definition
 
-__all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace", "stop_on_signals"]
+__all__ = ["RunOutcome", "run_matrix", "run_config", "Stopped", "wants_trace", "reads_series", "stop_on_signals"]
 
 
 class Stopped(KeyboardInterrupt):
@@ -86,6 +86,29 @@ def wants_trace(cell: Cell, policy: str, first_seed: int | None) -> bool:
     if policy == "none":
         return False
     raise ValueError(f"traces policy must be one of all, first-seed, none; got {policy!r}")
+
+
+def reads_series(cell: Cell, lowest_seed: int | None) -> bool:
+    """Whether the report reads this cell's series (:func:`reports.inputs._series_read`), so
+    that the cell writes it (:func:`bench.cells.run_cell`'s ``series``).
+
+    The claims read the series of the identification controller itself
+    (:data:`controllers.roles.IDENTIFICATION`, not a variant) on the thesis scenario, every
+    seed; the typical run (figures 7-2…7-5) is the lowest-seed cell in
+    :func:`reports.build._typical_run`'s order. So: those cells, and every controller ×
+    scenario on the matrix's lowest seed. A ``config.json`` edited afterwards to select other
+    cells (``report.selection``, ``report.typical_cell``) finds only these series.
+    """
+    from controllers import roles
+
+    if cell.seed == lowest_seed:
+        return True
+    spec = cell.controller
+    return (spec.name == spec.base == roles.IDENTIFICATION and cell.scenario.name == _THESIS
+            and spec.family == roles.IDENTIFICATION)
+
+
+_THESIS = "thesis"   # reports.selection.Selection.thesis_scenario's default
 
 
 @dataclass
@@ -152,6 +175,8 @@ def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, trace
     cells = matrix.cells()
     first_seed = matrix.seeds[0] if matrix.seeds else None
     trace_of = {c.cell_id: wants_trace(c, policy, first_seed) for c in cells}
+    lowest_seed = min(matrix.seeds) if matrix.seeds else None
+    series_of = {c.cell_id: reads_series(c, lowest_seed) for c in cells}
     with _stop_on_signals(), store.lock():
         store.check_matrix(cells)
         store.clean_temporaries()
@@ -171,7 +196,7 @@ def run_matrix(matrix: Matrix, out_dir: str | Path, *, executor: Executor, trace
             store.write_json("config.json", run_config(matrix, policy))
             store.write_json("meta.json", meta)
             if todo:
-                calls = [(c, str(store.root), trace_of[c.cell_id]) for c in todo]
+                calls = [(c, str(store.root), trace_of[c.cell_id], series_of[c.cell_id]) for c in todo]
                 keys = [c.process_key for c in todo]
                 for i, row, exc in executor.map_unordered(run_cell, calls, [kill_deadline(c) for c in todo], keys):
                     if exc is not None:

@@ -30,6 +30,8 @@ interval's plant events (keys :data:`plant.state.EVENT_FIELDS`), ``internals(val
 every controller step, and ``close()`` at the end. ``record=True`` collects everything in
 memory (:class:`MemoryRecorder`) and returns it as arrays in the :class:`RunResult`; a
 streaming recorder (``bench.traces``) writes it to disk instead.
+``x1_log=True`` keeps only t and x1 at the samples and plant events (what the per-phase peaks
+of :mod:`bench.series` read), also on the compiled loop of a family with ``compiled_loop_logs``.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ import numpy as np
 
 from bench.metrics import WindowTotals, run_metrics, unphysical
 from controllers.base import Controller, ControllerDiverged
+from plant.law_driver import X1Log
 from plant.params import PlantParams
 from plant.protocol import DEFAULT_FAMILY, TRUTH_FIELDS, PlantFamily, TruePlant, get_family, model_of
 from plant.drive import DriveCommand
@@ -185,7 +188,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                     options: SimOptions | None = None, x5_initial: float | None = None,
                     time_limit_s: float | None = None, recorder: Recorder | None = None,
                     compiled: bool = True, family: str | PlantFamily = DEFAULT_FAMILY,
-                    model: PlantParams | None = None) -> RunResult:
+                    model: PlantParams | None = None, x1_log: bool = False) -> RunResult:
     """Run ``controller`` on the plant for ``duration_s`` seconds and score from ``warmup_s``.
 
     Parameters
@@ -210,6 +213,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         Wall-clock budget [s]; checked at every sample (every ``CHUNK`` (1000)
         samples on the compiled path), a run over budget stops with status ``error``. None
         (default) means no limit.
+    x1_log : bool
+        Keep only t and x1 at every sample instant and plant event (:class:`plant.law_driver.X1Log`)
+        and return them as ``samples`` and ``events`` (keys ``t``, ``x1``; ``bench.series.phase_peaks``
+        needs no more), on the compiled loop of a ``compiled_law`` too (a ``linear_law`` then runs
+        in that loop, not in its own). Ignored with ``record=True``.
     compiled : bool
         Run a controller that describes its step as a linear law (``linear_law`` hook) or
         declares a compiled step (``compiled_law`` hook) in one compiled loop (the family's
@@ -250,6 +258,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     state = loop.state
     memory = MemoryRecorder() if record else None
     rec = memory if record else recorder
+    log = X1Log(n_samples) if x1_log and not record else None
     totals = WindowTotals()
     x1_window = np.empty(n_samples - n_warm + 1)
     n_window = 0
@@ -262,8 +271,10 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         n, law, claw, cloop, done = 0, None, None, None, False
         if rec is None and not privileged and compiled:
             fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
+            if log is not None and not fam.compiled_loop_logs:
+                cloop = None                 # a family loop that cannot keep the x1 log: Python
             law = controller.linear_law() if (fast or cloop) else None
-            if law is not None and fast:
+            if law is not None and fast and log is None:
                 state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
                                                             loop.plant_noise, deadline)
                 totals = WindowTotals(**sums)
@@ -284,7 +295,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                     continue
                 run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline, n0=n,
                             sums=vars(totals).copy(), x1_window=x1_window,
-                            pending=None if pending is None else pending.arrays())
+                            pending=None if pending is None else pending.arrays(), **({} if log is None else {"log": log}))
                 state = loop.state = run.state
                 n = loop.n = run.n_done
                 loop.pending = None if run.pending is None else DriveCommand(tuple(zip(*run.pending)), claw.drive)
@@ -297,6 +308,8 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                     break
             for n in range(n, n + 1 if claw is not None else n_samples):
                 y = loop.measure()
+                if log is not None:
+                    log.sample(n, state.t, state.x[X1])
                 if n >= n_warm:
                     x1_window[n_window] = state.x[X1]
                     n_window += 1
@@ -307,9 +320,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 command = controller.step(y)
                 if rec is not None:
                     rec.internals(controller.internals())
-                step = loop.advance(command, record=rec is not None)
+                step = loop.advance(command, record=rec is not None or log is not None)
                 if rec is not None:
                     rec.events(step.events)
+                if log is not None:
+                    log.add_events(step.events["t"], step.events["x1"])
                 if n >= n_warm:
                     totals.add(step)
                 state = step.state
@@ -351,5 +366,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     samples = events = internals = None
     if memory is not None:
         samples, events, internals = memory.arrays()
+    elif log is not None:
+        samples, events = log.arrays()
     return RunResult(str(status), message, metrics, summary, samples, events, internals, wall, state.t)
 

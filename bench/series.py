@@ -1,8 +1,15 @@
 """A controller's report series and its peak error per labelled phase, from the protocol hooks.
 
 Which controllers get a series: those that override
-:meth:`~controllers.base.Controller.report_series` (their cells are always recorded). Nothing
-here knows a controller by name.
+:meth:`~controllers.base.Controller.report_series`, on the cells whose series the report reads
+(:func:`bench.driver.reads_series`; every cell when the caller does not say). Nothing here
+knows a controller by name.
+
+Which runs are recorded: a cell whose series is written. Every other cell runs unrecorded, so
+a controller with a compiled step takes the compiled loop; for a controller that may label
+phases (it overrides ``event_times``) the run keeps t and x1 at the samples and plant events
+(``run_closed_loop(x1_log=True)``, also in the compiled loop), which is all :func:`phase_peaks`
+reads, so the row is the recorded run's, bit for bit (:func:`logs_x1`).
 
 Layout (``DIR/series/<cell>.parquet``, read by :mod:`reports.inputs`), one row per sample
 instant:
@@ -34,7 +41,7 @@ import pandas as pd
 
 from bench.runner import RunResult
 
-__all__ = ["wants_series", "figure_series", "phase_peaks", "PHASE_PREFIX"]
+__all__ = ["wants_series", "logs_x1", "figure_series", "phase_peaks", "PHASE_PREFIX"]
 
 PHASE_PREFIX = "phase:"
 _NO_PERCENT = {"x1", "y"}
@@ -45,6 +52,15 @@ def wants_series(controller: Any) -> bool:
     from controllers.base import Controller
 
     return type(controller).report_series is not Controller.report_series
+
+
+def logs_x1(controller: Any) -> bool:
+    """Whether an unrecorded cell of ``controller`` keeps t and x1 at its samples and plant events:
+    it has a report series and its class overrides ``event_times`` (it may label phases, whose
+    peaks :func:`phase_peaks` takes from those points)."""
+    from controllers.base import Controller
+
+    return wants_series(controller) and type(controller).event_times is not Controller.event_times
 
 
 def _ratio_pct(num: np.ndarray, den: np.ndarray) -> np.ndarray:

@@ -23,9 +23,10 @@ from typing import Any, Callable
 import numpy as np
 
 from plant.randomness import NoiseExhausted, NoiseStream
-from plant.state import PlantState, SimOptions, Status
+from plant.state import EVENT_FIELDS, PlantState, SimOptions, Status
 
-__all__ = ["run_chunks", "run_law_chunks", "LawRun", "CHUNK", "NOISE_MARGIN", "NEED_NOISE", "HAND_BACK", "TOTAL_FIELDS"]
+__all__ = ["run_chunks", "run_law_chunks", "LawRun", "X1Log", "CHUNK", "NOISE_MARGIN", "NEED_NOISE", "NEED_ROOM",
+           "HAND_BACK", "TOTAL_FIELDS"]
 
 CHUNK = 1000            # samples per compiled call (the wall-clock limit is checked between them)
 NOISE_MARGIN = 1 << 15  # unread normals guaranteed before each interval (else back to Python)
@@ -108,6 +109,49 @@ def run_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, params: 
 # --------------------------------------------------------------------------- a compiled controller step
 
 HAND_BACK = -2   # the chunk's code: the controller's step handed the current sample back to Python
+NEED_ROOM = -3   # the chunk's code: the x1 log's event rows must grow before the next interval
+_NO_LOG = np.empty((0, 2))
+
+
+class X1Log:
+    """t [s] and x1 [rad] at every sample instant and every plant event of one run: what a
+    recorded run's samples and events give ``bench.series.phase_peaks``, without the rest.
+
+    ``samples`` (one row per sample instant, (t, x1) before the step), ``events`` (one row per
+    plant event, in time order; grown on demand) and ``scratch``, the interval kernels' event
+    records (:data:`plant.state.EVENT_FIELDS` columns). The compiled loop writes them
+    (:func:`run_law_chunks`), the runner's Python loop with :meth:`sample` and :meth:`add_events`.
+    """
+
+    def __init__(self, n_samples: int) -> None:
+        self.samples = np.empty((n_samples, 2))
+        self.n_samples = 0
+        self.events = np.empty((8192, 2))
+        self.n_events = 0
+        self.scratch = np.empty((4096, len(EVENT_FIELDS)))
+
+    def sample(self, n: int, t: float, x1: float) -> None:
+        self.samples[n, 0], self.samples[n, 1] = t, x1
+        self.n_samples = n + 1
+
+    def room(self, k: int) -> None:
+        """At least ``k`` free event rows."""
+        if self.events.shape[0] - self.n_events < k:
+            grown = np.empty((max(2 * self.events.shape[0], self.n_events + k), 2))
+            grown[:self.n_events] = self.events[:self.n_events]
+            self.events = grown
+
+    def add_events(self, t: np.ndarray, x1: np.ndarray) -> None:
+        k = len(t)
+        self.room(k)
+        self.events[self.n_events:self.n_events + k, 0] = t
+        self.events[self.n_events:self.n_events + k, 1] = x1
+        self.n_events += k
+
+    def arrays(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """(samples, events) as ``{"t": ..., "x1": ...}`` arrays."""
+        s, e = self.samples[:self.n_samples], self.events[:self.n_events]
+        return ({"t": s[:, 0].copy(), "x1": s[:, 1].copy()}, {"t": e[:, 0].copy(), "x1": e[:, 1].copy()})
 _SPECIALISED: dict[tuple, Callable[..., int]] = {}
 
 
@@ -155,7 +199,8 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
                    deadline: float, *, n_state: int, sheet_size: int, no_events: np.ndarray, status_ok: int,
                    interval_status: Callable[[int, PlantState, SimOptions], tuple[Status, str]],
                    n0: int = 0, sums: dict[str, float] | None = None, x1_window: np.ndarray | None = None,
-                   pending: tuple[np.ndarray, np.ndarray] | None = None) -> LawRun:
+                   pending: tuple[np.ndarray, np.ndarray] | None = None, log: X1Log | None = None,
+                   record_full: type[BaseException] | tuple = ()) -> LawRun:
     """Run samples ``n0`` ≤ n < ``len(sensor)`` of a compiled controller step ``law`` from ``state``.
 
     ``law`` has the attributes of ``controllers.law.CompiledLaw`` (step, state, params, drive,
@@ -164,10 +209,13 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
 
     ``chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, offs, levs, now_o,
     now_l, carry_o, carry_l, n0, n1, n_warm, sensor, x, x_view, sheet, tau, prm, *family_args, z,
-    zpos, margin, ev, out, totals, x1_window, prog)``
+    zpos, margin, ev, out, totals, x1_window, prog, xs, xe)``
 
-    (``prog``: samples done, noise position, pending segments); it returns a kernel status code,
-    :data:`NEED_NOISE` or :data:`HAND_BACK`. Sensor (quantized when ``params.quantization`` > 0)
+    (``prog``: samples done, noise position, pending segments, events logged); it returns a kernel
+    status code, :data:`NEED_NOISE`, :data:`NEED_ROOM` or :data:`HAND_BACK`. With ``log``
+    (:class:`X1Log`) the chunk writes t and x1 of every sample and plant event into it (the
+    kernel records events into ``log.scratch``, raising ``record_full``, the family's exception,
+    when one interval has more: the sample is then undone and redone with a larger scratch). Sensor (quantized when ``params.quantization`` > 0)
     and compute delay (``params.command_delay``) as :meth:`plant.protocol.PlantFamily.observe`
     and ``delayed_step`` do them. The wall-clock limit as in :func:`run_chunks`.
 
@@ -184,7 +232,7 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     offs, levs = np.zeros(m), np.zeros(m)
     w = 2 * m + 2
     pend_o, pend_l, now_o, now_l, carry_o, carry_l = (np.zeros(w) for _ in range(6))
-    prog = np.zeros(3, dtype=np.int64)
+    prog = np.zeros(4, dtype=np.int64)
     if pending is None:
         prog[2] = 1   # before the first command: the hold of 0 (plant.delay)
     else:
@@ -209,6 +257,11 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     else:
         z, zpos = np.empty(0), 0
     margin = NOISE_MARGIN if noisy else 0
+    if log is not None:
+        xs, xe, no_events = log.samples, log.events, log.scratch
+        prog[3] = log.n_events
+    else:
+        xs = xe = _NO_LOG
     head = (law.step, s, law.params, s_back, bridge, float(params.u_max), float(params.quantization),
             float(params.command_delay), pend_o, pend_l, offs, levs, now_o, now_l, carry_o, carry_l)
     fn = _LAST.get(chunk)
@@ -216,7 +269,7 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     while n < n_samples:
         stop = min(n + CHUNK, n_samples)
         args = (*head, n, stop, n_warm, sensor, x, x_view, sheet, params.sample_period, prm, *family_args, z, zpos,
-                margin, no_events, out, totals, x1_window, prog)
+                margin, no_events, out, totals, x1_window, prog, xs, xe)
         if fn is None:
             fn = _LAST[chunk] = _specialised(chunk, args)
         try:
@@ -224,12 +277,23 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         except NoiseExhausted:        # one interval wanted more than the margin: undo its step, extend, redo
             s[:] = s_back
             code = NEED_NOISE
+        except record_full:           # one interval had more events than the log's scratch: undo, enlarge, redo
+            s[:] = s_back
+            log.scratch = no_events = np.empty((4 * no_events.shape[0], no_events.shape[1]))
+            code = NEED_ROOM
         except TypeError:             # other argument types than the last call's: compile (or load) for them
             if fn is _specialised(chunk, args):
                 raise
             fn = None
             continue
         n, zpos = int(prog[0]), int(prog[1])
+        if log is not None:
+            log.n_events = int(prog[3])
+            log.n_samples = max(log.n_samples, n)
+        if code == NEED_ROOM:
+            log.room(no_events.shape[0])
+            xe = log.events
+            continue
         if code == NEED_NOISE:
             z, zpos = noise.grow(zpos)
             while z.shape[0] - zpos < NOISE_MARGIN:

@@ -43,6 +43,10 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     :meth:`observe`, the controller's ``step`` and :meth:`delayed_step`; returns a
     :class:`plant.law_driver.LawRun`. :meth:`compiled_loop` offers it without a disturbance
     torque.
+``compiled_loop_logs``
+    True when ``compiled_law_loop`` takes ``log`` (a :class:`plant.law_driver.X1Log`: t and x1 at
+    every sample and plant event, for a run that keeps only those); otherwise such a run calls
+    ``step`` from Python.
 
 The runner, traces, series, metrics and the report reach a plant only through this protocol.
 A family registers itself with :func:`register_family`; the built-in ones are listed in
@@ -96,6 +100,7 @@ class PlantFamily(abc.ABC):
     description: ClassVar[str] = ""
     linear_law_loop: ClassVar[Callable[..., Any] | None] = None
     compiled_law_loop: ClassVar[Callable[..., Any] | None] = None
+    compiled_loop_logs: ClassVar[bool] = False
     # The family's reference simulators for a work-precision study (``bench.speed``), or None:
     # a namespace with exact_step, fixed_step, fixed_step_pulses, event_driven, Schedule,
     # schedule_from_commands (see plant/multimode/reference.py) and fixed_step_family(dt), a

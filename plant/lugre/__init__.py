@@ -36,6 +36,7 @@ class LuGre(PlantFamily):
     Params = LuGreParams
     linear_law_loop = staticmethod(law_loop.run_law)
     compiled_law_loop = staticmethod(law_loop.run_compiled_law)
+    compiled_loop_logs = True
     description = "LuGre dynamic friction (Canudas de Wit et al. 1995): pre-sliding, lag, Stribeck; error-controlled RK"
     scenarios = {
         "lugre": ({}, "Table 2-1's levels in the LuGre law: 2.1 µrad of bristle compliance at breakaway, "

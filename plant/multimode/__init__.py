@@ -37,6 +37,7 @@ class Multimode(PlantFamily):
     description = "Acker's shaft: Coulomb friction and stiction, exact multimode linearization (ch. 3-4)"
     linear_law_loop = staticmethod(law_loop.run_law)
     compiled_law_loop = staticmethod(law_loop.run_compiled_law)
+    compiled_loop_logs = True
     references = SimpleNamespace(exact_step=advance, fixed_step=reference.fixed_step,
                                  fixed_step_pulses=reference.fixed_step_pulses,
                                  coupled_step_pulses=reference.coupled_step_pulses, event_driven=reference.event_driven,

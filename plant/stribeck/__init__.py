@@ -35,6 +35,7 @@ class Stribeck(PlantFamily):
     Params = StribeckParams
     linear_law_loop = staticmethod(law_loop.run_law)
     compiled_law_loop = staticmethod(law_loop.run_compiled_law)
+    compiled_loop_logs = True
     description = "Stribeck curve (friction falls from ks to kc with speed) plus viscous drag; error-controlled RK"
     # one of the scenarios this family contributes: name -> (field changes, one-line story)
     scenarios = {

@@ -23,8 +23,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from plant.law_driver import HAND_BACK, NEED_NOISE, LawRun, run_chunks, run_law_chunks, CHUNK, TOTAL_FIELDS
+from plant.law_driver import HAND_BACK, NEED_NOISE, NEED_ROOM, LawRun, run_chunks, run_law_chunks, CHUNK, TOTAL_FIELDS
 from plant.law_step import check_command, delay_segments, quantize
+from plant.stribeck.interval import _NREC as _LOG_NREC, _RecordFull
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.multimode.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
                                       SHEET_FLYBACK, SHEET_MODE, SHEET_PEAK, SHEET_SQ, SHEET_STATUS,
@@ -102,20 +103,26 @@ def run_law(law, params: PlantParams, options: SimOptions, state: PlantState, se
 
 def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, offs, levs, now_o, now_l, carry_o,
                carry_l, n0, n1, n_warm, sensor, x, x_view, sheet, tau, prm, L, o, z, zpos,
-               margin, ev, out, totals, x1_window, prog):
+               margin, ev, out, totals, x1_window, prog, xs, xe):
     """Samples n0 ≤ n < n1 of a compiled controller step (:func:`plant.law_driver.run_law_chunks`).
 
     Per sample, in the runner's order: y(n) = quantize(x1 + w1(n)) (``PlantFamily.observe``);
     the step; the delay (``delayed_step``); the interval kernel; the window sums; the state.
-    ``prog`` gets (samples done, noise position, pending segments); returns a kernel status
-    code, NEED_NOISE, or HAND_BACK with ``s`` restored (the sample is not done).
+    ``prog`` gets (samples done, noise position, pending segments, events logged); returns a
+    kernel status code, NEED_NOISE, NEED_ROOM (the x1 log ``xs``, ``xe`` needs room) or HAND_BACK
+    with ``s`` restored (the sample is not done).
     """
     n_s = s.shape[0]
+    logging = xs.shape[0] > 0
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
             return NEED_NOISE
+        if logging and xe.shape[0] - prog[3] < ev.shape[0]:
+            return NEED_ROOM
         x1 = x[0]
+        if logging:                         # the x1 log (plant.law_driver.X1Log): the sample
+            xs[n, 0], xs[n, 1] = sheet[0], x1
         y = quantize(x1 + sensor[n], quant)
         for i in range(n_s):
             s_back[i] = s[i]
@@ -135,6 +142,11 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
         pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o, seg_l, bridge, prm, L, o, z,
                               zpos, ev, out)
         S = out[N_STATE:]
+        if logging:                         # ... and the interval's plant events (t, x1)
+            m, k_ev = prog[3], int(S[_LOG_NREC])
+            for i in range(k_ev):
+                xe[m + i, 0], xe[m + i, 1] = ev[i, 0], ev[i, 1]
+            prog[3] = m + k_ev
         if n >= n_warm:
             x1_window[n - n_warm] = x1
             totals[_DUR] += S[SHEET_DURATION]
@@ -170,4 +182,4 @@ def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor
         o[0] = 0.0
     return run_law_chunks(_law_chunk, (params.law_vector(), o), law, params, options, state, sensor, n_warm, noise, noisy,
                           deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
-                          interval_status=interval_status, **resume)
+                          interval_status=interval_status, record_full=_RecordFull, **resume)

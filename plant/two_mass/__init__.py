@@ -37,6 +37,7 @@ class TwoMass(PlantFamily):
     Params = TwoMassParams
     linear_law_loop = staticmethod(law_loop.run_law)
     compiled_law_loop = staticmethod(law_loop.run_compiled_law)
+    compiled_loop_logs = True
     description = "compliant shaft: motor and load inertias on a torsional spring and damper, friction on the load"
     # 149 Hz, ζ = 0.029, J_m = J/10: mid-range of the 100-300 Hz first structural modes of
     # gimbal axes, lightly damped as bolted metal structures are (Jia et al., J. Nonlinear Dyn.
