@@ -130,8 +130,14 @@ class OraclePulse(Controller):
         self._truth = state
 
     def _dtu_for(self, state: Any, motion: float, sign: int) -> tuple[float, float, float]:
-        """(Δt_u, |Δc|, t_stop) of the shortest true noise-free pulse from ``state`` with |Δc| ≥ ``motion``."""
+        """(Δt_u, |Δc|, t_stop) of the shortest true noise-free pulse from ``state`` with |Δc| ≥ ``motion``:
+        the family's compiled search (``PlantFamily.pulse_on_time``) when it offers one, else
+        :func:`_on_time_for` over ``pulse_motion`` (the same arithmetic)."""
         plant = self._plant
+        fast = getattr(plant, "pulse_on_time", None)      # the same search, compiled by the family
+        found = fast(state, motion, sign, self.dtu_max, _TOL_S, _MAX_ITERATIONS) if fast is not None else None
+        if found is not None:
+            return found
 
         def response(dtu: float) -> tuple[float, float]:
             dc, t_stop = plant.pulse_motion(state, dtu, sign)

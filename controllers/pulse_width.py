@@ -46,9 +46,11 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from controllers._fma import cubic_invert, cubic_predict, rls_update
 from controllers.base import Controller, register
+from controllers.law import CompiledLaw, law_command
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 
@@ -188,41 +190,188 @@ class PulseWidthOptions:
                              f"got {self.initial_width!r}")
 
 
-class _Segment:
-    """Running sums of one stuck segment's samples (t [s], y [rad]); ``clean`` holds the sums of
-    the samples taken before any trigger decision (for the unbiased slope)."""
+# ---------------------------------------------------------------------------- the compiled step
+# The controller's whole state is the float64 array s (counts are whole floats), its constants p.
+# A stuck segment is a block of _SEG entries: its running sums (n, Σt, Σy, Σt², Σty), its prior
+# (flag, t, x̂1(t), variance) and the sums of its "clean" samples (taken before any trigger
+# decision: n, Σt, Σy, Σt², Σty).
+_SN, _SST, _SSY, _SSTT, _SSTY, _SHP, _SPT, _SPL, _SPV, _SCN, _SCST, _SCSY, _SCSTT, _SCSTY = range(14)
+_SEG = 14
+(_N, _SXX, _SXY, _HAS_PREV, _HAS_PULSE, _P_T, _P_SIGN, _P_WIDTH, _P_PRED, _VAR_PRED, _DPHASE, _PULSES, _SIGNIFICANT,
+ _NO_MOTION, _INVERSIONS, _LAST_DC, _X1, _X4, _WIDTH, _FLOOR, _HAS_LAST, _L_W, _L_DC, _MODEL_N) = range(24)
+_THETA = 24                  # θ (4), then P (4 × 4, row-major)
+_PMAT = _THETA + 4
+_CUR = _PMAT + 16            # the current segment, then the one before the last pulse
+_PREV = _CUR + _SEG
+_N_STATE = _PREV + _SEG
+(_O_STEP, _O_W0, _O_GROWTH, _O_WMAX, _O_DITHER, _O_LAMBDA, _O_MIN_MODEL, _O_OVERSHOOT, _O_STARTUP, _O_MIN_SEG,
+ _O_CHANGE, _O_TS, _O_SIGMA2, _O_FORGET, _O_UMAX, _O_VAR_FLOOR, _O_TWO) = range(17)
+_N_PARAMS = 17
 
-    __slots__ = ("n", "st", "sy", "stt", "sty", "prior", "clean")
 
-    def __init__(self) -> None:
-        self.n, self.st, self.sy, self.stt, self.sty = 0, 0.0, 0.0, 0.0, 0.0
-        self.prior: tuple[float, float, float] | None = None   # (t, x̂1(t), variance)
-        self.clean: _Segment | None = None
+@njit(cache=True)
+def _py_max(a, b):
+    # Python's max(a, b): a unless b > a
+    return b if b > a else a
 
-    def add(self, t: float, y: float, clean: bool = False) -> None:
-        if clean:
-            if self.clean is None:
-                self.clean = _Segment()
-            self.clean.add(t, y)
-        self.n += 1
-        self.st += t
-        self.sy += y
-        self.stt += t * t
-        self.sty += t * y
 
-    @property
-    def t_mean(self) -> float:
-        return self.st / self.n
+@njit(cache=True)
+def _py_min(a, b):
+    # Python's min(a, b): a unless b < a
+    return b if b < a else a
 
-    @property
-    def y_mean(self) -> float:
-        return self.sy / self.n
 
-    def centred(self) -> tuple[float, float]:
-        """(Σ(t − t̄)², Σ(t − t̄)(y − ȳ))."""
-        if self.n < 2:
-            return 0.0, 0.0
-        return self.stt - self.st ** 2 / self.n, self.sty - self.st * self.sy / self.n
+@njit(cache=True)
+def _centred(s, c, two):
+    """(Σ(t − t̄)², Σ(t − t̄)(y − ȳ)) of the sums (n, Σt, Σy, Σt², Σty) at s[c:c+5] ((0, 0) below two
+    samples). ``two`` = 2.0 arrives at run time so that (Σt)² is libm's pow(Σt, 2.0), as Python's
+    ``**`` computes it (a constant 2 would become Σt·Σt, which glibc's pow does not always equal)."""
+    n = s[c]
+    if n < 2.0:
+        return 0.0, 0.0
+    return s[c + 3] - math.pow(s[c + 1], two) / n, s[c + 4] - s[c + 1] * s[c + 2] / n
+
+
+@njit(cache=True)
+def _level(s, g, t, slope, sigma2):
+    """x̂1(t) [rad] and its variance from segment g's samples and its prior."""
+    mean, var = math.nan, math.inf
+    n = s[g + _SN]
+    if n > 0.0:                      # ȳ + slope·(t − t̄), σ1²/n
+        mean, var = s[g + _SSY] / n + slope * (t - s[g + _SST] / n), sigma2 / n
+    if s[g + _SHP] != 0.0:
+        var0 = s[g + _SPV]
+        prior = s[g + _SPL] + slope * (t - s[g + _SPT])
+        if not math.isfinite(mean):
+            return prior, var0
+        w = var0 / (var0 + var)      # precision-weighted combination
+        return prior + w * (mean - prior), var0 * var / (var0 + var)
+    return mean, var
+
+
+@njit(cache=True)
+def _predict(s, width):
+    return cubic_predict(s[_THETA], s[_THETA + 1], s[_THETA + 2], s[_THETA + 3], width, _MS, _URAD)
+
+
+@njit(cache=True)
+def _close_segment(s, p, slope):
+    """Pool the finished segment's slope sums and evaluate the previous pulse from the samples
+    alone (the prior is not used twice); the current segment becomes the previous one."""
+    sxx, sxy = _centred(s, _CUR + _SCN, p[_O_TWO])
+    s[_SXX] += sxx
+    s[_SXY] += sxy
+    a, b = _CUR, _PREV
+    if s[_HAS_PULSE] != 0.0 and s[_HAS_PREV] != 0.0 and s[b + _SN] > 0.0 and s[a + _SN] > 0.0:
+        sign, width, predicted = s[_P_SIGN], s[_P_WIDTH], s[_P_PRED]
+        na, nb = s[a + _SN], s[b + _SN]
+        dc = sign * (s[a + _SSY] / na - s[b + _SSY] / nb - slope * (s[a + _SST] / na - s[b + _SST] / nb))
+        var_e = p[_O_SIGMA2] * (1.0 / na + 1.0 / nb)
+        s[_LAST_DC] = dc
+        if s[_SIGNIFICANT] == 0.0 and dc < 2.0 * math.sqrt(var_e):
+            s[_NO_MOTION] += 1.0                     # start-up: no motion yet, widen
+            s[_FLOOR] = _py_max(s[_FLOOR], width)
+        else:
+            s[_SIGNIFICANT] += 1.0
+            v = width / _MS                          # PulseModelRls.update
+            phi = np.array([1.0, v, v * v, v * v * v])
+            P = s[_PMAT:_PMAT + 16].copy().reshape((4, 4))
+            P2, theta = rls_update(P, s[_THETA:_THETA + 4].copy(), phi, dc / _URAD, p[_O_LAMBDA])
+            for i in range(4):
+                s[_THETA + i] = theta[i]
+                for j in range(4):
+                    s[_PMAT + 4 * i + j] = P2[i, j]
+            s[_MODEL_N] += 1.0
+            s[_HAS_LAST], s[_L_W], s[_L_DC] = 1.0, width, dc
+            if s[_INVERSIONS] != 0.0:                # spread of Δc about the model
+                resid = math.pow(dc - predicted, p[_O_TWO]) - var_e
+                s[_VAR_PRED] += 0.05 * (_py_max(resid, 0.0) - s[_VAR_PRED])
+                s[_VAR_PRED] = _py_max(s[_VAR_PRED], p[_O_VAR_FLOOR])
+    for i in range(_SEG):
+        s[_PREV + i] = s[_CUR + i]
+        s[_CUR + i] = 0.0
+    s[_HAS_PREV] = 1.0
+
+
+@njit(cache=True)
+def _next_width(s, p):
+    """The next pulse's width [s]: the inverted model, or the start-up rule; dithered."""
+    step, change, w_max = p[_O_STEP], p[_O_CHANGE], p[_O_WMAX]
+    lo_limit = 0.2 * p[_O_W0]
+    width = s[_WIDTH]
+    if s[_SIGNIFICANT] >= p[_O_MIN_MODEL]:
+        # one pulse changes the width by at most ``max_width_change`` (model glitches)
+        w = cubic_invert(s[_THETA], s[_THETA + 1], s[_THETA + 2], s[_THETA + 3], step,
+                         _py_max(lo_limit, width / (1 + change)), _py_min(w_max, width * (1 + change)), _MS, _URAD, 60)
+        if w == w:
+            s[_INVERSIONS] += 1.0
+            width = w
+        else:   # the target is outside the bracket: move to its edge towards the target
+            width *= (1 + change) if _predict(s, width) < step else 1 / (1 + change)
+    elif s[_HAS_LAST] == 0.0:          # before the model: grow after no motion, else w ← w·√(Δ/Δc)
+        if width <= s[_FLOOR]:
+            width = s[_FLOOR] * p[_O_GROWTH]
+    elif s[_L_DC] > 0:
+        width = s[_L_W] * _py_min(_py_max(math.sqrt(step / s[_L_DC]), 0.9), 1.1)
+    width = _py_min(_py_max(width, lo_limit), w_max)
+    s[_WIDTH] = width
+    s[_DPHASE] = (s[_DPHASE] + 1.0) % 3.0
+    return _py_min(width * (1.0 + p[_O_DITHER] * (s[_DPHASE] - 1.0)), w_max)
+
+
+@njit(cache=True)
+def _pulse_width_step(s, p, y, offs, levs):
+    """:class:`PulseWidthController`'s step (:data:`plant.law_step.STEP_SIGNATURE`): add y(n) to
+    the stuck segment; the hold of 0, or a ±u_max pulse of the next width from the sample instant."""
+    t = s[_N] * p[_O_TS]
+    s[_N] += 1.0
+    s[_SXX] *= p[_O_FORGET]
+    s[_SXY] *= p[_O_FORGET]
+    g = _CUR
+    early = t < p[_O_STARTUP]
+    offs[0], levs[0] = 0.0, 0.0
+    if math.isfinite(y):   # samples before the first trigger decision enter the slope
+        if s[g + _SN] < p[_O_MIN_SEG] or early:
+            s[g + _SCN] += 1.0
+            s[g + _SCST] += t
+            s[g + _SCSY] += y
+            s[g + _SCSTT] += t * t
+            s[g + _SCSTY] += t * y
+        s[g + _SN] += 1.0
+        s[g + _SST] += t
+        s[g + _SSY] += y
+        s[g + _SSTT] += t * t
+        s[g + _SSTY] += t * y
+    if s[g + _SN] == 0.0:
+        return 1
+    sxx, sxy = _centred(s, g + _SCN, p[_O_TWO])
+    den = s[_SXX] + sxx
+    slope = (s[_SXY] + sxy) / den if den > 0 else 0.0
+    sigma2 = p[_O_SIGMA2]
+    s[_X4] = -slope
+    s[_X1] = _level(s, g, t, slope, sigma2)[0]
+    if early or s[g + _SN] < p[_O_MIN_SEG]:
+        return 1
+    ts = p[_O_TS]
+    pe, var_p = _level(s, g, t + ts, slope, sigma2)
+    step = p[_O_STEP]
+    away = pe * slope > 0 or slope == 0.0
+    due = abs(pe) >= 0.5 * step and away
+    overshoot = abs(pe) >= p[_O_OVERSHOOT] * step and abs(pe) >= 3.0 * math.sqrt(var_p)
+    if not (due or overshoot):
+        return 1
+    sign = -1.0 if pe > 0 else 1.0
+    _close_segment(s, p, slope)
+    width = _next_width(s, p)
+    level_now, var_now = _level(s, _PREV, t, slope, sigma2)
+    predicted = _predict(s, width) if s[_INVERSIONS] != 0.0 else step
+    s[_CUR + _SHP], s[_CUR + _SPT] = 1.0, t
+    s[_CUR + _SPL], s[_CUR + _SPV] = level_now + sign * predicted, var_now + s[_VAR_PRED]
+    s[_HAS_PULSE], s[_P_T], s[_P_SIGN], s[_P_WIDTH], s[_P_PRED] = 1.0, t, sign, width, predicted
+    s[_PULSES] += 1.0
+    levs[0] = sign * p[_O_UMAX]            # DriveCommand.pulse(0, width, ±u_max)
+    offs[1], levs[1] = width, 0.0
+    return 2
 
 
 @register("pulse-width")
@@ -230,6 +379,11 @@ class PulseWidthController(Controller):
     """Adaptive pulse-width control on the switched bridge (Yang & Tomizuka 1988).
 
     Options: :class:`PulseWidthOptions`. Knob: ``target_step`` [rad]. Counter: ``pulses``.
+
+    The whole step is :func:`_pulse_width_step`, one compiled function over the state array
+    ``s`` (the ``compiled_law`` hook): ``step`` calls it, and so does the runner's compiled loop,
+    in the same order of floating-point operations as the Python form it replaces (whose rows
+    tests/test_pulse_width_compiled.py compares bit for bit).
     """
 
     drive = DriveType.BRIDGE
@@ -248,142 +402,60 @@ class PulseWidthController(Controller):
             raise ValueError(f"max_width must let the current return to zero within one sample "
                              f"period ({ts!r} s); got {o.max_width!r} s")
         self.params = params
-        self._ts = ts
-        self._sigma = max(params.measurement_noise_std, 1e-12)
-        self._sigma2 = self._sigma ** 2
-        self._forget_slope = math.exp(-ts / o.slope_memory_s)
-        self.model = PulseModelRls(o.forgetting)
-        self.width = o.initial_width
-        self.width_floor = 0.0
-        self._n = 0
-        self._seg = _Segment()
-        self._prev: _Segment | None = None          # segment before the last pulse
-        self._pulse: tuple[float, int, float, float] | None = None  # (t, sign, width, Δc_p)
-        self._var_pred = o.target_step ** 2          # spread of Δc about the model [rad²]
-        self._sxx, self._sxy = 0.0, 0.0
-        self._dither_phase = 0
+        sigma = max(params.measurement_noise_std, 1e-12)
+        p = np.empty(_N_PARAMS)
+        p[_O_STEP], p[_O_W0], p[_O_GROWTH], p[_O_WMAX] = o.target_step, o.initial_width, o.width_growth, o.max_width
+        p[_O_DITHER], p[_O_LAMBDA], p[_O_MIN_MODEL] = o.width_dither, o.forgetting, o.min_model_pulses
+        p[_O_OVERSHOOT], p[_O_STARTUP], p[_O_MIN_SEG] = o.overshoot_factor, o.startup_s, o.min_segment_samples
+        p[_O_CHANGE], p[_O_TS], p[_O_SIGMA2] = o.max_width_change, ts, sigma ** 2
+        p[_O_FORGET], p[_O_UMAX] = math.exp(-ts / o.slope_memory_s), params.u_max
+        p[_O_VAR_FLOOR], p[_O_TWO] = (0.05 * o.target_step) ** 2, 2.0
+        s = np.zeros(_N_STATE)
+        s[_VAR_PRED] = o.target_step ** 2            # spread of Δc about the model [rad²]
+        s[_WIDTH] = o.initial_width
+        s[_LAST_DC] = math.nan
+        s[_PMAT:_PMAT + 16] = (np.eye(4) * 1e6).ravel()   # PulseModelRls's prior
+        self._s, self._p = s, p
+        self._offs, self._levs = np.zeros(2), np.zeros(2)
         self._pulse_times: list[float] = []
-        self.counts = dict(pulses=0, significant=0, no_motion=0, model_inversions=0)
-        self.last_dc = math.nan
-        self.x1_hat = 0.0
-        self.x4_hat = 0.0
 
-    # ------------------------------------------------------------------ estimates
-    def _slope(self) -> float:
-        sxx, sxy = self._seg.clean.centred() if self._seg.clean is not None else (0.0, 0.0)
-        den = self._sxx + sxx
-        return (self._sxy + sxy) / den if den > 0 else 0.0
-
-    def _level(self, seg: _Segment, t: float, slope: float) -> tuple[float, float]:
-        """x̂1(t) [rad] and its variance from the segment's samples and its prior."""
-        mean, var = math.nan, math.inf
-        n = seg.n
-        if n > 0:   # seg.y_mean + slope·(t − seg.t_mean), σ1²/n
-            mean, var = seg.sy / n + slope * (t - seg.st / n), self._sigma2 / n
-        prior = seg.prior
-        if prior is not None:
-            t0, level0, var0 = prior
-            prior = level0 + slope * (t - t0)
-            if not math.isfinite(mean):
-                return prior, var0
-            w = var0 / (var0 + var)                    # precision-weighted combination
-            return prior + w * (mean - prior), var0 * var / (var0 + var)
-        return mean, var
-
-    # ------------------------------------------------------------------ per sample
     def step(self, y: float) -> DriveCommand:
-        """Add y(n) to the stuck segment; fire a ±u_max pulse when the error is due."""
-        o = self.options
-        t = self._n * self._ts
-        self._n += 1
-        self._sxx *= self._forget_slope
-        self._sxy *= self._forget_slope
-        seg = self._seg
-        early = t < o.startup_s
-        if math.isfinite(y):   # samples before the first trigger decision enter the slope
-            seg.add(t, y, clean=seg.n < o.min_segment_samples or early)
-        if seg.n == 0:
+        """Add y(n) to the stuck segment; fire a ±u_max pulse when the error is due
+        (:func:`_pulse_width_step`)."""
+        k = _pulse_width_step(self._s, self._p, y, self._offs, self._levs)
+        if k == 1:
             return _OFF
-        slope = self._slope()
-        self.x4_hat = -slope
-        self.x1_hat, _ = self._level(seg, t, slope)
-        if early or seg.n < o.min_segment_samples:
-            return _OFF
-        p, var_p = self._level(seg, t + self._ts, slope)
-        step = o.target_step
-        away = p * slope > 0 or slope == 0.0
-        due = abs(p) >= 0.5 * step and away
-        overshoot = abs(p) >= o.overshoot_factor * step and abs(p) >= 3.0 * math.sqrt(var_p)
-        if not (due or overshoot):
-            return _OFF
-        sign = -1 if p > 0 else 1
-        self._close_segment(slope)
-        width = self._next_width()
-        level_now, var_now = self._level(self._prev, t, slope)
-        predicted = self.model.predict(width) if self.counts["model_inversions"] else step
-        self._seg.prior = (t, level_now + sign * predicted, var_now + self._var_pred)
-        self._pulse = (t, sign, width, predicted)
-        self._pulse_times.append(t)
-        self.counts["pulses"] += 1
-        return DriveCommand.pulse(0.0, width, sign * self.params.u_max)
+        self._pulse_times.append(self._s[_P_T])
+        return law_command(k, self._offs, self._levs, DriveType.BRIDGE)
 
-    def _close_segment(self, slope: float) -> None:
-        """Pool the finished segment's slope sums and evaluate the previous pulse from the
-        samples alone (the prior is not used twice)."""
-        seg = self._seg
-        sxx, sxy = seg.clean.centred() if seg.clean is not None else (0.0, 0.0)
-        self._sxx += sxx
-        self._sxy += sxy
-        if self._pulse is not None and self._prev is not None and self._prev.n > 0 and seg.n > 0:
-            _, sign, width, predicted = self._pulse
-            a, b = seg, self._prev
-            dc = sign * (a.y_mean - b.y_mean - slope * (a.t_mean - b.t_mean))
-            var_e = self._sigma2 * (1.0 / a.n + 1.0 / b.n)
-            self.last_dc = dc
-            if self.counts["significant"] == 0 and dc < 2.0 * math.sqrt(var_e):
-                self.counts["no_motion"] += 1          # start-up: no motion yet, widen
-                self.width_floor = max(self.width_floor, width)
-            else:
-                self.counts["significant"] += 1
-                self.model.update(width, dc)
-                self._last_motion = (width, dc)
-                if self.counts["model_inversions"]:   # spread of Δc about the model
-                    resid = (dc - predicted) ** 2 - var_e
-                    self._var_pred += 0.05 * (max(resid, 0.0) - self._var_pred)
-                    self._var_pred = max(self._var_pred, (0.05 * self.options.target_step) ** 2)
-        self._prev = seg
-        self._seg = _Segment()
+    def compiled_law(self) -> CompiledLaw | None:
+        """The compiled step on this controller's own arrays (None before ``reset``)."""
+        if not hasattr(self, "_s"):
+            return None
+        return CompiledLaw(_pulse_width_step, self._s, self._p, DriveType.BRIDGE, 2)
 
-    def _next_width(self) -> float:
-        o = self.options
-        lo_limit = 0.2 * o.initial_width
-        if self.counts["significant"] >= o.min_model_pulses:
-            # one pulse changes the width by at most ``max_width_change`` (model glitches)
-            w = self.model.invert(o.target_step, max(lo_limit, self.width / (1 + o.max_width_change)),
-                                  min(o.max_width, self.width * (1 + o.max_width_change)))
-            if w is not None:
-                self.counts["model_inversions"] += 1
-                self.width = w
-            else:   # the target is outside the bracket: move to its edge towards the target
-                up = self.model.predict(self.width) < o.target_step
-                self.width *= (1 + o.max_width_change) if up else 1 / (1 + o.max_width_change)
-        else:
-            self._scalar_rule()
-        self.width = min(max(self.width, lo_limit), o.max_width)
-        self._dither_phase = (self._dither_phase + 1) % 3
-        return min(self.width * (1.0 + o.width_dither * (self._dither_phase - 1)), o.max_width)
+    # the state, read from the array
+    width = property(lambda self: float(self._s[_WIDTH]), doc="The width before dither [s].")
+    width_floor = property(lambda self: float(self._s[_FLOOR]), doc="Widest pulse without motion [s].")
+    x1_hat = property(lambda self: float(self._s[_X1]), doc="x̂1 at the last sample [rad].")
+    x4_hat = property(lambda self: float(self._s[_X4]), doc="x̂4 [rad/s].")
+    last_dc = property(lambda self: float(self._s[_LAST_DC]), doc="The last measured Δc [rad].")
 
-    def _scalar_rule(self) -> None:
-        """Before the model: grow after no motion, else w ← w·√(Δ/Δc) (Δc ∝ w², clipped)."""
-        o = self.options
-        last = getattr(self, "_last_motion", None)
-        if last is None:
-            if self.width <= self.width_floor:
-                self.width = self.width_floor * o.width_growth
-            return
-        w, dc = last
-        if dc > 0:
-            self.width = w * min(max(math.sqrt(o.target_step / dc), 0.9), 1.1)
+    @property
+    def counts(self) -> dict[str, int]:
+        """pulses, significant, no_motion, model_inversions."""
+        s = self._s
+        return dict(pulses=int(s[_PULSES]), significant=int(s[_SIGNIFICANT]), no_motion=int(s[_NO_MOTION]),
+                    model_inversions=int(s[_INVERSIONS]))
+
+    @property
+    def model(self) -> PulseModelRls:
+        """The identified Δc(w) model (a copy of the state's θ and P)."""
+        m = PulseModelRls(self.options.forgetting)
+        m.theta = self._s[_THETA:_THETA + 4]
+        m.P = self._s[_PMAT:_PMAT + 16].reshape((4, 4)).copy()
+        m.n = int(self._s[_MODEL_N])
+        return m
 
     # ------------------------------------------------------------------ reporting
     def internals(self) -> dict[str, float]:
@@ -394,7 +466,7 @@ class PulseWidthController(Controller):
         return {"pulse": np.asarray(getattr(self, "_pulse_times", []), dtype=float)}
 
     def summary(self) -> dict[str, Any]:
-        if not hasattr(self, "model"):
+        if not hasattr(self, "_s"):
             return {"target_step": self.options.target_step}
         out: dict[str, Any] = {"target_step": self.options.target_step, "width": self.width,
                                "width_floor": self.width_floor, "x4_hat": self.x4_hat,

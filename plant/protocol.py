@@ -187,6 +187,18 @@ class PlantFamily(abc.ABC):
             raise RuntimeError(f"shaft still moving {_PULSE_HORIZON_S} s after a {dt_u} s pulse")
         return float(s.x[X1]) - x1_0, t_stop
 
+    def pulse_on_time(self, params: PlantParams, state: PlantState, motion: float, sign: int, dtu_max: float,
+                      tol: float, max_iterations: int) -> tuple[float, float, float] | None:
+        """(Δt_u, |Δc|, t_stop) of the shortest noise-free pulse with |Δc| ≥ ``motion`` [rad]
+        (``dtu_max`` when none), or None when the family offers no fast path (the default).
+
+        Optional, for speed only: the answer must be bit for bit the Illinois regula falsi on
+        |Δc|(Δt_u) − motion over :meth:`pulse_motion` (start bracket [0, ``dtu_max``], the
+        upper end returned once the bracket is narrower than ``tol`` or after
+        ``max_iterations``), as ``controllers.oracle_pulse`` runs it.
+        """
+        return None
+
     def __repr__(self) -> str:
         return f"<plant family {self.name!r}>"
 
@@ -222,6 +234,10 @@ class TruePlant(NamedTuple):
 
     def pulse_motion(self, state: PlantState, dt_u: float, sign: int) -> tuple[float, float]:
         return self.family.pulse_motion(self.params, state, dt_u, sign)
+
+    def pulse_on_time(self, state: PlantState, motion: float, sign: int, dtu_max: float, tol: float,
+                      max_iterations: int) -> tuple[float, float, float] | None:
+        return self.family.pulse_on_time(self.params, state, motion, sign, dtu_max, tol, max_iterations)
 
 
 _REGISTRY: dict[str, PlantFamily] = {}

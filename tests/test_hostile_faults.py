@@ -291,8 +291,10 @@ def test_a_state_that_leaves_the_finite_range_ends_diverged(monkeypatch):
                 step = step._replace(state=step.state._replace(x=x))
             return step
 
+    # compiled=False: the fault is injected in the family's Python step, which pulse-width's
+    # compiled loop (its compiled_law) would not call
     result = runner.run_closed_loop(PlantParams(), make_controller("pulse-width"), duration_s=0.3, warmup_s=0.1,
-                                    family=Faulty())
+                                    family=Faulty(), compiled=False)
     assert result.status == "diverged" and "plant state left the finite range" in result.message
     assert math.isnan(result.metrics["peak_error_rad"]) and math.isnan(result.metrics["mean_abs_current"])
 

@@ -72,6 +72,14 @@ class Multimode(PlantFamily):
                 return fast
         return super().pulse_motion(params, state, dt_u, sign)
 
+    def pulse_on_time(self, params, state, motion, sign, dtu_max, tol, max_iterations):
+        """As :meth:`PlantFamily.pulse_on_time`: the whole search compiled when there is no
+        disturbance torque (:func:`plant.multimode.pulse.pulse_on_time`), else None."""
+        if params.disturbance_torque_std == 0.0:
+            return pulse.pulse_on_time(protocol._quiet_command(params), state, motion, sign, dtu_max, tol,
+                                       max_iterations, protocol._PULSE_HORIZON_S)
+        return None
+
     def truth(self, params, state):
         """The shared truth; with the disturbance torque on, d [ozf·in] as ``disturbance_torque``."""
         out = super().truth(params, state)
