@@ -38,10 +38,10 @@ from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.segments import torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
-from plant.randomness import NoiseExhausted, normal, uniform
+from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
 
-__all__ = ["interval_kernel", "kernel_inputs", "SHEET_SIZE"]
+__all__ = ["interval_kernel", "interval_k", "kernel_inputs", "SHEET_SIZE"]
 
 Y1, Y2, Y3, Y4, Y5, YD, YKC, YU = range(8)
 _N = 8
@@ -537,13 +537,12 @@ def _moving_far(w, v0, slope, curv, a, s2, sd2, s5, w3):
 
 
 @njit(cache=True)
-def _far(kind, w, c, lad, j):
-    """far(w) of the stuck (kind 0) or moving rule; rung j of the ladder table, or j < 0: w itself."""
+def _far(kind, w, c0, c1, c2, c3, c4, c5, c6, w3, decay):
+    """far(w) of the stuck (kind 0) or moving rule, the rung's w**3 and exp(−w/τ3) given (scalars
+    only: an array argument costs an atomic reference-count pair per call)."""
     if kind == 0:
-        decay = lad[1 + LADDER + j] if j >= 0 else math.exp(-w / c[5])
-        return _stuck_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], decay)
-    w3 = lad[1 + j] if j >= 0 else math.pow(w, 3.0)
-    return _moving_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], w3)
+        return _stuck_far(w, c0, c1, c2, c3, c4, c5, c6, decay)
+    return _moving_far(w, c0, c1, c2, c3, c4, c5, c6, w3)
 
 
 @njit(cache=True)
@@ -563,14 +562,20 @@ def _ladder_table(lad, sub, tau3):
 
 
 @njit(cache=True)
-def _ladder_width(room, sub, kind, c, lad):
-    """disturbed._ladder_width: (width, far)."""
+def _ladder_width(room, sub, kind, c0, c1, c2, c3, c4, c5, c6, lad):
+    """disturbed._ladder_width: (width, far); (c0, …, c6) the rule's w-free terms (_stuck_far's
+    ks, |x3|, |d|, u, x3 − u, τ3, σ² or _moving_far's), rung j's w**3 and exp(−w/τ3) from ``lad``."""
     w = sub * _TOP
-    if sub < room <= w and _far(kind, room, c, lad, -1):
-        return room, True
+    if sub < room <= w:
+        if kind == 0:
+            far = _far(kind, room, c0, c1, c2, c3, c4, c5, c6, 0.0, math.exp(-room / c5))
+        else:
+            far = _far(kind, room, c0, c1, c2, c3, c4, c5, c6, math.pow(room, 3.0), 0.0)
+        if far:
+            return room, True
     j = 0
     while w > sub:
-        if w <= room and _far(kind, w, c, lad, j):
+        if w <= room and _far(kind, w, c0, c1, c2, c3, c4, c5, c6, lad[1 + j], lad[1 + LADDER + j]):
             return w, True
         w /= 2.0
         j += 1
@@ -661,10 +666,75 @@ def _velocity_zero(Y, S, dirn, dp, ov, ev):
     return _event(S, Y, kind, ov, ev)
 
 
+@njit(cache=True)
+def _take(z, cursor, n):
+    """The read position of the next ``n`` unit normals of ``z`` (advances ``cursor``; _normals
+    without the slice)."""
+    i = cursor[0]
+    if i + n > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[0] = i + n
+    return i
+
+
 @njit(cache=True, inline="always")
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad):
-    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop."""
-    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM = C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9]
+def _gemv_flat(F, off, m, x, xoff, out):
+    """out[:m] = A @ x[xoff:xoff + m] for the C-ordered m × m matrix A = F[off:off + m·m]
+    (m in 1–5 or 8): :func:`_gemv`'s arithmetic, operation for operation, on flat indices (no
+    array views: each view costs an atomic reference-count pair in the sub-step loop)."""
+    m1 = m - (m & 3)
+    r = m - m1
+    for i in range(m):
+        row = off + i * m
+        y = 0.0
+        if m1 > 0:
+            a0 = a1 = a2 = a3 = 0.0
+            for k in range(0, m1, 4):
+                a0 = _fma(F[row + k], x[xoff + k], a0)
+                a1 = _fma(F[row + k + 1], x[xoff + k + 1], a1)
+                a2 = _fma(F[row + k + 2], x[xoff + k + 2], a2)
+                a3 = _fma(F[row + k + 3], x[xoff + k + 3], a3)
+            y = (a0 + a2) + (a1 + a3)
+        if r == 1:
+            y = _fma(F[row + m1], x[xoff + m1], y)
+        elif r == 2:
+            y = y + _fma(F[row + m1], x[xoff + m1], F[row + m1 + 1] * x[xoff + m1 + 1])
+        elif r == 3:
+            y = y + _fma(F[row + m1 + 2], x[xoff + m1 + 2],
+                         _fma(F[row + m1], x[xoff + m1], F[row + m1 + 1] * x[xoff + m1 + 1]))
+        out[i] = y
+
+
+@njit(cache=True)
+def _trans_miss(mode, w, recs, rds, FB, IB):
+    """_trans on the table views (a cache miss: the views are cut only here)."""
+    C = _views(recs, rds, FB, IB)
+    return _trans(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9])
+
+
+@njit(cache=True)
+def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
+    """Yb[rows] += factor · (m unit normals) for transition slot k (m = TM[k] ≠ 0)."""
+    if m > 0 and (m <= 5 or m == 8):
+        pos = _take(z, cursor, m)
+        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
+        add = Yc
+    elif m > 0:
+        add = np.empty(m)
+        B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
+        _gemv(B, _normals(z, cursor, m), add)
+    else:                                           # the eigen-factor, stored transposed
+        m = -m
+        B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
+        add = np.dot(B.T, _normals(z, cursor, m))
+    for i in range(m):
+        Yb[IB[_OFF_TROWS + k * _N + i]] += add[i]
+
+
+@njit(cache=True, inline="always")
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
+    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
+    The transition tables are read from the flat buffers by offset (no views on the hit path)."""
     mode = int(S[_MODE])
     room = t_end - S[_T]
     x2, x3, x5, d, u = Y[Y2], Y[Y3], Y[Y5], Y[YD], Y[YU]
@@ -680,8 +750,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
             return _breakaway(Y, S, g, ov, ev)
         sig2 = sig_d2
         if ks - abs(x3) - abs(d) > 0.0:
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6] = ks, abs(x3), abs(d), u, x3 - u, tau3, sig2
-            w, far = _ladder_width(room_fb, sub, 0, c, lad)
+            w, far = _ladder_width(room_fb, sub, 0, ks, abs(x3), abs(d), u, x3 - u, tau3, sig2, lad)
         else:
             w, far = min(sub, room_fb), False
         rungs = False
@@ -696,28 +765,21 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
             S[_JUST] = 0.0
         if dirn * x2 > 0.0:
             a = dp[_ALPHA]
-            c[0] = dirn * x2
-            c[1] = dirn * a * (x3 + d) - a * (kc + x5)
-            c[2] = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
-            c[3], c[4], c[5], c[6] = a, dp[_S2], dp[_SD2], dp[_S5]
-            w, far = _ladder_width(room_fb, sub, 1, c, lad)
+            slope = dirn * a * (x3 + d) - a * (kc + x5)
+            curv = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
+            w, far = _ladder_width(room_fb, sub, 1, dirn * x2, slope, curv, a, dp[_S2], dp[_SD2], dp[_S5], lad)
         else:
             w, far = min(sub, room_fb), False
         if reflecting and not far:
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
-    k = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
-    _gemv(TPHI[k], Y, Yb)
-    m = TM[k]
+    k = _slot(mode, w, _NT)
+    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
+        k = _trans_miss(mode, w, recs, rds, FB, IB)
+    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
+    m = IB[_OFF_TM + k]
     if noisy and m:
-        if m > 0:
-            add = Yc[:m]
-            _gemv(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
-        else:                                       # the eigen-factor, stored transposed
-            m = -m
-            add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
-        for i in range(m):
-            Yb[TROWS[k, i]] += add[i]
+        _noise_add(k, m, z, cursor, FB, IB, Yb, Yc)
     S[_NSUB] += 1.0
     if _tick(S, 1.0, ov):
         return True
@@ -748,11 +810,13 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
         else:
             e[Y2] = dirn
             prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
-        if prob >= 1.0 or (prob > 0.0 and not far and uniform(z, cursor) < prob):
+        # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
+        if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True
     if crossed:
-        w = _bisect(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, C, Yc)
-        Yb[:] = Yc
+        w = _bisect(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), Yc)
+        for i in range(_N):
+            Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
             return True
     _torque(S, x3, u, w, bridge, dp)
@@ -760,7 +824,8 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    Y[:] = Yb
+    for i in range(_N):
+        Y[i] = Yb[i]
     Y[Y3] = u + (x3 - u) * math.exp(-w / tau3)
     S[_T] += w
     if crossed:
@@ -787,6 +852,19 @@ _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 
 _LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
 _SIZE_F = sum(n for _, n in _LAYOUT_F)
 _SIZE_I = sum(n for _, n in _LAYOUT_I)
+
+
+def _offsets(layout):
+    out, o = {}, 0
+    for name, n in layout:
+        out[name] = o
+        o += n
+    return out
+
+
+_OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
+_OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
+_OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
 
 
 @njit(cache=True)
@@ -836,8 +914,15 @@ def _views(recs, rds, FB, IB):
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
     """disturbed.advance over [t0, t0 + duration): ``out[:7]`` the new state, ``out[7:]`` the work
     sheet; returns the new read position in ``z`` (from ``zpos``). (recs, rds, FB, IB): kernel_inputs()."""
-    C = _views(recs, rds, FB, IB)
-    dp = C[2]
+    return interval_k(x, mode, flyback, t0, duration, offsets, levels, offsets.shape[0], bridge, ov, recs, rds, FB, IB,
+                      z, zpos, ev, out)
+
+
+@njit(cache=True)
+def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
+    """:func:`interval_kernel` with the drive's first ``k`` segments of ``offsets``, ``levels``
+    (a compiled caller's scratch arrays, not copied)."""
+    dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
     S = out[7:]
@@ -850,13 +935,11 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
     Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5] = x[0], x[1], x[2], x[3], x[4]
     Y[YD] = x[6] if x.shape[0] > 6 else 0.0
     Y[YKC], Y[YU] = dp[_KC], x[5]
-    c = np.empty(7)
     Yb = np.empty(_N)
     Yc = np.empty(_N)
     e = np.zeros(_N)
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
-    k = offsets.shape[0]
     stop = False
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
@@ -866,7 +949,8 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
         if seg > 0 and _event(S, Y, _LEVEL, ov, ev):
             break
         while S[_T] < t_seg_end:
-            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad)
+            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
+                            lad)
             if stop or S[_STATUS] != _OK:
                 stop = True
                 break
