@@ -41,7 +41,7 @@ from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
 
-__all__ = ["interval_kernel", "interval_k", "kernel_inputs", "SHEET_SIZE"]
+__all__ = ["interval_kernel", "interval_k", "kernel_inputs", "SHEET_SIZE", "WORK_SIZE"]
 
 Y1, Y2, Y3, Y4, Y5, YD, YKC, YU = range(8)
 _N = 8
@@ -481,7 +481,7 @@ def _event(S, Y, kind, ov, ev):
     return _tick(S, 1.0, ov)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _torque(S, x3, u, h, bridge, dp):
     if h <= 0.0:
         return
@@ -666,7 +666,7 @@ def _velocity_zero(Y, S, dirn, dp, ov, ev):
     return _event(S, Y, kind, ov, ev)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _take(z, cursor, n):
     """The read position of the next ``n`` unit normals of ``z`` (advances ``cursor``; _normals
     without the slice)."""
@@ -778,7 +778,12 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         k = _trans_miss(mode, w, recs, rds, FB, IB)
     _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
     m = IB[_OFF_TM + k]
-    if noisy and m:
+    if noisy and m > 0 and (m <= 5 or m == 8):         # the Cholesky factor (_noise_add has the rest)
+        pos = _take(z, cursor, m)
+        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
+        for i in range(m):
+            Yb[IB[_OFF_TROWS + k * _N + i]] += Yc[i]
+    elif noisy and m:
         _noise_add(k, m, z, cursor, FB, IB, Yb, Yc)
     S[_NSUB] += 1.0
     if _tick(S, 1.0, ov):
@@ -915,13 +920,18 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
     """disturbed.advance over [t0, t0 + duration): ``out[:7]`` the new state, ``out[7:]`` the work
     sheet; returns the new read position in ``z`` (from ``zpos``). (recs, rds, FB, IB): kernel_inputs()."""
     return interval_k(x, mode, flyback, t0, duration, offsets, levels, offsets.shape[0], bridge, ov, recs, rds, FB, IB,
-                      z, zpos, ev, out)
+                      z, zpos, ev, out, np.empty(WORK_SIZE), np.empty(1, np.int64))
+
+
+WORK_SIZE = 4 * _N
 
 
 @njit(cache=True)
-def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
+def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out,
+               work, cursor):
     """:func:`interval_kernel` with the drive's first ``k`` segments of ``offsets``, ``levels``
-    (a compiled caller's scratch arrays, not copied)."""
+    and the scratch ``work`` (WORK_SIZE floats) and ``cursor`` (one int64) of a compiled caller
+    (nothing copied or allocated per interval)."""
     dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
@@ -929,15 +939,14 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
     for i in range(SHEET_SIZE):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    cursor = np.empty(1, np.int64)
     cursor[0] = zpos
-    Y = np.empty(_N)
+    Y = work[:_N]
     Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5] = x[0], x[1], x[2], x[3], x[4]
     Y[YD] = x[6] if x.shape[0] > 6 else 0.0
     Y[YKC], Y[YU] = dp[_KC], x[5]
-    Yb = np.empty(_N)
-    Yc = np.empty(_N)
-    e = np.zeros(_N)
+    Yb = work[_N:2 * _N]
+    Yc = work[2 * _N:3 * _N]
+    e = work[3 * _N:4 * _N]                         # set by each sub-step before use
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
     stop = False
