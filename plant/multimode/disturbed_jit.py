@@ -66,8 +66,10 @@ SHEET_STATUS, STATUS_OK = _STATUS, _OK
 _LEVEL, _FLYBACK_END, _BREAKAWAY, _REGIME_END, _STICK, _REVERSAL, _REFLECTION = (int(k) for k in EventKind)
 _TOP = 2.0 ** (LADDER - 1)
 
-_NT = 1024          # transition cache slots
-_NB = 256           # bridge-law cache slots
+_NT_BITS, _NB_BITS = 10, 8
+_NT = 1 << _NT_BITS         # transition cache slots
+_NB = 1 << _NB_BITS         # bridge-law cache slots
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)     # 2^64 / golden ratio, odd (_slot)
 
 # LAPACK dpotrf and BLAS dsyrk of scipy, called through their addresses passed in at run time
 # (an address baked into the code would stop numba from caching the compiled kernel)
@@ -311,16 +313,22 @@ def _noise_factor(Q, rows, Bflat, fa):
 # --- the caches --------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _slot(mode, w, size):
+def _slot(mode, w, bits):
+    """The slot of (mode, w) in a table of 2**bits: Fibonacci hashing (Knuth, TAOCP 3, 6.4) of
+    all 53 mantissa bits, the exponent and the mode, top bits kept. The widths that end an
+    interval (t_end − t) differ from the ladder's only in low mantissa bits whose last ones are
+    zeros; a hash of the top 30 bits put them in one slot, and they evicted each other (6700
+    misses per 100 s linear cell, against 338 distinct widths)."""
     fr, ex = math.frexp(w)
-    key = int(fr * 1073741824.0) * 31 + ex * 7 + mode
-    return key % size
+    key = (np.uint64(int(fr * 9007199254740992.0)) + (np.uint64(ex & 1023) << np.uint64(53))
+           + np.uint64(mode << 1))
+    return int((key * _GOLDEN) >> np.uint64(64 - bits))
 
 
 @njit(cache=True, inline="always")
 def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
     """Slot of (mode, w) in the transition cache, computed on a miss."""
-    k = _slot(mode, w, TK.shape[0])
+    k = _slot(mode, w, _NT_BITS)
     if TK[k, 0] == mode and TK[k, 1] == w:
         return k
     _closed_form(mode, w, rec, rd, dp, TPHI[k], TQ[k])
@@ -332,7 +340,7 @@ def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
 @njit(cache=True)
 def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN):
     """Slot of (mode, w) in the bridge cache: disturbed._bridge_law (Matheron's rule)."""
-    k = _slot(mode, w, BK.shape[0])
+    k = _slot(mode, w, _NB_BITS)
     if BK[k, 0] == mode and BK[k, 1] == w:
         return k
     kf = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
@@ -773,7 +781,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         if reflecting and not far:
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
-    k = _slot(mode, w, _NT)
+    k = _slot(mode, w, _NT_BITS)
     if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
         k = _trans_miss(mode, w, recs, rds, FB, IB)
     _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
