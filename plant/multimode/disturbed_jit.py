@@ -740,9 +740,10 @@ def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
 
 
 @njit(cache=True, inline="always")
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
-    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
-    The transition tables are read from the flat buffers by offset (no views on the hit path)."""
+def _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad):
+    """The sub-step's head (disturbed._segment up to the width): (breaks, g, mode, dirn, room,
+    h_fb, ks, sig2, w, far, rungs, just). ``breaks``: a stuck shaft at (or past) stiction, g its
+    x3 + d. Nothing is drawn; Y[YKC] is set (idempotent), the just-broke flag only read."""
     mode = int(S[_MODE])
     room = t_end - S[_T]
     x2, x3, x5, d, u = Y[Y2], Y[Y3], Y[Y5], Y[YD], Y[YU]
@@ -751,11 +752,13 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
     room_fb = min(room, h_fb)
     ks = max(dp[_KS] + x5, 0.0)
     sub = ov[_O_SUB]
+    g = 0.0
+    just = False
     if mode == 2:
         dirn = 0.0
         g = x3 + d
         if abs(g) > ks:
-            return _breakaway(Y, S, g, ov, ev)
+            return True, g, mode, dirn, room, h_fb, ks, 0.0, 0.0, False, False, just
         sig2 = sig_d2
         if ks - abs(x3) - abs(d) > 0.0:
             w, far = _ladder_width(room_fb, sub, 0, ks, abs(x3), abs(d), u, x3 - u, tau3, sig2, lad)
@@ -770,7 +773,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         sig2 = dp[_SIG2MOV] if noisy else 0.0
         if S[_JUST] != 0.0:
             reflecting = True
-            S[_JUST] = 0.0
+            just = True
         if dirn * x2 > 0.0:
             a = dp[_ALPHA]
             slope = dirn * a * (x3 + d) - a * (kc + x5)
@@ -781,21 +784,13 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         if reflecting and not far:
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
-    k = _slot(mode, w, _NT_BITS)
-    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
-        k = _trans_miss(mode, w, recs, rds, FB, IB)
-    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
-    m = IB[_OFF_TM + k]
-    if noisy and m > 0 and (m <= 5 or m == 8):         # the Cholesky factor (_noise_add has the rest)
-        pos = _take(z, cursor, m)
-        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
-        for i in range(m):
-            Yb[IB[_OFF_TROWS + k * _N + i]] += Yc[i]
-    elif noisy and m:
-        _noise_add(k, m, z, cursor, FB, IB, Yb, Yc)
-    S[_NSUB] += 1.0
-    if _tick(S, 1.0, ov):
-        return True
+    return False, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just
+
+
+@njit(cache=True, inline="always")
+def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
+    """After the Gaussian step Y → Yb: the Skorokhod push of a reflected sub-step, else the
+    crossing test (e, c0: the barrier functional; v: its variant). Returns (crossed, v, c0)."""
     crossed = False
     for i in range(_N):
         e[i] = 0.0
@@ -826,12 +821,13 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
         if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True
-    if crossed:
-        w = _bisect(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), Yc)
-        for i in range(_N):
-            Yb[i] = Yc[i]
-        if S[_STATUS] != _OK:
-            return True
+    return crossed, v, c0
+
+
+@njit(cache=True, inline="always")
+def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+    """The sub-step's tail from Y to Yb over w: integrals, peak, x3's closed form, the event."""
+    x3, u = Y[Y3], Y[YU]
     _torque(S, x3, u, w, bridge, dp)
     if mode != 2:
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
@@ -839,7 +835,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
     for i in range(_N):
         Y[i] = Yb[i]
-    Y[Y3] = u + (x3 - u) * math.exp(-w / tau3)
+    Y[Y3] = u + (x3 - u) * math.exp(-w / dp[_TAU3])
     S[_T] += w
     if crossed:
         if mode == 2:
@@ -853,6 +849,95 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
     if w == room:
         S[_T] = t_end
     return False
+
+
+@njit(cache=True, inline="always")
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
+    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
+    The general path (cache misses, every noise factor, the bisection); :func:`_fast_segment`
+    takes the common sub-steps."""
+    breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
+    if breaks:
+        return _breakaway(Y, S, g, ov, ev)
+    if just:
+        S[_JUST] = 0.0
+    k = _slot(mode, w, _NT_BITS)
+    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
+        k = _trans_miss(mode, w, recs, rds, FB, IB)
+    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
+    m = IB[_OFF_TM + k]
+    if noisy and m:
+        _noise_add(k, m, z, cursor, FB, IB, Yb, Yc)
+    S[_NSUB] += 1.0
+    if _tick(S, 1.0, ov):
+        return True
+    crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
+    if crossed:
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        for i in range(_N):
+            Yb[i] = Yc[i]
+        if S[_STATUS] != _OK:
+            return True
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+
+
+@njit(cache=True)
+def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+    """_bisect on the table views (cut here: the sub-step holds no reference to them)."""
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), out)
+
+
+@njit(cache=True, _nrt=False)
+def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad, hold):
+    """:func:`_segment` for a sub-step whose transition is cached with a Cholesky noise factor
+    (or none), the same operations in the same order. Compiled without numba's reference counting
+    (it allocates nothing), which otherwise costs tens of atomic increments per sub-step.
+    Returns −1 before changing anything when it does not apply (the caller runs _segment), 0 or 1
+    (the sub-step done; 1: stop), 2 when a crossing was drawn: Yb holds the end, e the barrier and
+    hold[0:3] = (w, v, c0) for :func:`_crossed_tail`."""
+    breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
+    if breaks:
+        return 1 if _breakaway(Y, S, g, ov, ev) else 0
+    k = _slot(mode, w, _NT_BITS)
+    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
+        return -1
+    m = IB[_OFF_TM + k]
+    if noisy and m != 0 and not (m > 0 and (m <= 5 or m == 8)):
+        return -1
+    if just:
+        S[_JUST] = 0.0
+    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
+    if noisy and m:
+        pos = _take(z, cursor, m)
+        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
+        for i in range(m):
+            Yb[IB[_OFF_TROWS + k * _N + i]] += Yc[i]
+    S[_NSUB] += 1.0
+    if _tick(S, 1.0, ov):
+        return 1
+    crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
+    if crossed:
+        hold[0], hold[1], hold[2] = w, v, c0
+        return 2
+    return 1 if _finish(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
+
+
+@njit(cache=True)
+def _crossed_tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold):
+    """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing: the bisection and
+    :func:`_finish` (mode, direction, room and flyback end recomputed from the unchanged Y, S)."""
+    mode = int(S[_MODE])
+    dirn = 0.0 if mode == 2 else (1.0 if mode == 3 else -1.0)
+    room = t_end - S[_T]
+    h_fb = math.inf if S[_FB] == 0.0 else dp[_TAU3] * math.log1p(abs(Y[Y3]) / dp[_UMAX])
+    sig2 = sig_d2 if mode == 2 else (dp[_SIG2MOV] if noisy else 0.0)
+    w, v, c0 = hold[0], int(hold[1]), hold[2]
+    w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+    for i in range(_N):
+        Yb[i] = Yc[i]
+    if S[_STATUS] != _OK:
+        return True
+    return _finish(Y, S, Yb, w, True, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
 
 
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
@@ -931,7 +1016,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
                       z, zpos, ev, out, np.empty(WORK_SIZE), np.empty(1, np.int64))
 
 
-WORK_SIZE = 4 * _N
+WORK_SIZE = 4 * _N + 3
 
 
 @njit(cache=True)
@@ -955,6 +1040,7 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
     Yb = work[_N:2 * _N]
     Yc = work[2 * _N:3 * _N]
     e = work[3 * _N:4 * _N]                         # set by each sub-step before use
+    hold = work[4 * _N:4 * _N + 3]
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
     stop = False
@@ -966,8 +1052,16 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
         if seg > 0 and _event(S, Y, _LEVEL, ov, ev):
             break
         while S[_T] < t_seg_end:
-            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
-                            lad)
+            r = _fast_segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad,
+                              hold)
+            if r == -1:
+                stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
+                                e, lad)
+            elif r == 2:
+                stop = _crossed_tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB,
+                                     Yb, Yc, e, hold)
+            else:
+                stop = r == 1
             if stop or S[_STATUS] != _OK:
                 stop = True
                 break
