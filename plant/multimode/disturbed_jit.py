@@ -1103,6 +1103,23 @@ def kernel_inputs(params, options) -> tuple:
     """(options vector, recs, rds, FB, IB): interval_kernel's inputs after ``levels, bridge``. FB and
     IB hold the constants and this thread's cache tables for ``params`` (filled on use; a pure
     function of the parameters, so sharing them cannot change a result)."""
+    last = getattr(_LOCAL, "last", None)
+    if last is not None and last[0] is params:      # the same object as the last call: no hashing
+        K = last[1]
+    else:
+        K = _tables_for(params)
+        _LOCAL.last = (params, K)
+    ov = options.__dict__.get("_disturbed_vector")
+    if ov is None:
+        ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
+                       options.bisection_tol, float(options.max_events), options.diverge_error])
+        ov.flags.writeable = False
+        object.__setattr__(options, "_disturbed_vector", ov)
+    return (ov, *K)
+
+
+def _tables_for(params) -> tuple:
+    """This thread's (recs, rds, FB, IB) for ``params`` (kernel_inputs)."""
     memo = getattr(_LOCAL, "memo", None)
     if memo is None:
         memo = _LOCAL.memo = {}
@@ -1131,10 +1148,4 @@ def kernel_inputs(params, options) -> tuple:
                 IB[o:o + n] = -2                # conditional laws not computed
             o += n
         K = memo[params] = (recs, rds, FB, IB)
-    ov = options.__dict__.get("_disturbed_vector")
-    if ov is None:
-        ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
-                       options.bisection_tol, float(options.max_events), options.diverge_error])
-        ov.flags.writeable = False
-        object.__setattr__(options, "_disturbed_vector", ov)
-    return (ov, *K)
+    return K
