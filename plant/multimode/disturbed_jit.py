@@ -826,13 +826,20 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
 
 @njit(cache=True, inline="always")
 def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
-    """The sub-step's tail from Y to Yb over w: integrals, peak, x3's closed form, the event."""
-    x3, u = Y[Y3], Y[YU]
-    _torque(S, x3, u, w, bridge, dp)
+    """The sub-step's tail from Y to Yb over w: peak, then :func:`_finish_rest`."""
     if mode != 2:
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
+    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+
+
+@njit(cache=True, inline="always")
+def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+    """Integrals, x3's closed form, the event (the peak is the caller's: a moving one needs
+    hermite_peak, which allocates)."""
+    x3, u = Y[Y3], Y[YU]
+    _torque(S, x3, u, w, bridge, dp)
     for i in range(_N):
         Y[i] = Yb[i]
     Y[Y3] = u + (x3 - u) * math.exp(-w / dp[_TAU3])
@@ -893,8 +900,10 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
     (or none), the same operations in the same order. Compiled without numba's reference counting
     (it allocates nothing), which otherwise costs tens of atomic increments per sub-step.
     Returns −1 before changing anything when it does not apply (the caller runs _segment), 0 or 1
-    (the sub-step done; 1: stop), 2 when a crossing was drawn: Yb holds the end, e the barrier and
-    hold[0:3] = (w, v, c0) for :func:`_crossed_tail`."""
+    (the sub-step done; 1: stop), 2 when a crossing was drawn (Yb holds the end, e the barrier,
+    hold[0:3] = (w, v, c0)), 3 for a moving sub-step without one (Yb, hold[0] = w): :func:`_tail`
+    finishes those. Every function it calls must allocate nothing (numba compiles them without
+    reference counting too, and refuses an allocation)."""
     breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
     if breaks:
         return 1 if _breakaway(Y, S, g, ov, ev) else 0
@@ -916,28 +925,31 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
     if _tick(S, 1.0, ov):
         return 1
     crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
-    if crossed:
+    if crossed or mode != 2:            # the bisection, or a moving peak (hermite_peak allocates)
         hold[0], hold[1], hold[2] = w, v, c0
-        return 2
-    return 1 if _finish(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
+        return 2 if crossed else 3
+    S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))          # _finish's stuck branch
+    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
 
 
 @njit(cache=True)
-def _crossed_tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold):
-    """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing: the bisection and
-    :func:`_finish` (mode, direction, room and flyback end recomputed from the unchanged Y, S)."""
+def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed):
+    """The rest of a sub-step :func:`_fast_segment` left (code 2: a drawn crossing, bisected here;
+    3: a moving sub-step without one) — :func:`_finish`, with the mode, direction, room and flyback
+    end recomputed from the unchanged Y and S."""
     mode = int(S[_MODE])
     dirn = 0.0 if mode == 2 else (1.0 if mode == 3 else -1.0)
     room = t_end - S[_T]
     h_fb = math.inf if S[_FB] == 0.0 else dp[_TAU3] * math.log1p(abs(Y[Y3]) / dp[_UMAX])
     sig2 = sig_d2 if mode == 2 else (dp[_SIG2MOV] if noisy else 0.0)
     w, v, c0 = hold[0], int(hold[1]), hold[2]
-    w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
-    for i in range(_N):
-        Yb[i] = Yc[i]
-    if S[_STATUS] != _OK:
-        return True
-    return _finish(Y, S, Yb, w, True, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    if crossed:
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        for i in range(_N):
+            Yb[i] = Yc[i]
+        if S[_STATUS] != _OK:
+            return True
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
 
 
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
@@ -1057,9 +1069,9 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
             if r == -1:
                 stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
                                 e, lad)
-            elif r == 2:
-                stop = _crossed_tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB,
-                                     Yb, Yc, e, hold)
+            elif r >= 2:
+                stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
+                             hold, r == 2)
             else:
                 stop = r == 1
             if stop or S[_STATUS] != _OK:
