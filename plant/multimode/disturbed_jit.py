@@ -901,8 +901,7 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
     (it allocates nothing), which otherwise costs tens of atomic increments per sub-step.
     Returns −1 before changing anything when it does not apply (the caller runs _segment), 0 or 1
     (the sub-step done; 1: stop), 2 when a crossing was drawn (Yb holds the end, e the barrier,
-    hold[0:3] = (w, v, c0)), 3 for a moving sub-step without one (Yb, hold[0] = w): :func:`_tail`
-    finishes those. Every function it calls must allocate nothing (numba compiles them without
+    hold[0:3] = (w, v, c0)): :func:`_tail` bisects and finishes it. Every function it calls must allocate nothing (numba compiles them without
     reference counting too, and refuses an allocation)."""
     breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
     if breaks:
@@ -925,18 +924,65 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
     if _tick(S, 1.0, ov):
         return 1
     crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
-    if crossed or mode != 2:            # the bisection, or a moving peak (hermite_peak allocates)
+    if crossed:
         hold[0], hold[1], hold[2] = w, v, c0
-        return 2 if crossed else 3
-    S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))          # _finish's stuck branch
+        return 2
+    if mode != 2:
+        S[_PEAK] = _substep_peak(Y, Yb, w, S[_PEAK])
+    else:
+        S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
     return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
 
 
 @njit(cache=True)
+def _hermite_peak(h, ya, da, yb, db):
+    """plant.multimode.segments.hermite_peak with its two roots in scalars instead of an array
+    (the same operations; no allocation, for _fast_segment)."""
+    if h <= 0:
+        return 0.0
+    c2 = 3 * (yb - ya) - (2 * da + db) * h
+    c3 = -2 * (yb - ya) + (da + db) * h
+    A, B, C = 3 * c3, 2 * c2, da * h
+    best = 0.0
+    r0 = r1 = 0.0
+    nr = 0
+    if A == 0.0:
+        if B != 0.0:
+            r0 = -C / B
+            nr = 1
+    else:
+        disc = B * B - 4 * A * C
+        if disc >= 0:
+            sq = math.sqrt(disc)
+            q = -0.5 * (B + math.copysign(sq, B))
+            if q != 0.0:
+                r0, r1 = q / A, C / q
+                nr = 2
+    for i in range(nr):
+        s = r0 if i == 0 else r1
+        if 0.0 < s < 1.0:
+            v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
+            if v > best:
+                best = v
+    return best
+
+
+@njit(cache=True)
+def _substep_peak(Xa, Xb, h, peak):
+    """plant.multimode.moving.substep_peak on this plant's Y (x1, x2, x4 at the same positions)
+    through :func:`_hermite_peak`."""
+    pk = max(peak, abs(Xa[Y1]), abs(Xb[Y1]))
+    da, db = Xa[Y2] - Xa[Y4], Xb[Y2] - Xb[Y4]
+    if da * db < 0:
+        pk = max(pk, _hermite_peak(h, Xa[Y1], da, Xb[Y1], db))
+    return pk
+
+
+@njit(cache=True)
 def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed):
-    """The rest of a sub-step :func:`_fast_segment` left (code 2: a drawn crossing, bisected here;
-    3: a moving sub-step without one) — :func:`_finish`, with the mode, direction, room and flyback
-    end recomputed from the unchanged Y and S."""
+    """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing (``crossed``): the
+    bisection and :func:`_finish`, with the mode, direction, room and flyback end recomputed from
+    the unchanged Y and S."""
     mode = int(S[_MODE])
     dirn = 0.0 if mode == 2 else (1.0 if mode == 3 else -1.0)
     room = t_end - S[_T]
@@ -1069,7 +1115,7 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
             if r == -1:
                 stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
                                 e, lad)
-            elif r >= 2:
+            elif r == 2:
                 stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
                              hold, r == 2)
             else:
