@@ -21,11 +21,13 @@ miss the goal are marked xfail with the reason (the assertion stays the goal):
   cell's CPU), the common sub-step runs in a function compiled without reference counting
   (``_fast_segment``), and the transition cache hashes all mantissa bits (interval-end widths had
   evicted the ladder's: 6707 misses per linear cell, now ~350). Bit-identical. One run, all
-  pairs in one process, per 100 s cell: linear 0.024 s against 0.008 s (3.1×, was 12.5× in the
-  same morning's run), pulse-width 0.195 against 0.104 s (1.9×, was 2.4×), solnic-modern 1.02×
-  (was 0.71×; noise), dithered in the module's docs/plant.md table. linear and pulse-width
-  still miss: ~8 (linear) and ~20 (pulse-width) exact sub-steps per sample, and pulse-width's
-  per-sample Python wrapper (~11 µs per interval against the kernel's ~3 µs).
+  pairs in one process (08:00), per 100 s cell: linear 0.023 s against 0.007 s (3.2×, was 12.5×
+  in the same morning's run), pulse-width 0.165 against 0.098 s (1.7×, was 2.4×), solnic-modern
+  0.99× (was 0.71×; noise), dithered 2.1 against 0.40 s (5.3×, was 8.3×); quantized 1.10 /
+  0.98 / 1.02×, delayed 1.48 / 1.00 / 1.45× (linear / solnic-modern / pulse-width). linear,
+  pulse-width and dithered still miss: ~8 (linear) and ~20 (pulse-width) exact sub-steps per
+  sample, and pulse-width's per-sample Python wrapper (~11 µs per interval against the
+  kernel's ~3 µs); see docs/plant.md.
 
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
