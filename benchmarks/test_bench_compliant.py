@@ -4,7 +4,11 @@ Goal (issue #22): the compliant plant costs at most 3× the thesis plant's CPU p
 linear, solnic-modern and pulse-width, measured in the same run (seed 0; compiled code warmed
 first by a 1 s cell of each, so the ratio is of simulation, not of compilation). ``make benchmark``
 runs it (skipped under ``--benchmark-disable``); measured 2.49-2.55 (linear), 1.10-1.12 (solnic-modern),
-2.41-2.50 (pulse-width) on the shared 2-core machine (two runs).
+2.41-2.50 (pulse-width) on the shared 2-core machine (two runs); 2026-11-27 08:00, in one process
+with the other issue-22 scenarios: 2.63, 1.18, 2.38. Where the time goes (linear, gdb stack
+samples): the stuck load's shaft-torque exit search (two_mass.interval._stuck, _torque_exit,
+modes.first_exit) and ~40 % numba reference counting and allocation, the cost cut from the
+disturbed multimode kernel (docs/plant.md); not changed here.
 """
 
 

@@ -16,6 +16,19 @@ miss the goal are marked xfail with the reason (the assertion stays the goal):
   measured 0.99–1.6× over three runs (loaded machine, 2026-11-27 04:30–05:15 UTC; quantized
   1.2–1.4×): at the goal, within the noise, so left marked.
 
+* ``disturbed`` again (2026-11-27 07:58, helper distfast): the sub-step no longer cuts array views
+  or passes the tuple of twenty cache tables (numba's atomic reference counts were ~⅓ of the
+  cell's CPU), the common sub-step runs in a function compiled without reference counting
+  (``_fast_segment``), and the transition cache hashes all mantissa bits (interval-end widths had
+  evicted the ladder's: 6707 misses per linear cell, now ~350). Bit-identical. One run, all
+  pairs in one process (08:00), per 100 s cell: linear 0.023 s against 0.007 s (3.2×, was 12.5×
+  in the same morning's run), pulse-width 0.165 against 0.098 s (1.7×, was 2.4×), solnic-modern
+  0.99× (was 0.71×; noise), dithered 2.1 against 0.40 s (5.3×, was 8.3×); quantized 1.10 /
+  0.98 / 1.02×, delayed 1.48 / 1.00 / 1.45× (linear / solnic-modern / pulse-width). linear,
+  pulse-width and dithered still miss: ~8 (linear) and ~20 (pulse-width) exact sub-steps per
+  sample, and pulse-width's per-sample Python wrapper (~11 µs per interval against the
+  kernel's ~3 µs); see docs/plant.md.
+
 Measured on the shared, heavily loaded 2-core machine (one run): quantized/thesis linear 10.5,
 solnic-modern 0.88, pulse-width 1.02; delayed/thesis linear 13.5, solnic-modern 0.99, pulse-width
 1.39. ``disturbed``/thesis, CPU per 100 s cell, one process, 2026-11-27 (loaded machine):

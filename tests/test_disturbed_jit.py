@@ -179,3 +179,18 @@ def test_kernel_matrix_vector_product_is_numpys_bit_for_bit():
                 assert np.array_equal(out, A @ x), n
             else:
                 assert np.all(np.abs(out - A @ x) <= 1e-13 * (np.abs(A) @ np.abs(x))), n
+
+
+def test_transition_cache_slots_separate_widths_that_differ_in_low_bits():
+    """An interval's last sub-step has width t_end − t, which differs from a ladder width only in
+    mantissa bits below ulp(t) (whose own last bits are zeros). Hashing only the top 30 mantissa
+    bits put all such widths in one slot, where they evicted each other. 64 such widths next to
+    0.4 ms (t near 50 s) and the 12 ladder widths must spread over the 1024 slots as random keys
+    would (the expected number of distinct slots for 76 random keys is ~73)."""
+    ulp = np.spacing(50.0)
+    widths = [4e-4 + k * ulp for k in range(1, 65)] + [1e-4 * 2.0 ** j for j in range(12)]
+    slots = {disturbed_jit._slot(2, w, disturbed_jit._NT_BITS) for w in widths}
+    assert all(0 <= k < disturbed_jit._NT for k in slots)
+    assert len(slots) >= 66
+    # the mode is part of the key: the same width in the three modes
+    assert len({disturbed_jit._slot(m, 4e-4, disturbed_jit._NT_BITS) for m in (1, 2, 3)}) == 3

@@ -38,10 +38,10 @@ from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.segments import torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
-from plant.randomness import NoiseExhausted, normal, uniform
+from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
 
-__all__ = ["interval_kernel", "kernel_inputs", "SHEET_SIZE"]
+__all__ = ["interval_kernel", "interval_k", "kernel_inputs", "SHEET_SIZE", "WORK_SIZE"]
 
 Y1, Y2, Y3, Y4, Y5, YD, YKC, YU = range(8)
 _N = 8
@@ -66,8 +66,10 @@ SHEET_STATUS, STATUS_OK = _STATUS, _OK
 _LEVEL, _FLYBACK_END, _BREAKAWAY, _REGIME_END, _STICK, _REVERSAL, _REFLECTION = (int(k) for k in EventKind)
 _TOP = 2.0 ** (LADDER - 1)
 
-_NT = 1024          # transition cache slots
-_NB = 256           # bridge-law cache slots
+_NT_BITS, _NB_BITS = 10, 8
+_NT = 1 << _NT_BITS         # transition cache slots
+_NB = 1 << _NB_BITS         # bridge-law cache slots
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)     # 2^64 / golden ratio, odd (_slot)
 
 # LAPACK dpotrf and BLAS dsyrk of scipy, called through their addresses passed in at run time
 # (an address baked into the code would stop numba from caching the compiled kernel)
@@ -311,16 +313,22 @@ def _noise_factor(Q, rows, Bflat, fa):
 # --- the caches --------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _slot(mode, w, size):
+def _slot(mode, w, bits):
+    """The slot of (mode, w) in a table of 2**bits: Fibonacci hashing (Knuth, TAOCP 3, 6.4) of
+    all 53 mantissa bits, the exponent and the mode, top bits kept. The widths that end an
+    interval (t_end − t) differ from the ladder's only in low mantissa bits whose last ones are
+    zeros; a hash of the top 30 bits put them in one slot, and they evicted each other (6700
+    misses per 100 s linear cell, against 338 distinct widths)."""
     fr, ex = math.frexp(w)
-    key = int(fr * 1073741824.0) * 31 + ex * 7 + mode
-    return key % size
+    key = (np.uint64(int(fr * 9007199254740992.0)) + (np.uint64(ex & 1023) << np.uint64(53))
+           + np.uint64(mode << 1))
+    return int((key * _GOLDEN) >> np.uint64(64 - bits))
 
 
 @njit(cache=True, inline="always")
 def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
     """Slot of (mode, w) in the transition cache, computed on a miss."""
-    k = _slot(mode, w, TK.shape[0])
+    k = _slot(mode, w, _NT_BITS)
     if TK[k, 0] == mode and TK[k, 1] == w:
         return k
     _closed_form(mode, w, rec, rd, dp, TPHI[k], TQ[k])
@@ -332,7 +340,7 @@ def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
 @njit(cache=True)
 def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN):
     """Slot of (mode, w) in the bridge cache: disturbed._bridge_law (Matheron's rule)."""
-    k = _slot(mode, w, BK.shape[0])
+    k = _slot(mode, w, _NB_BITS)
     if BK[k, 0] == mode and BK[k, 1] == w:
         return k
     kf = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
@@ -481,7 +489,7 @@ def _event(S, Y, kind, ov, ev):
     return _tick(S, 1.0, ov)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _torque(S, x3, u, h, bridge, dp):
     if h <= 0.0:
         return
@@ -537,13 +545,12 @@ def _moving_far(w, v0, slope, curv, a, s2, sd2, s5, w3):
 
 
 @njit(cache=True)
-def _far(kind, w, c, lad, j):
-    """far(w) of the stuck (kind 0) or moving rule; rung j of the ladder table, or j < 0: w itself."""
+def _far(kind, w, c0, c1, c2, c3, c4, c5, c6, w3, decay):
+    """far(w) of the stuck (kind 0) or moving rule, the rung's w**3 and exp(−w/τ3) given (scalars
+    only: an array argument costs an atomic reference-count pair per call)."""
     if kind == 0:
-        decay = lad[1 + LADDER + j] if j >= 0 else math.exp(-w / c[5])
-        return _stuck_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], decay)
-    w3 = lad[1 + j] if j >= 0 else math.pow(w, 3.0)
-    return _moving_far(w, c[0], c[1], c[2], c[3], c[4], c[5], c[6], w3)
+        return _stuck_far(w, c0, c1, c2, c3, c4, c5, c6, decay)
+    return _moving_far(w, c0, c1, c2, c3, c4, c5, c6, w3)
 
 
 @njit(cache=True)
@@ -563,14 +570,20 @@ def _ladder_table(lad, sub, tau3):
 
 
 @njit(cache=True)
-def _ladder_width(room, sub, kind, c, lad):
-    """disturbed._ladder_width: (width, far)."""
+def _ladder_width(room, sub, kind, c0, c1, c2, c3, c4, c5, c6, lad):
+    """disturbed._ladder_width: (width, far); (c0, …, c6) the rule's w-free terms (_stuck_far's
+    ks, |x3|, |d|, u, x3 − u, τ3, σ² or _moving_far's), rung j's w**3 and exp(−w/τ3) from ``lad``."""
     w = sub * _TOP
-    if sub < room <= w and _far(kind, room, c, lad, -1):
-        return room, True
+    if sub < room <= w:
+        if kind == 0:
+            far = _far(kind, room, c0, c1, c2, c3, c4, c5, c6, 0.0, math.exp(-room / c5))
+        else:
+            far = _far(kind, room, c0, c1, c2, c3, c4, c5, c6, math.pow(room, 3.0), 0.0)
+        if far:
+            return room, True
     j = 0
     while w > sub:
-        if w <= room and _far(kind, w, c, lad, j):
+        if w <= room and _far(kind, w, c0, c1, c2, c3, c4, c5, c6, lad[1 + j], lad[1 + LADDER + j]):
             return w, True
         w /= 2.0
         j += 1
@@ -662,9 +675,75 @@ def _velocity_zero(Y, S, dirn, dp, ov, ev):
 
 
 @njit(cache=True, inline="always")
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad):
-    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop."""
-    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM = C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9]
+def _take(z, cursor, n):
+    """The read position of the next ``n`` unit normals of ``z`` (advances ``cursor``; _normals
+    without the slice)."""
+    i = cursor[0]
+    if i + n > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[0] = i + n
+    return i
+
+
+@njit(cache=True, inline="always")
+def _gemv_flat(F, off, m, x, xoff, out):
+    """out[:m] = A @ x[xoff:xoff + m] for the C-ordered m × m matrix A = F[off:off + m·m]
+    (m in 1–5 or 8): :func:`_gemv`'s arithmetic, operation for operation, on flat indices (no
+    array views: each view costs an atomic reference-count pair in the sub-step loop)."""
+    m1 = m - (m & 3)
+    r = m - m1
+    for i in range(m):
+        row = off + i * m
+        y = 0.0
+        if m1 > 0:
+            a0 = a1 = a2 = a3 = 0.0
+            for k in range(0, m1, 4):
+                a0 = _fma(F[row + k], x[xoff + k], a0)
+                a1 = _fma(F[row + k + 1], x[xoff + k + 1], a1)
+                a2 = _fma(F[row + k + 2], x[xoff + k + 2], a2)
+                a3 = _fma(F[row + k + 3], x[xoff + k + 3], a3)
+            y = (a0 + a2) + (a1 + a3)
+        if r == 1:
+            y = _fma(F[row + m1], x[xoff + m1], y)
+        elif r == 2:
+            y = y + _fma(F[row + m1], x[xoff + m1], F[row + m1 + 1] * x[xoff + m1 + 1])
+        elif r == 3:
+            y = y + _fma(F[row + m1 + 2], x[xoff + m1 + 2],
+                         _fma(F[row + m1], x[xoff + m1], F[row + m1 + 1] * x[xoff + m1 + 1]))
+        out[i] = y
+
+
+@njit(cache=True)
+def _trans_miss(mode, w, recs, rds, FB, IB):
+    """_trans on the table views (a cache miss: the views are cut only here)."""
+    C = _views(recs, rds, FB, IB)
+    return _trans(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9])
+
+
+@njit(cache=True)
+def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
+    """Yb[rows] += factor · (m unit normals) for transition slot k (m = TM[k] ≠ 0)."""
+    if m > 0 and (m <= 5 or m == 8):
+        pos = _take(z, cursor, m)
+        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
+        add = Yc
+    elif m > 0:
+        add = np.empty(m)
+        B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
+        _gemv(B, _normals(z, cursor, m), add)
+    else:                                           # the eigen-factor, stored transposed
+        m = -m
+        B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
+        add = np.dot(B.T, _normals(z, cursor, m))
+    for i in range(m):
+        Yb[IB[_OFF_TROWS + k * _N + i]] += add[i]
+
+
+@njit(cache=True, inline="always")
+def _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad):
+    """The sub-step's head (disturbed._segment up to the width): (breaks, g, mode, dirn, room,
+    h_fb, ks, sig2, w, far, rungs, just). ``breaks``: a stuck shaft at (or past) stiction, g its
+    x3 + d. Nothing is drawn; Y[YKC] is set (idempotent), the just-broke flag only read."""
     mode = int(S[_MODE])
     room = t_end - S[_T]
     x2, x3, x5, d, u = Y[Y2], Y[Y3], Y[Y5], Y[YD], Y[YU]
@@ -673,15 +752,16 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
     room_fb = min(room, h_fb)
     ks = max(dp[_KS] + x5, 0.0)
     sub = ov[_O_SUB]
+    g = 0.0
+    just = False
     if mode == 2:
         dirn = 0.0
         g = x3 + d
         if abs(g) > ks:
-            return _breakaway(Y, S, g, ov, ev)
+            return True, g, mode, dirn, room, h_fb, ks, 0.0, 0.0, False, False, just
         sig2 = sig_d2
         if ks - abs(x3) - abs(d) > 0.0:
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6] = ks, abs(x3), abs(d), u, x3 - u, tau3, sig2
-            w, far = _ladder_width(room_fb, sub, 0, c, lad)
+            w, far = _ladder_width(room_fb, sub, 0, ks, abs(x3), abs(d), u, x3 - u, tau3, sig2, lad)
         else:
             w, far = min(sub, room_fb), False
         rungs = False
@@ -693,34 +773,24 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
         sig2 = dp[_SIG2MOV] if noisy else 0.0
         if S[_JUST] != 0.0:
             reflecting = True
-            S[_JUST] = 0.0
+            just = True
         if dirn * x2 > 0.0:
             a = dp[_ALPHA]
-            c[0] = dirn * x2
-            c[1] = dirn * a * (x3 + d) - a * (kc + x5)
-            c[2] = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
-            c[3], c[4], c[5], c[6] = a, dp[_S2], dp[_SD2], dp[_S5]
-            w, far = _ladder_width(room_fb, sub, 1, c, lad)
+            slope = dirn * a * (x3 + d) - a * (kc + x5)
+            curv = a * (abs(u - x3) / tau3 + abs(d) / dp[_TAUD] + abs(x5) / dp[_TAU5])
+            w, far = _ladder_width(room_fb, sub, 1, dirn * x2, slope, curv, a, dp[_S2], dp[_SD2], dp[_S5], lad)
         else:
             w, far = min(sub, room_fb), False
         if reflecting and not far:
             w = min(ov[_O_RSUB], room_fb)
         rungs = reflecting and not far
-    k = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
-    _gemv(TPHI[k], Y, Yb)
-    m = TM[k]
-    if noisy and m:
-        if m > 0:
-            add = Yc[:m]
-            _gemv(TB[k, :m * m].reshape((m, m)), _normals(z, cursor, m), add)
-        else:                                       # the eigen-factor, stored transposed
-            m = -m
-            add = np.dot(TB[k, :m * m].reshape((m, m)).T, _normals(z, cursor, m))
-        for i in range(m):
-            Yb[TROWS[k, i]] += add[i]
-    S[_NSUB] += 1.0
-    if _tick(S, 1.0, ov):
-        return True
+    return False, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just
+
+
+@njit(cache=True, inline="always")
+def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
+    """After the Gaussian step Y → Yb: the Skorokhod push of a reflected sub-step, else the
+    crossing test (e, c0: the barrier functional; v: its variant). Returns (crossed, v, c0)."""
     crossed = False
     for i in range(_N):
         e[i] = 0.0
@@ -748,20 +818,31 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
         else:
             e[Y2] = dirn
             prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
-        if prob >= 1.0 or (prob > 0.0 and not far and uniform(z, cursor) < prob):
+        # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
+        if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True
-    if crossed:
-        w = _bisect(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, C, Yc)
-        Yb[:] = Yc
-        if S[_STATUS] != _OK:
-            return True
-    _torque(S, x3, u, w, bridge, dp)
+    return crossed, v, c0
+
+
+@njit(cache=True, inline="always")
+def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+    """The sub-step's tail from Y to Yb over w: peak, then :func:`_finish_rest`."""
     if mode != 2:
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    Y[:] = Yb
-    Y[Y3] = u + (x3 - u) * math.exp(-w / tau3)
+    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+
+
+@njit(cache=True, inline="always")
+def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+    """Integrals, x3's closed form, the event (the peak is the caller's: a moving one needs
+    hermite_peak, which allocates)."""
+    x3, u = Y[Y3], Y[YU]
+    _torque(S, x3, u, w, bridge, dp)
+    for i in range(_N):
+        Y[i] = Yb[i]
+    Y[Y3] = u + (x3 - u) * math.exp(-w / dp[_TAU3])
     S[_T] += w
     if crossed:
         if mode == 2:
@@ -777,6 +858,146 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc
     return False
 
 
+@njit(cache=True, inline="always")
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
+    """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
+    The general path (cache misses, every noise factor, the bisection); :func:`_fast_segment`
+    takes the common sub-steps."""
+    breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
+    if breaks:
+        return _breakaway(Y, S, g, ov, ev)
+    if just:
+        S[_JUST] = 0.0
+    k = _slot(mode, w, _NT_BITS)
+    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
+        k = _trans_miss(mode, w, recs, rds, FB, IB)
+    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
+    m = IB[_OFF_TM + k]
+    if noisy and m:
+        _noise_add(k, m, z, cursor, FB, IB, Yb, Yc)
+    S[_NSUB] += 1.0
+    if _tick(S, 1.0, ov):
+        return True
+    crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
+    if crossed:
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        for i in range(_N):
+            Yb[i] = Yc[i]
+        if S[_STATUS] != _OK:
+            return True
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+
+
+@njit(cache=True)
+def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+    """_bisect on the table views (cut here: the sub-step holds no reference to them)."""
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), out)
+
+
+@njit(cache=True, _nrt=False)
+def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad, hold):
+    """:func:`_segment` for a sub-step whose transition is cached with a Cholesky noise factor
+    (or none), the same operations in the same order. Compiled without numba's reference counting
+    (it allocates nothing), which otherwise costs tens of atomic increments per sub-step.
+    Returns −1 before changing anything when it does not apply (the caller runs _segment), 0 or 1
+    (the sub-step done; 1: stop), 2 when a crossing was drawn (Yb holds the end, e the barrier,
+    hold[0:3] = (w, v, c0)): :func:`_tail` bisects and finishes it. Every function it calls must allocate nothing (numba compiles them without
+    reference counting too, and refuses an allocation)."""
+    breaks, g, mode, dirn, room, h_fb, ks, sig2, w, far, rungs, just = _width(Y, S, t_end, noisy, sig_d2, ov, dp, lad)
+    if breaks:
+        return 1 if _breakaway(Y, S, g, ov, ev) else 0
+    k = _slot(mode, w, _NT_BITS)
+    if not (FB[_OFF_TK + 2 * k] == mode and FB[_OFF_TK + 2 * k + 1] == w):
+        return -1
+    m = IB[_OFF_TM + k]
+    if noisy and m != 0 and not (m > 0 and (m <= 5 or m == 8)):
+        return -1
+    if just:
+        S[_JUST] = 0.0
+    _gemv_flat(FB, _OFF_TPHI + k * 64, _N, Y, 0, Yb)
+    if noisy and m:
+        pos = _take(z, cursor, m)
+        _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
+        for i in range(m):
+            Yb[IB[_OFF_TROWS + k * _N + i]] += Yc[i]
+    S[_NSUB] += 1.0
+    if _tick(S, 1.0, ov):
+        return 1
+    crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
+    if crossed:
+        hold[0], hold[1], hold[2] = w, v, c0
+        return 2
+    if mode != 2:
+        S[_PEAK] = _substep_peak(Y, Yb, w, S[_PEAK])
+    else:
+        S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
+    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
+
+
+@njit(cache=True)
+def _hermite_peak(h, ya, da, yb, db):
+    """plant.multimode.segments.hermite_peak with its two roots in scalars instead of an array
+    (the same operations; no allocation, for _fast_segment)."""
+    if h <= 0:
+        return 0.0
+    c2 = 3 * (yb - ya) - (2 * da + db) * h
+    c3 = -2 * (yb - ya) + (da + db) * h
+    A, B, C = 3 * c3, 2 * c2, da * h
+    best = 0.0
+    r0 = r1 = 0.0
+    nr = 0
+    if A == 0.0:
+        if B != 0.0:
+            r0 = -C / B
+            nr = 1
+    else:
+        disc = B * B - 4 * A * C
+        if disc >= 0:
+            sq = math.sqrt(disc)
+            q = -0.5 * (B + math.copysign(sq, B))
+            if q != 0.0:
+                r0, r1 = q / A, C / q
+                nr = 2
+    for i in range(nr):
+        s = r0 if i == 0 else r1
+        if 0.0 < s < 1.0:
+            v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
+            if v > best:
+                best = v
+    return best
+
+
+@njit(cache=True)
+def _substep_peak(Xa, Xb, h, peak):
+    """plant.multimode.moving.substep_peak on this plant's Y (x1, x2, x4 at the same positions)
+    through :func:`_hermite_peak`."""
+    pk = max(peak, abs(Xa[Y1]), abs(Xb[Y1]))
+    da, db = Xa[Y2] - Xa[Y4], Xb[Y2] - Xb[Y4]
+    if da * db < 0:
+        pk = max(pk, _hermite_peak(h, Xa[Y1], da, Xb[Y1], db))
+    return pk
+
+
+@njit(cache=True)
+def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed):
+    """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing (``crossed``): the
+    bisection and :func:`_finish`, with the mode, direction, room and flyback end recomputed from
+    the unchanged Y and S."""
+    mode = int(S[_MODE])
+    dirn = 0.0 if mode == 2 else (1.0 if mode == 3 else -1.0)
+    room = t_end - S[_T]
+    h_fb = math.inf if S[_FB] == 0.0 else dp[_TAU3] * math.log1p(abs(Y[Y3]) / dp[_UMAX])
+    sig2 = sig_d2 if mode == 2 else (dp[_SIG2MOV] if noisy else 0.0)
+    w, v, c0 = hold[0], int(hold[1]), hold[2]
+    if crossed:
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        for i in range(_N):
+            Yb[i] = Yc[i]
+        if S[_STATUS] != _OK:
+            return True
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+
+
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
 # numba's argument typing per call); _views cuts them into the named tables.
 _DP_LEN = 15
@@ -787,6 +1008,19 @@ _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 
 _LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
 _SIZE_F = sum(n for _, n in _LAYOUT_F)
 _SIZE_I = sum(n for _, n in _LAYOUT_I)
+
+
+def _offsets(layout):
+    out, o = {}, 0
+    for name, n in layout:
+        out[name] = o
+        o += n
+    return out
+
+
+_OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
+_OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
+_OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
 
 
 @njit(cache=True)
@@ -836,27 +1070,37 @@ def _views(recs, rds, FB, IB):
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out):
     """disturbed.advance over [t0, t0 + duration): ``out[:7]`` the new state, ``out[7:]`` the work
     sheet; returns the new read position in ``z`` (from ``zpos``). (recs, rds, FB, IB): kernel_inputs()."""
-    C = _views(recs, rds, FB, IB)
-    dp = C[2]
+    return interval_k(x, mode, flyback, t0, duration, offsets, levels, offsets.shape[0], bridge, ov, recs, rds, FB, IB,
+                      z, zpos, ev, out, np.empty(WORK_SIZE), np.empty(1, np.int64))
+
+
+WORK_SIZE = 4 * _N + 3
+
+
+@njit(cache=True)
+def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out,
+               work, cursor):
+    """:func:`interval_kernel` with the drive's first ``k`` segments of ``offsets``, ``levels``
+    and the scratch ``work`` (WORK_SIZE floats) and ``cursor`` (one int64) of a compiled caller
+    (nothing copied or allocated per interval)."""
+    dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
     S = out[7:]
     for i in range(SHEET_SIZE):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    cursor = np.empty(1, np.int64)
     cursor[0] = zpos
-    Y = np.empty(_N)
+    Y = work[:_N]
     Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5] = x[0], x[1], x[2], x[3], x[4]
     Y[YD] = x[6] if x.shape[0] > 6 else 0.0
     Y[YKC], Y[YU] = dp[_KC], x[5]
-    c = np.empty(7)
-    Yb = np.empty(_N)
-    Yc = np.empty(_N)
-    e = np.zeros(_N)
+    Yb = work[_N:2 * _N]
+    Yc = work[2 * _N:3 * _N]
+    e = work[3 * _N:4 * _N]                         # set by each sub-step before use
+    hold = work[4 * _N:4 * _N + 3]
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
-    k = offsets.shape[0]
     stop = False
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
@@ -866,7 +1110,16 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
         if seg > 0 and _event(S, Y, _LEVEL, ov, ev):
             break
         while S[_T] < t_seg_end:
-            stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, C, c, Yb, Yc, e, lad)
+            r = _fast_segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad,
+                              hold)
+            if r == -1:
+                stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
+                                e, lad)
+            elif r == 2:
+                stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
+                             hold, r == 2)
+            else:
+                stop = r == 1
             if stop or S[_STATUS] != _OK:
                 stop = True
                 break
@@ -908,6 +1161,23 @@ def kernel_inputs(params, options) -> tuple:
     """(options vector, recs, rds, FB, IB): interval_kernel's inputs after ``levels, bridge``. FB and
     IB hold the constants and this thread's cache tables for ``params`` (filled on use; a pure
     function of the parameters, so sharing them cannot change a result)."""
+    last = getattr(_LOCAL, "last", None)
+    if last is not None and last[0] is params:      # the same object as the last call: no hashing
+        K = last[1]
+    else:
+        K = _tables_for(params)
+        _LOCAL.last = (params, K)
+    ov = options.__dict__.get("_disturbed_vector")
+    if ov is None:
+        ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
+                       options.bisection_tol, float(options.max_events), options.diverge_error])
+        ov.flags.writeable = False
+        object.__setattr__(options, "_disturbed_vector", ov)
+    return (ov, *K)
+
+
+def _tables_for(params) -> tuple:
+    """This thread's (recs, rds, FB, IB) for ``params`` (kernel_inputs)."""
     memo = getattr(_LOCAL, "memo", None)
     if memo is None:
         memo = _LOCAL.memo = {}
@@ -936,10 +1206,4 @@ def kernel_inputs(params, options) -> tuple:
                 IB[o:o + n] = -2                # conditional laws not computed
             o += n
         K = memo[params] = (recs, rds, FB, IB)
-    ov = options.__dict__.get("_disturbed_vector")
-    if ov is None:
-        ov = np.array([1.0 if options.noise else 0.0, options.substep, options.reflect_substep,
-                       options.bisection_tol, float(options.max_events), options.diverge_error])
-        ov.flags.writeable = False
-        object.__setattr__(options, "_disturbed_vector", ov)
-    return (ov, *K)
+    return K

@@ -41,6 +41,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
     n_max = int(2.0 * freq * tau) + 4 if amp != 0.0 else 1
     offs = np.empty(n_max)
     levs = np.empty(n_max)
+    work = np.empty(disturbed_jit.WORK_SIZE)
+    cursor = np.empty(1, np.int64)
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
@@ -50,9 +52,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
         v = compensator_step(A, B, C, D, cx, cxn, y)
         level = min(max(-v, -u_max), u_max)
         k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
-        pos = disturbed_jit.interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
-                                            levs[:k].copy(), bridge, ov, recs, rds, FB, IB, z, zpos, ev,
-                                            out)
+        pos = disturbed_jit.interval_k(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs, levs, k, bridge,
+                                       ov, recs, rds, FB, IB, z, zpos, ev, out, work, cursor)
         S = out[N_X:]
         if n >= n_warm:
             x1_window[n - n_warm] = x1
