@@ -29,11 +29,12 @@ crossing, the first half chosen in proportion to its own) down to ``bisection_to
   ``reflect_substep`` rather than in closed form (d is random).
 
 With ``disturbance_torque_std`` = 0 the family runs :func:`plant.multimode.interval.advance`
-itself, bit for bit. This path is plain Python over numpy (no compiled loop yet); its cost is
-cut by caching what depends only on (mode, h) or (mode, h, e) — Φ, Q and their factors, the
-bridge law, and the bisection's conditional law given c — and by scalar arithmetic on Python
-floats (the same doubles) in the sub-step's tests; every numpy product is kept as it was, so
-the bits are those of the first version.
+itself, bit for bit. This module is the Python reference (``advance_python``), kept as it was:
+it caches what depends only on (mode, h) or (mode, h, e) — Φ, Q and their factors, the bridge
+law, and the bisection's conditional law given c — and does the sub-step's tests in scalar
+arithmetic on Python floats (the same doubles). The same law runs compiled in
+:mod:`plant.multimode.disturbed_jit` (and its linear-law loop, :mod:`~plant.multimode.disturbed_loop`),
+bit for bit where OpenBLAS sums in the same order (tests/test_disturbed_jit.py).
 """
 
 from __future__ import annotations
