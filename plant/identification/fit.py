@@ -209,7 +209,10 @@ class _Model:
     def residual(self, z: np.ndarray, scale: np.ndarray) -> np.ndarray:
         pred = self.predict(z)
         if pred is None:
-            return np.full(self.rows.size, 1e3)
+            # an invalid point or a plant that left ``ok`` (diverged past 1 rad): 10 rad per sample,
+            # more than any prediction the plant can make (a fixed 1e3 in scaled units was less than
+            # a real residual of a noise-free log, whose scale is 1e-12 rad, and the start chose it)
+            return np.full(self.rows.size, 10.0) / scale
         r = (self.log.y[self.rows] - pred) / scale
         if self.deadline < math.inf:
             cost = float(r @ r)
@@ -518,7 +521,13 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
                 i = names.index("bristle_stiffness")
                 axes[i] = (sigma0,) + tuple(axes[i])
         grid = [np.concatenate([core, np.log(point)]) for point in itertools.product(*axes)]
-        costs = [float(np.sum(model.residual(z0, scale) ** 2)) for z0 in grid]
+        counts = np.bincount(model.groups)
+
+        def _loglik_cost(z0):     # Σ n_m·ln(MSE_m): the Gaussian likelihood with a variance per move
+            r0 = model.residual(z0, scale) * scale
+            ms0 = np.bincount(model.groups, weights=r0 * r0) / counts
+            return float(np.sum(counts * np.log(np.maximum(ms0, sigma1 ** 2))))
+        costs = [_loglik_cost(z0) for z0 in grid]
         starts = [grid[int(np.argmin(costs))]]
     if core is not None:
         model.deadline = time.process_time() + _FOLD_BUDGET_S
@@ -527,14 +536,16 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
     # minutes in one plant step (a stiff shaft), beyond the budget's reach
     box = (z - math.log(30.0), z + math.log(30.0)) if core is not None else (-np.inf, np.inf)
     try:
-        for _ in range(2 if scale_of is None else 1):
+        for _ in range(2):
+            model.best_cost = math.inf     # each pass has its own weights: costs compare within a pass
             sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
                                          x_scale=1.0, max_nfev=40 * len(z), xtol=1e-8, ftol=1e-10)
             z = sol.x
             r = sol.fun * scale
             ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
-            if scale_of is None:
-                scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
+            # reweighted by this family's own residuals (iteratively reweighted least squares toward
+            # the likelihood with a variance per move, which the held-out score measures)
+            scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
     except _OutOfTime:        # the best point seen within the budget stands for the family
         z = model.best_z
         model.deadline = math.inf
