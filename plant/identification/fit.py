@@ -115,19 +115,28 @@ def moves(log: AxisLog) -> list[tuple[int, int]]:
 
 
 def _sigma1(log: AxisLog, segs: list[tuple[int, int]]) -> tuple[float, int]:
-    """Pooled within-rest sd of y [rad] and its degrees of freedom."""
+    """Pooled within-rest sd of y [rad] and its degrees of freedom.
+
+    A rest whose sd exceeds twice the median rest's is left out: the shaft was still sliding
+    there (a slide after a hold can outlast the 0.25-s quiet time). For a stuck shaft this
+    leaves out a rest of ≥ 15 samples with probability < 1e-5 (χ² with 14 dof beyond 56)."""
     active = np.array([any(v != 0.0 for _, v in c.segments) for c in log.commands])
     quiet = int(math.ceil(_QUIET_S / log.sample_period))
-    groups, ss, dof = [], 0.0, 0
+    groups = []
     bounds = [(0, segs[0][0] if segs else log.n)] + [(s, e) for s, e in segs]
     for s, e in bounds:
         idx = np.flatnonzero(active[s:e])
         first = s + (idx[-1] + 1 + quiet if idx.size else 0)
         g = log.y[first:e + 1] if e < log.n else log.y[first:e]
         if g.size >= 3:
+            groups.append(g)
+    sds = np.array([g.std(ddof=1) for g in groups])
+    limit = 2.0 * float(np.median(sds)) if groups else 0.0
+    ss, dof = 0.0, 0
+    for g, sd in zip(groups, sds):
+        if sd <= limit:
             ss += float(np.sum((g - g.mean()) ** 2))
             dof += g.size - 1
-            groups.append(g)
     if dof < 2:
         raise ValueError("the log has no rest long enough to measure the noise (u = 0 for > 0.1 s)")
     return math.sqrt(ss / dof), dof
