@@ -284,9 +284,9 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="the auto study (10-15 min CPU for 40 logs): "
-                    "set SOLNIC_AXIS_STUDY=1 to run it; its last, partial result is in docs/axis.md (the generating "
-                    "family kept within 2 SE on 24 of 26 logs, picked on 10 of 27)")
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="the auto study (about 40 min CPU for 40 logs "
+                    "on the plan with holds): set SOLNIC_AXIS_STUDY=1 to run it; its last, partial results are in "
+                    "docs/axis.md")
 @pytest.mark.parametrize("family", ["multimode", "stribeck", "lugre", "two-mass"])
 def test_auto_on_held_out_truth(family):
     """10 random axes of ``family`` in the stated region (tests/identify_draws.py; seed 4711, not
