@@ -21,7 +21,7 @@ import bench
 from bench.cli import out_console, user_errors
 from bench.errors import UserError
 from plant.identification.experiment import ExperimentOptions, design_experiment
-from plant.identification.families import FAMILY_FREE
+from plant.identification.families import DEFAULT_BUDGET_S, FAMILY_FREE, NOT_IDENTIFIED_RULE
 from plant.identification.log import LogError, read_log, write_log
 from plant.drive import DriveType
 from plant.identification.experiment import WHY
@@ -47,18 +47,23 @@ def experiment_command(
     repeats: int = typer.Option(6, "--repeats", help="Pulses per width and direction (the plan's length)."),
     max_angle: float = typer.Option(0.2, "--max-angle", help="|y - y(0)| [rad] at which the player must abort."),
     sample_period: float = typer.Option(0.01, "--sample-period", help="τs [s]."),
+    holds: int = typer.Option(2, "--holds", help="Torque holds per ladder level and direction (linear drive; "
+                                                 "0: the plan without holds)."),
+    hold_time: float = typer.Option(0.15, "--hold-time", help="Seconds each torque hold lasts."),
 ) -> None:
     """Write the identification plan: u at each sample instant, to be played on the axis.
 
     Rests measure the noise σ1; slow torque ramps both ways show the breakaway level (stiction) and,
     by the slide after it, Coulomb friction against inertia; pulse trains of several widths both
     ways give the pulse law (its onset: stiction and the motor lag τ3; its slope: inertia and
-    Coulomb friction). Record y at every t and run `solnic-bench identify LOG`.
+    Coulomb friction); torque holds on a ladder of levels tell the friction laws apart (LuGre's
+    elastic pre-sliding below stiction, a compliant shaft's early breakaway, the speed-dependent
+    friction of constant-torque runs). Record y at every t and run `solnic-bench identify LOG`.
     """
     try:
         opts = ExperimentOptions(drive=drive, sample_period=sample_period, max_torque=max_torque,
                                  ramp_fraction=ramp_fraction, ramp_time=ramp_time, repeats=repeats,
-                                 max_angle=max_angle)
+                                 max_angle=max_angle, holds=holds, hold_time=hold_time)
     except ValueError as exc:
         raise UserError(str(exc).replace("ExperimentOptions.", "--").replace("_", "-")) from None
     plan = design_experiment(opts)
@@ -94,6 +99,8 @@ def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
     for name in fields:
         sd = fit.std.get(name)
         note = f"   # ± {sd:.3g} (1 sd)" if sd is not None else ""
+        if name in fit.not_identified:
+            note += ", not identified (kept as fitted; the log does not pin it)"
         lines.append(f"{name} = {float(getattr(p, name))!r}{note}")
     return "\n".join(lines) + "\n"
 
@@ -116,16 +123,20 @@ def fit_page(fit: AxisFit, log, log_name: str, choice: FamilyChoice | None) -> s
     fig.add_trace(go.Scattergl(x=t, y=fit.y_model * 1e6, mode="lines", name=f"simulated y ({fit.family})"))
     fig.update_layout(xaxis_title="t [s]", yaxis_title="y [µrad]", height=520,
                       title=f"{log_name}: measured against the fitted {fit.family} plant (noise-free, per move)")
+    weak = fit.not_identified
     rows = "".join(f"<tr><td>{n}</td><td>{fit.estimates[n]:.6g}</td><td>{fit.std[n]:.3g}</td>"
-                   f"<td>[{fit.interval[n][0]:.6g}, {fit.interval[n][1]:.6g}]</td><td>{_UNITS.get(n, '')}</td></tr>"
+                   f"<td>[{fit.interval[n][0]:.6g}, {fit.interval[n][1]:.6g}]</td><td>{_UNITS.get(n, '')}</td>"
+                   f"<td>{'not identified' if n in weak else 'yes'}</td></tr>"
                    for n in fit.estimates)
+    budget = f"<p><b>{escape(fit.budget_note)}</b></p>" if fit.budget_note else ""
     bic = "" if not choice else (f"<h2>Family choice (--family auto)</h2><p>Rule: {escape(choice.rule)}.</p><ul>"
                                  + "".join(f"<li>{escape(line)}</li>" for line in choice_lines(choice)) + "</ul>")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>identify {log_name}</title>"
             f"<script>{plotly.offline.get_plotlyjs()}</script></head><body>"
             f"<h1>Identified axis: {fit.family}</h1><p>{fit.method}; {fit.n_moves} moves, {fit.n_samples} samples, "
-            f"{fit.seconds:.1f} s.</p><table border='1'><tr><th>field</th><th>estimate</th><th>sd</th>"
-            f"<th>95 % interval</th><th>unit</th></tr>{rows}</table>{bic}"
+            f"{fit.seconds:.1f} s.</p>{budget}<table border='1'><tr><th>field</th><th>estimate</th><th>sd</th>"
+            f"<th>95 % interval</th><th>unit</th><th>identified</th></tr>{rows}</table>"
+            f"<p>{escape(NOT_IDENTIFIED_RULE)}.</p>{bic}"
             f"{fig.to_html(full_html=False, include_plotlyjs=False)}</body></html>")
 
 
@@ -139,6 +150,9 @@ def identify_command(
     html: Path = typer.Option(None, "--html", help="Fit page (default: OUT with .html)."),
     bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),
     seed: int = typer.Option(0, "--seed", help="Root seed of the bootstrap."),
+    budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget",
+                                 help="CPU seconds for the final fit (point fit + bootstrap); when hit, the output "
+                                      "says what was cut short."),
 ) -> None:
     """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
     from plant.identification.fit import choose_family, fit_log
@@ -150,6 +164,8 @@ def identify_command(
         raise UserError(f"--family: {family!r} is not one of {', '.join(FAMILY_FREE)}, auto")
     if not (bootstrap == 0 or 5 <= bootstrap <= 1000):
         raise UserError(f"--bootstrap: must be 0 or in [5, 1000], got {bootstrap}")
+    if not (math.isfinite(budget) and budget > 0):
+        raise UserError(f"--budget: must be > 0 CPU seconds, got {budget}")
     try:
         log = read_log(log_path)
     except LogError as exc:
@@ -157,18 +173,24 @@ def identify_command(
     choice = None
     try:
         if family == "auto":
-            fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed)
+            fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget)
         else:
-            fit = fit_log(log, family, bootstrap=bootstrap, seed=seed)
+            fit = fit_log(log, family, bootstrap=bootstrap, seed=seed, budget_s=budget)
     except (ValueError, RuntimeError) as exc:
         raise UserError(f"{log_path}: {exc}") from None
     table = Table(title=f"{log_path.name}: {fit.family} ({fit.method})")
-    for col in ("field", "estimate", "± sd", "95 % interval", "unit"):
+    for col in ("field", "estimate", "± sd", "95 % interval", "unit", "identified"):
         table.add_column(col)
+    weak = fit.not_identified
     for n in fit.estimates:
         lo, hi = fit.interval[n]
-        table.add_row(n, f"{fit.estimates[n]:.6g}", f"{fit.std[n]:.2g}", f"[{lo:.5g}, {hi:.5g}]", _UNITS.get(n, ""))
+        table.add_row(n, f"{fit.estimates[n]:.6g}", f"{fit.std[n]:.2g}", f"[{lo:.5g}, {hi:.5g}]", _UNITS.get(n, ""),
+                      "not identified" if n in weak else "yes")
     out_console.print(table)
+    if weak:
+        out_console.print(f"not identified: {', '.join(weak)} ({NOT_IDENTIFIED_RULE})")
+    if fit.budget_note:
+        out_console.print(f"budget: {fit.budget_note}")
     if choice:
         out_console.print(f"family: {choice.family} ({choice.rule})")
         for line in choice_lines(choice):

@@ -12,6 +12,16 @@ Why each part is there (also the plan's header and ``solnic-bench experiment --h
   stick): the net motion per pulse against its width is the pulse law (section 3.2). Its onset
   width is set by k̄s and the motor lag τ3 (x3 = u·(1 − e^(−t/τ3))), its slope by J and k̄c;
   repeats average the friction noise; both directions expose an asymmetry.
+* **torque holds on a ladder of levels** (linear drive: u steps to a fraction of the ramp peak,
+  holds for ``hold_time``, then 0; bridge: none, it has one level): the laws differ most here.
+  Below k̄s the multimode, Stribeck and two-mass shafts do not move at all, while a LuGre shaft
+  deflects elastically on its bristles (u/σ0, 3–25 µrad) and springs back when u returns to 0;
+  just below k̄s a compliant shaft's ringing (the step excites the resonance, f_r above the
+  sample rate) lifts the load's torque past k̄s and it breaks away where a rigid shaft stays
+  stuck (the slow ramp does not ring: it shows k̄s itself); above k̄s the hold is a constant-torque
+  run, accelerating at (u − k̄c)/J for a rigid Coulomb shaft but slower when friction depends on
+  speed (Stribeck curve, viscous b·v). Several levels because the plan cannot know k̄s in
+  advance; ``holds`` repeats per level and direction average the friction noise of the slides.
 
 The plan alternates directions so that the shaft wanders little; the player must still stop
 (u = 0) when |y − y(0)| exceeds ``max_angle`` (written in the header): an open-loop plan cannot.
@@ -55,6 +65,13 @@ class ExperimentOptions:
         Rest after every move [s], long enough for the shaft to stick and the current to decay.
     max_angle : float
         |y − y(0)| [rad] at which the player must abort (written into the plan).
+    holds : int
+        Torque holds per ladder level and direction (0: no holds, the plan of the first
+        release). Linear drive only: a bridge has no intermediate level.
+    hold_time : float
+        Seconds each hold lasts [s]: long enough for the elastic and creeping responses and for
+        a slide's speed-dependent friction to show, short enough that a slide at the top level
+        stays well inside ``max_angle`` (the angle grows like hold_time²).
     """
 
     drive: str = "linear"
@@ -65,12 +82,15 @@ class ExperimentOptions:
     repeats: int = 6
     rest: float = 0.4
     max_angle: float = 0.2
+    holds: int = 2
+    hold_time: float = 0.15
 
     def __post_init__(self) -> None:
         if self.drive not in ("linear", "bridge"):
             raise ValueError(f"ExperimentOptions.drive must be 'linear' or 'bridge', got {self.drive!r}")
         for name, lo, hi in (("sample_period", 1e-5, 1.0), ("max_torque", 1e-6, 1e6), ("ramp_time", 0.02, 100.0),
-                             ("rest", 0.05, 100.0), ("max_angle", 1e-9, 100.0)):
+                             ("rest", 0.05, 100.0), ("max_angle", 1e-9, 100.0),
+                             ("hold_time", 0.02, 10.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"ExperimentOptions.{name} must be in [{lo}, {hi}], got {v!r}")
@@ -78,12 +98,17 @@ class ExperimentOptions:
             raise ValueError(f"ExperimentOptions.ramp_fraction must be in (0, 1], got {self.ramp_fraction!r}")
         if not (isinstance(self.repeats, int) and 1 <= self.repeats <= 100):
             raise ValueError(f"ExperimentOptions.repeats must be an integer in [1, 100], got {self.repeats!r}")
+        if not (isinstance(self.holds, int) and not isinstance(self.holds, bool) and 0 <= self.holds <= 100):
+            raise ValueError(f"ExperimentOptions.holds must be an integer in [0, 100], got {self.holds!r}")
 
 
 # Pulse widths [s] (short moves: the friction noise grows like the move's duration^1.5). The
 # linear drive pulses at max_torque and at half of it (two onsets separate k̄s from τ3).
 _LINEAR_WIDTHS = ((1.0, (0.0012, 0.0016, 0.002, 0.0025)), (0.5, (0.0025, 0.003, 0.004)))
 _BRIDGE_WIDTHS = ((1.0, (0.001, 0.0015, 0.002, 0.003)),)
+# Hold levels as fractions of the ramp peak (ramp_fraction·max_torque ≈ 1.2–1.5 k̄s, so the
+# ladder spans ≈ 0.25–1.4 k̄s: elastic, near-breakaway and constant-torque runs).
+_HOLD_LEVELS = (0.2, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.95)
 _BRIDGE_RAMP = tuple(round(0.0004 + 0.0001 * k, 6) for k in range(13))   # 0.4 … 1.6 ms
 
 
@@ -117,6 +142,11 @@ def design_experiment(options: ExperimentOptions = ExperimentOptions()) -> AxisL
         for sign in (1, -1, 1, -1):
             cmds += [_hold(sign * peak * (k + 1) / n_ramp, drive) for k in range(n_ramp)]
             cmds += rest * 3
+        n_hold = max(int(round(o.hold_time / tau)), 1)
+        for _ in range(o.holds):
+            for fraction in _HOLD_LEVELS:
+                for sign in (1, -1):
+                    cmds += [_hold(sign * fraction * peak, drive)] * n_hold + rest * 2
         widths = _LINEAR_WIDTHS
     else:
         for width in _BRIDGE_RAMP:

@@ -39,13 +39,14 @@ import numpy as np
 from scipy import optimize, stats
 
 from plant.drive import DriveType
-from plant.identification.families import FAMILY_FREE
+from plant.identification.families import DEFAULT_BUDGET_S, FAMILY_FREE, NOT_IDENTIFIED_RULE
 from plant.identification.log import AxisLog
 from plant.identification.simulate import axis_params
 from plant.protocol import get_family
 from plant.state import SimOptions, Status
 
-__all__ = ["FAMILY_FREE", "AxisFit", "FamilyChoice", "fit_log", "choose_family", "moves", "RULE"]
+__all__ = ["FAMILY_FREE", "AxisFit", "FamilyChoice", "fit_log", "choose_family", "moves", "RULE",
+           "NOT_IDENTIFIED_RULE", "DEFAULT_BUDGET_S"]
 
 _CORE = ("coulomb", "stiction", "inertia", "motor_time_constant")
 _REST_MIN = 5          # samples of zero command that separate two moves
@@ -75,6 +76,8 @@ class AxisFit:
     seconds : float
         Wall-clock time of the fit.
     method : str
+    budget_note : str
+        Empty, or what the CPU budget (``fit_log(budget_s=…)``) cut short.
     """
 
     family: str
@@ -88,6 +91,20 @@ class AxisFit:
     n_samples: int
     seconds: float
     method: str = "weighted least squares, cluster-robust Gauss-Newton covariance"
+    budget_note: str = ""
+
+    @property
+    def not_identified(self) -> tuple[str, ...]:
+        """Fields the log does not identify (:data:`NOT_IDENTIFIED_RULE`): the 95 % interval's
+        half-width is at least the estimate, i.e. the interval reaches 0 or below — the log
+        cannot tell the value from none (or the uncertainty is not finite)."""
+        out = []
+        for n, v in self.estimates.items():
+            lo, hi = self.interval[n]
+            half = 0.5 * (hi - lo)
+            if not (math.isfinite(half) and half < abs(v)):
+                out.append(n)
+        return tuple(out)
 
 
 def moves(log: AxisLog) -> list[tuple[int, int]]:
@@ -98,19 +115,28 @@ def moves(log: AxisLog) -> list[tuple[int, int]]:
 
 
 def _sigma1(log: AxisLog, segs: list[tuple[int, int]]) -> tuple[float, int]:
-    """Pooled within-rest sd of y [rad] and its degrees of freedom."""
+    """Pooled within-rest sd of y [rad] and its degrees of freedom.
+
+    A rest whose sd exceeds twice the median rest's is left out: the shaft was still sliding
+    there (a slide after a hold can outlast the 0.25-s quiet time). For a stuck shaft this
+    leaves out a rest of ≥ 15 samples with probability < 1e-5 (χ² with 14 dof beyond 56)."""
     active = np.array([any(v != 0.0 for _, v in c.segments) for c in log.commands])
     quiet = int(math.ceil(_QUIET_S / log.sample_period))
-    groups, ss, dof = [], 0.0, 0
+    groups = []
     bounds = [(0, segs[0][0] if segs else log.n)] + [(s, e) for s, e in segs]
     for s, e in bounds:
         idx = np.flatnonzero(active[s:e])
         first = s + (idx[-1] + 1 + quiet if idx.size else 0)
         g = log.y[first:e + 1] if e < log.n else log.y[first:e]
         if g.size >= 3:
+            groups.append(g)
+    sds = np.array([g.std(ddof=1) for g in groups])
+    limit = 2.0 * float(np.median(sds)) if groups else 0.0
+    ss, dof = 0.0, 0
+    for g, sd in zip(groups, sds):
+        if sd <= limit:
             ss += float(np.sum((g - g.mean()) ** 2))
             dof += g.size - 1
-            groups.append(g)
     if dof < 2:
         raise ValueError("the log has no rest long enough to measure the noise (u = 0 for > 0.1 s)")
     return math.sqrt(ss / dof), dof
@@ -192,7 +218,10 @@ class _Model:
     def residual(self, z: np.ndarray, scale: np.ndarray) -> np.ndarray:
         pred = self.predict(z)
         if pred is None:
-            return np.full(self.rows.size, 1e3)
+            # an invalid point or a plant that left ``ok`` (diverged past 1 rad): 10 rad per sample,
+            # more than any prediction the plant can make (a fixed 1e3 in scaled units was less than
+            # a real residual of a noise-free log, whose scale is 1e-12 rad, and the start chose it)
+            return np.full(self.rows.size, 10.0) / scale
         r = (self.log.y[self.rows] - pred) / scale
         if self.deadline < math.inf:
             cost = float(r @ r)
@@ -232,23 +261,42 @@ def _start(model: _Model, sigma1: float) -> np.ndarray:
     return best
 
 
-def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None):
-    """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian)."""
+def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, deadline: float = math.inf):
+    """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian, hit).
+
+    ``deadline`` (``time.process_time``): past it, the best point of the current pass stands
+    and ``hit`` is True (the Jacobian is then a finite-difference one at that point)."""
     model = _Model(log, family, base)
     sigma1, dof = _sigma1(log, model.segs)
     sigma1 = max(sigma1, 1e-12)   # a noise-free log: residuals in units of 1e-12 rad
     z = _start(model, sigma1) if z0 is None else z0
     scale = np.full(model.rows.size, sigma1)
-    for _ in range(2):
+    model.deadline = deadline
+    try:
+        for _ in range(2):
+            model.best_cost = math.inf
+            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
+                                         x_scale=1.0, max_nfev=60 * len(z), xtol=1e-8, ftol=1e-10)
+            z = sol.x
+            r = sol.fun * scale
+            ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
+            scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
+        model.best_cost = math.inf
         sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
-                                     x_scale=1.0, max_nfev=60 * len(z), xtol=1e-8, ftol=1e-10)
-        z = sol.x
-        r = sol.fun * scale
-        ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
-        scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
-    sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
-                                 x_scale=1.0, max_nfev=60 * len(z), xtol=1e-10, ftol=1e-12)
-    return sol.x, model, sigma1, dof, sol.fun, sol.jac
+                                     x_scale=1.0, max_nfev=60 * len(z), xtol=1e-10, ftol=1e-12)
+    except _OutOfTime:
+        z = getattr(model, "best_z", z)
+        model.deadline = math.inf
+        r0 = model.residual(z, scale)
+        jac = np.empty((r0.size, z.size))
+        for i in range(z.size):      # forward differences, the step least_squares uses (1e-5)
+            h = 1e-5 * max(abs(z[i]), 1.0)
+            zi = z.copy()
+            zi[i] += h
+            jac[:, i] = (model.residual(zi, scale) - r0) / h
+        return z, model, sigma1, dof, r0, jac, True
+    model.deadline = math.inf
+    return sol.x, model, sigma1, dof, sol.fun, sol.jac, False
 
 
 def _physical(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -276,7 +324,7 @@ def _sandwich(model: _Model, r: np.ndarray, jac: np.ndarray) -> np.ndarray:
 
 
 def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: int = 20,
-            seed: int = 0) -> AxisFit:
+            seed: int = 0, budget_s: float = DEFAULT_BUDGET_S) -> AxisFit:
     """Fit ``family`` to ``log`` (see the module docstring).
 
     Parameters
@@ -293,6 +341,11 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         Gauss–Newton covariance alone, which is optimistic — see the module docstring).
     seed : int
         Root of the bootstrap's ``SeedSequence``.
+    budget_s : float
+        CPU seconds (``time.process_time``, this process) for the whole fit. Past it: during the
+        point fit, its best point so far stands; during the bootstrap, the replicates done so far
+        give the sd (at least 5), else the cluster-robust covariance does. Either is stated in
+        ``budget_note`` and ``method``.
 
     Raises
     ------
@@ -307,27 +360,40 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         raise ValueError("the log has no y column")
     if not (isinstance(bootstrap, int) and (bootstrap == 0 or 5 <= bootstrap <= 1000)):
         raise ValueError(f"bootstrap must be 0 or an integer in [5, 1000], got {bootstrap!r}")
+    if not (isinstance(budget_s, (int, float)) and budget_s > 0):
+        raise ValueError(f"budget_s must be > 0 CPU seconds, got {budget_s!r}")
     t0 = time.perf_counter()
+    deadline = time.process_time() + budget_s
+    notes = []
     fam = get_family(family)
     u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max), fam.Params().u_max)
     base = (base or fam.Params()).replace(u_max=u_max, sample_period=log.sample_period)
-    z, model, sigma1, dof, r, jac = _point_fit(log, family, base)
+    z, model, sigma1, dof, r, jac, hit = _point_fit(log, family, base, deadline=deadline)
+    if hit:
+        notes.append(f"CPU budget {budget_s:g} s hit in the point fit: its best point so far stands (not converged)"
+                     + ("; no bootstrap, the cluster-robust covariance (optimistic) instead" if bootstrap else ""))
     names = model.names
     values, D = _physical(z)
     fitted = model.params(z).replace(measurement_noise_std=sigma1)
     p = len(z)
-    if bootstrap:
+    devs = []
+    if bootstrap and not hit:
         # parametric bootstrap: logs simulated from the fit (Table 2-1 process noise, x5 drawn),
         # refitted; the spread of (estimate − that log's effective truth) is the uncertainty
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
-        devs = []
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
             blog, truth = simulate_log(plan, family, fitted, int(child.generate_state(1)[0]))
-            zb = _point_fit(blog, family, base)[0]   # the whole estimator, start included
+            zb, *_, b_hit = _point_fit(blog, family, base, deadline=deadline)   # the whole estimator, start included
+            if b_hit:
+                break
             vb, _ = _physical(zb)
             tb = values.copy()
             tb[0], tb[1] = truth["coulomb"], truth["stiction"]
             devs.append(vb - tb)
+        if len(devs) < bootstrap:
+            notes.append(f"CPU budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
+                         + ("" if len(devs) >= 5 else "; the cluster-robust covariance (optimistic) instead"))
+    if len(devs) >= 5:
         devs = np.array(devs)
         # a replicate whose refit lands far in another minimum (beyond 10 robust sd, 1.4826·MAD)
         # must not decide the interval; the others' standard deviation does (heavy tails count)
@@ -337,7 +403,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         wild = int(np.sum(~keep))
         sd_v = devs[keep].std(axis=0, ddof=1)
         quant = stats.t.ppf(0.975, int(keep.sum()) - 1)
-        method = (f"weighted least squares; parametric bootstrap, {bootstrap} replicates, sd of the replicates "
+        method = (f"weighted least squares; parametric bootstrap, {len(devs)} replicates, sd of the replicates "
                   f"({wild} replicate(s) beyond 10 sd)")
     else:
         cov = D @ _sandwich(model, r, jac) @ D.T
@@ -360,8 +426,9 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         counts = np.bincount(model.groups)
         ms = np.maximum(np.bincount(model.groups, weights=raw * raw) / counts, 1e-300)
         bic = float(np.sum(counts * np.log(ms)) + p * math.log(model.rows.size))
+    note = "; ".join(notes)
     return AxisFit(family, fitted, est, sd, interval, y_model, bic, len(model.segs), int(model.rows.size),
-                   time.perf_counter() - t0, method)
+                   time.perf_counter() - t0, method + (f" ({note})" if note else ""), note)
 
 
 @dataclass(frozen=True)
@@ -385,6 +452,8 @@ class FamilyChoice:
         Wall-clock time of the held-out fits.
     cpu : dict
         CPU time [s] of each family's two fold fits (this process).
+    per_move : dict
+        Per family, the held-out score of every move (the numbers the rule averages).
     """
 
     family: str
@@ -395,6 +464,7 @@ class FamilyChoice:
     rule: str
     seconds: float
     cpu: dict
+    per_move: dict = dataclasses.field(default_factory=dict)
 
 
 _FOLD_BUDGET_S = 8.0   # CPU seconds per fold fit of a richer family; then its best point so far
@@ -408,6 +478,31 @@ RULE = ("held-out prediction error, 2-fold over moves (alternate pairs of moves)
         "half of the moves and predicts the other; score = mean over moves of ln(mean squared prediction error); "
         "the simplest family (multimode < two-mass < stribeck < lugre) whose paired excess over the best score "
         f"is within {_SEPARABLE_SE:g} standard errors over moves is chosen (not separable: the simpler one)")
+
+
+def _elastic_stiffness(model: _Model) -> float | None:
+    """The pre-sliding stiffness the torque holds show [ozf·in/rad]: the least-squares slope of u
+    against the deflection at the end of each hold that did not slide (|Δy| < 50 µrad), 1/c with
+    c = Σ u·Δy / Σ u² (a LuGre shaft deflects u/σ0 on its bristles; a rigid stuck one not at all).
+    None when the log has no such hold or shows no positive compliance."""
+    log, num, den = model.log, 0.0, 0.0
+    for (s, e), off in zip(model.segs, model.offsets):
+        first = log.commands[s].segments
+        if len(first) != 1:
+            continue
+        k = 0
+        while s + k < e and log.commands[s + k].segments == first:
+            k += 1
+        if k < 5 or s + k >= log.n:
+            continue
+        dy = float(np.mean(log.y[s + k - 2:s + k + 1])) - off
+        if abs(dy) < 5e-5:
+            u = first[0][1]
+            num += u * dy
+            den += u * u
+    if den == 0.0 or num <= 0.0:
+        return None
+    return den / num
 
 
 def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarray | None,
@@ -428,8 +523,20 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
             core[2] = math.log(max(math.exp(core[2]) - base.motor_inertia, 0.2 * math.exp(core[2])))
         # the extras' start: the best-predicting point of a coarse grid (one simulation each) —
         # a fit stuck worse than multimode is not chosen anyway (the rule prefers the simpler family)
-        grid = [np.concatenate([core, np.log(point)]) for point in itertools.product(*(_GRID[n] for n in names))]
-        costs = [float(np.sum(model.residual(z0, scale) ** 2)) for z0 in grid]
+        axes = [_GRID[n] for n in names]
+        if "bristle_stiffness" in names:      # the holds' elastic deflection says σ0 directly
+            sigma0 = _elastic_stiffness(model)
+            if sigma0 is not None and 1e4 <= sigma0 <= 1e8:
+                i = names.index("bristle_stiffness")
+                axes[i] = (sigma0,) + tuple(axes[i])
+        grid = [np.concatenate([core, np.log(point)]) for point in itertools.product(*axes)]
+        counts = np.bincount(model.groups)
+
+        def _loglik_cost(z0):     # Σ n_m·ln(MSE_m): the Gaussian likelihood with a variance per move
+            r0 = model.residual(z0, scale) * scale
+            ms0 = np.bincount(model.groups, weights=r0 * r0) / counts
+            return float(np.sum(counts * np.log(np.maximum(ms0, sigma1 ** 2))))
+        costs = [_loglik_cost(z0) for z0 in grid]
         starts = [grid[int(np.argmin(costs))]]
     if core is not None:
         model.deadline = time.process_time() + _FOLD_BUDGET_S
@@ -438,14 +545,16 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
     # minutes in one plant step (a stiff shaft), beyond the budget's reach
     box = (z - math.log(30.0), z + math.log(30.0)) if core is not None else (-np.inf, np.inf)
     try:
-        for _ in range(2 if scale_of is None else 1):
+        for _ in range(2):
+            model.best_cost = math.inf     # each pass has its own weights: costs compare within a pass
             sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
                                          x_scale=1.0, max_nfev=40 * len(z), xtol=1e-8, ftol=1e-10)
             z = sol.x
             r = sol.fun * scale
             ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
-            if scale_of is None:
-                scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
+            # reweighted by this family's own residuals (iteratively reweighted least squares toward
+            # the likelihood with a variance per move, which the held-out score measures)
+            scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
     except _OutOfTime:        # the best point seen within the budget stands for the family
         z = model.best_z
         model.deadline = math.inf
@@ -464,8 +573,8 @@ def _held_out(log: AxisLog, family: str, base, z: np.ndarray, test: list[int]) -
     return np.log(np.maximum(np.bincount(model.groups, weights=r * r) / np.bincount(model.groups), 1e-300))
 
 
-def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int = 0
-                  ) -> tuple[AxisFit, FamilyChoice]:
+def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int = 0,
+                  budget_s: float = DEFAULT_BUDGET_S) -> tuple[AxisFit, FamilyChoice]:
     """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
 
     Rule (:data:`RULE`): the moves are split into two folds by alternate pairs (a pair = one
@@ -484,7 +593,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     Returns
     -------
     (AxisFit, FamilyChoice)
-        The chosen family's fit (:func:`fit_log`, with ``bootstrap``) and how it was chosen.
+        The chosen family's fit (:func:`fit_log`, with ``bootstrap`` and ``budget_s``) and how it
+        was chosen.
     """
     fams = [f for f in _SIMPLER if f in (families or FAMILY_FREE)]
     if not fams or any(f not in FAMILY_FREE for f in (families or ())):
@@ -523,5 +633,6 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         excess[f] = float(np.mean(d))
         se[f] = float(np.std(d, ddof=1) / math.sqrt(G)) if np.all(np.isfinite(d)) else math.inf
     chosen = next(f for f in fams if f == best or excess[f] <= _SEPARABLE_SE * se[f])
-    choice = FamilyChoice(chosen, best, score, excess, se, RULE, time.perf_counter() - t0, cpu)
-    return fit_log(log, chosen, bootstrap=bootstrap, seed=seed), choice
+    choice = FamilyChoice(chosen, best, score, excess, se, RULE, time.perf_counter() - t0, cpu,
+                          {f: v.copy() for f, v in per_move.items()})
+    return fit_log(log, chosen, bootstrap=bootstrap, seed=seed, budget_s=budget_s), choice
