@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit, types
 
-__all__ = ["STEP_SIGNATURE", "STEP_TYPE", "quantize", "delay_segments", "check_command"]
+__all__ = ["STEP_SIGNATURE", "STEP_TYPE", "quantize", "delay_segments", "check_command", "log_events"]
 
 _ARRAY = types.float64[::1]
 STEP_SIGNATURE = types.intp(_ARRAY, _ARRAY, types.float64, _ARRAY, _ARRAY)
@@ -120,3 +120,13 @@ def delay_segments(offs, levs, k, pend_o, pend_l, n_pend, delay, period, now_o, 
         carry_l[0] = now_l[n_now - 1]
         n_carry = 1
     return n_now, n_carry
+
+
+@njit(cache=True)
+def log_events(xe, prog, ev, k):
+    """The x1 log of a compiled loop (:class:`plant.law_driver.X1Log`): append the interval's
+    ``k`` plant events (t [s], x1 [rad]) of ``ev`` to ``xe`` at row ``prog[3]``, and advance it."""
+    m = prog[3]
+    for i in range(k):
+        xe[m + i, 0], xe[m + i, 1] = ev[i, 0], ev[i, 1]
+    prog[3] = m + k

@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from plant.law_driver import HAND_BACK, NEED_NOISE, NEED_ROOM, LawRun, run_chunks, run_law_chunks, CHUNK, TOTAL_FIELDS
-from plant.law_step import check_command, delay_segments, quantize
+from plant.law_step import check_command, delay_segments, log_events, quantize
 from plant.stribeck.interval import _NREC as _LOG_NREC, _RecordFull
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.multimode.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
@@ -143,10 +143,7 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
                               zpos, ev, out)
         S = out[N_STATE:]
         if logging:                         # ... and the interval's plant events (t, x1)
-            m, k_ev = prog[3], int(S[_LOG_NREC])
-            for i in range(k_ev):
-                xe[m + i, 0], xe[m + i, 1] = ev[i, 0], ev[i, 1]
-            prog[3] = m + k_ev
+            log_events(xe, prog, ev, int(S[_LOG_NREC]))
         if n >= n_warm:
             x1_window[n - n_warm] = x1
             totals[_DUR] += S[SHEET_DURATION]

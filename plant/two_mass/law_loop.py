@@ -22,7 +22,7 @@ from numba import njit
 
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.law_driver import HAND_BACK, NEED_NOISE, NEED_ROOM, LawRun, run_chunks, run_law_chunks, CHUNK, TOTAL_FIELDS
-from plant.law_step import check_command, delay_segments, quantize
+from plant.law_step import check_command, delay_segments, log_events, quantize
 from plant.two_mass.interval import _NREC as _LOG_NREC, _RecordFull
 from plant.randomness import NoiseStream
 from plant.state import PlantState, SimOptions, Status
@@ -151,10 +151,7 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
                               Vi, lam, o, TP, TL, BT, z, zpos, ev, out)
         S = out[N_STATE:]
         if logging:                         # ... and the interval's plant events (t, x1)
-            m, k_ev = prog[3], int(S[_LOG_NREC])
-            for i in range(k_ev):
-                xe[m + i, 0], xe[m + i, 1] = ev[i, 0], ev[i, 1]
-            prog[3] = m + k_ev
+            log_events(xe, prog, ev, int(S[_LOG_NREC]))
         if n >= n_warm:
             x1_window[n - n_warm] = x1
             totals[_TDUR] += S[SHEET_DURATION]
