@@ -6,8 +6,10 @@
 Each cell runs in a fresh interpreter with ``PYTHONPATH`` set to one tree (JIT compilation and
 imports are excluded: the child warms up on a 1 s cell first and times the 100 s cell with
 ``time.process_time``). The two trees alternate round by round, so machine load affects both
-alike; the ratio of the medians is reported. The other revision's API is only used through
-``run_closed_loop`` and ``make_controller``, which both revisions share.
+alike; the ratio of the medians is reported, and whether both trees gave the same status and peak
+error in every round ("same peak", a bit-identity check of the cell's headline number). The other
+revision's API is only used through ``run_closed_loop`` and ``make_controller``, which both
+revisions share.
 """
 
 from __future__ import annotations
@@ -59,20 +61,25 @@ def main() -> None:
         names = tuple(n.strip() for n in args.controllers.split(",") if n.strip())
     here = Path(__file__).resolve().parent.parent
     times: dict[tuple[str, str], list[float]] = {}
+    peaks: dict[tuple[str, str], set] = {}
     for _ in range(args.rounds):
         for name in names:
             for label, tree in (("this", here), ("other", args.other.resolve())):
-                times.setdefault((label, name), []).append(_cell(tree, name)["cpu_s"])
+                cell = _cell(tree, name)
+                times.setdefault((label, name), []).append(cell["cpu_s"])
+                peaks.setdefault((label, name), set()).add((cell["status"], cell["peak_error_rad"]))
     rows = []
     for name in names:
         this, other = statistics.median(times["this", name]), statistics.median(times["other", name])
-        rows.append({"controller": name, "this_cpu_s": this, "other_cpu_s": other, "speedup": other / this})
+        rows.append({"controller": name, "this_cpu_s": this, "other_cpu_s": other, "speedup": other / this,
+                     "same_peak": peaks["this", name] == peaks["other", name] and len(peaks["this", name]) == 1})
     if args.json:
         print(json.dumps(rows, indent=2))
         return
-    print(f"{'controller':<14} {'this [s]':>9} {'other [s]':>10} {'speed-up':>9}")
+    print(f"{'controller':<16} {'this [s]':>9} {'other [s]':>10} {'speed-up':>9} {'same peak':>10}")
     for r in rows:
-        print(f"{r['controller']:<14} {r['this_cpu_s']:>9.3f} {r['other_cpu_s']:>10.3f} {r['speedup']:>8.2f}x")
+        print(f"{r['controller']:<16} {r['this_cpu_s']:>9.3f} {r['other_cpu_s']:>10.3f} {r['speedup']:>8.2f}x "
+              f"{'yes' if r['same_peak'] else 'NO':>10}")
 
 
 if __name__ == "__main__":
