@@ -83,7 +83,7 @@ from numba import njit
 from plant.params import PlantParams
 from controllers.models.acker import closed_form_kernel
 
-__all__ = ["PulseNoise", "pulse_noise", "braked_pulse_noise", "velocity_std_after"]
+__all__ = ["PulseNoise", "pulse_noise", "pulse_bias", "braked_pulse_noise", "velocity_std_after"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 # the backward-equation solver: grid points in x, time steps after/before t_ks, domain width in
@@ -171,6 +171,20 @@ def pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breaka
     bias, variance = _pulse_noise(params.alpha, params.u_max, params.motor_time_constant, s2, ks, kc, dt_u,
                                   t_breakaway, t_current_zero, t_stop, _GL_X, _GL_W)
     return PulseNoise(bias, variance)
+
+
+def pulse_bias(params: PlantParams, ks: float, kc: float, dt_u: float, t_breakaway: float | None,
+               t_current_zero: float, t_stop: float, braked: bool = False) -> float:
+    """``(braked_pulse_noise if braked else pulse_noise)(...).bias`` without the variance (the
+    backward solve for the mean only, :func:`_pulse_bias`): what a trigger test reads [rad]."""
+    s2 = params.alpha**2 * params.sigma2_sq
+    if t_breakaway is None or s2 <= 0 or not t_stop > t_breakaway:
+        return 0.0
+    al, U, tau = params.alpha, params.u_max, params.motor_time_constant
+    if braked and t_stop > t_current_zero and kc > 0:
+        return _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop,
+                                 U * -math.expm1(-dt_u / tau), _GL_X, _GL_W, al * kc * (t_stop - t_current_zero))[0]
+    return _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, _GL_X, _GL_W)
 
 
 @njit(cache=True)
