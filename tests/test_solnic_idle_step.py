@@ -152,3 +152,16 @@ def test_solnic_modern_rows_are_the_rows_before_the_bias_only_paths(scenario, mo
         assert c.predictor.n_model_runs == cb.predictor.n_model_runs
         if scenario != "disturbed":
             assert n_python < 0.3 * duration * 100
+
+
+@pytest.mark.parametrize("options", [{"friction_grid": False}, {"braking_pulse": False},
+                                     {"preset": "high-error-cost"}])
+def test_solnic_modern_variants_are_the_rows_before_the_bias_only_paths(options, monkeypatch):
+    """As above for option sets that plan with the point estimate from the start (no grid),
+    without braking pulses, and the high-error-cost preset; thesis, seeds 0–2, 10 s."""
+    new = [_run(make_controller("solnic-modern", **options), "thesis", seed, 10.0) for seed in range(3)]
+    monkeypatch.setattr("controllers.solnic.controller.SolnicController._pulse_bias", _full_moments_bias)
+    for seed, (compiled, n_python, _) in enumerate(new):
+        before, _, _ = _run(make_controller("solnic-modern", **options), "thesis", seed, 10.0, compiled=False)
+        assert compiled.status == "ok" and n_python < 300
+        assert _row(compiled) == _row(before), seed
