@@ -28,9 +28,12 @@ inside the step cannot propagate: the call returns 0, the hand-back, and the Pyt
 meets the same case (the filters' divisions are the only places; they raise
 ZeroDivisionError in Python too).
 
-Only the faithful estimators run here (two filters, no grid, no noise-aware model, i.e.
-``solnic``); ``solnic-modern``'s joint EKF moves k̂ at every sample and keeps the Python path.
-Bit-identity is tested against the recorded (Python) path, tests/test_solnic_idle_step.py.
+:func:`idle_step` serves the faithful estimators (two filters, no grid, no noise-aware model,
+i.e. ``solnic``); :func:`joint_idle_step` the joint EKF with the noise-aware model
+(``solnic-modern``), whose k̂ moves at every sample: it predicts the next pulse afresh (keeping
+the last sample's plan by its key) and solves only the mean's backward equation for the w2 bias
+(:func:`~controllers.solnic.noise_model._pulse_bias`). Bit-identity is tested against the
+recorded (Python) path, tests/test_solnic_idle_step.py.
 """
 
 from __future__ import annotations
