@@ -139,3 +139,28 @@ def test_predictive_brackets_the_truth():
     p = g.predictive(dtu)
     assert p.p_motion > 0.99
     assert abs(p.dc_mean - dc) < 3 * math.sqrt(p.dc_var) + 0.2e-6
+
+
+def test_table_of_the_needed_points_is_the_full_tables():
+    """The lattice table evaluates only the valid points and their neighbours (issue 27); at
+    the valid points Δc, t_stop, t_breakaway and the cell spread equal the table of every
+    point, on the first lattice (about half of it invalid) and on re-fitted ones."""
+    p = PlantParams()
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    rng = np.random.default_rng(5)
+    skipped = 0
+    for round_ in range(4):
+        for dtu in (0.8e-3, 1.3e-3, 2.1e-3):
+            g._tables.clear()
+            part = g.table(dtu)
+            need = g._need
+            g._need, g._tables = np.ones_like(need), {}
+            full = g.table(dtu)
+            g._need = need
+            assert all(np.array_equal(a, b) for a, b in zip(part, full))
+            skipped += int(np.sum(~need))
+        # re-fit the lattice on evidence from a pulse of the true friction
+        dtu = 1.3e-3
+        dc = pulse_table(p, dtu, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+        g.update(dtu, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2)
+    assert skipped > 0 and g.n_regrids > 0

@@ -130,3 +130,38 @@ def test_option_variants_compiled_are_the_python_rows(name, options):
     python, _, _ = _run(make_controller(name, **options), "thesis", 6, 10.0, compiled=False)
     assert compiled.status == "ok" and n_python < 500
     assert _row(compiled) == _row(python)
+
+
+def _full_moments_bias(self, pred, dtu):
+    """The planner's bias as it was before issue 27's bias-only path: from the full moments."""
+    return self._pulse_noise(pred, dtu)[0]
+
+
+@pytest.mark.parametrize("scenario", ["thesis", "disturbed", "quantized", "delayed", "stribeck", "compliant"])
+def test_solnic_modern_rows_are_the_rows_before_the_bias_only_paths(scenario, monkeypatch):
+    """The mean-only backward solve, the plan cache of the compiled step and the planner's
+    bias-only path change no row: the compiled run against the Python path with every bias
+    taken from the full moments (the code before them), seeds 0–4, every metric and the summary."""
+    duration = 20.0 if scenario == "thesis" else 8.0          # thesis: past the grid's hand-over
+    new = [_run("solnic-modern", scenario, seed, duration) for seed in range(5)]
+    monkeypatch.setattr("controllers.solnic.controller.SolnicController._pulse_bias", _full_moments_bias)
+    for seed, (compiled, n_python, c) in enumerate(new):
+        before, _, cb = _run("solnic-modern", scenario, seed, duration, compiled=False)
+        assert compiled.status == "ok"
+        assert _row(compiled) == _row(before), seed
+        assert c.predictor.n_model_runs == cb.predictor.n_model_runs
+        if scenario != "disturbed":
+            assert n_python < 0.3 * duration * 100
+
+
+@pytest.mark.parametrize("options", [{"friction_grid": False}, {"braking_pulse": False},
+                                     {"preset": "high-error-cost"}])
+def test_solnic_modern_variants_are_the_rows_before_the_bias_only_paths(options, monkeypatch):
+    """As above for option sets that plan with the point estimate from the start (no grid),
+    without braking pulses, and the high-error-cost preset; thesis, seeds 0–2, 10 s."""
+    new = [_run(make_controller("solnic-modern", **options), "thesis", seed, 10.0) for seed in range(3)]
+    monkeypatch.setattr("controllers.solnic.controller.SolnicController._pulse_bias", _full_moments_bias)
+    for seed, (compiled, n_python, _) in enumerate(new):
+        before, _, _ = _run(make_controller("solnic-modern", **options), "thesis", seed, 10.0, compiled=False)
+        assert compiled.status == "ok" and n_python < 300
+        assert _row(compiled) == _row(before), seed

@@ -107,3 +107,50 @@ def test_backward_equation_solver_is_bit_identical_to_the_row_array_reference():
         args = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, 64, 48, 16)
         assert _absorbed_moments(*args) == absorbed_moments(*args), args
     assert n_reflect > 50      # both phases (reflecting, then absorbing) exercised
+
+
+def test_mean_only_solver_and_bias_are_bit_identical_to_the_full_moments():
+    # the idle planner reads only the bias (issue 27): _absorbed_mean / _pulse_bias must give
+    # exactly the mean of the row-array reference and of _pulse_noise, in every blend regime
+    from controllers.solnic.noise_model import _GL_W, _GL_X, _absorbed_mean, _pulse_bias, _pulse_noise
+    from tests.reference_kernels import absorbed_moments
+    p = PlantParams()
+    al, U, tau, s2 = p.alpha, p.u_max, p.motor_time_constant, p.alpha**2 * p.sigma2_sq
+    rng = np.random.default_rng(2727)
+    regimes = {"solver": 0, "blend": 0, "coast": 0}
+    for _ in range(300):
+        ks = rng.uniform(0.5, 3.5)
+        kc = ks * rng.uniform(0.3, 1.0)
+        dtu, t_b = rng.uniform(0.3e-3, 3e-3), rng.uniform(0.0, 0.3e-3)
+        t_cz = t_b + rng.uniform(0.5e-3, 4e-3)
+        t_stop = t_cz + rng.uniform(-0.3e-3, 3e-3)
+        args = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, 64, 48, 16)
+        assert _absorbed_mean(*args) == absorbed_moments(*args)[0], args
+        full = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, t_stop, _GL_X, _GL_W)
+        b = _pulse_bias(*full)
+        assert b == _pulse_noise(*full)[0], full
+        x3_off = U * -math.expm1(-dtu / tau)
+        from controllers.solnic.noise_model import _v0
+        r = _v0(t_cz, dtu, t_b, al, U, tau, ks, kc, x3_off) / math.sqrt(s2 * (t_cz - t_b))
+        regimes["solver" if r <= 0.25 else "coast" if r >= 0.75 else "blend"] += 1
+    assert min(regimes.values()) >= 5, regimes     # 71 / 8 / 221 with this seed
+    assert _pulse_bias(al, U, tau, s2, 2.0, 0.0, 1e-3, 0.0, 2e-3, 3e-3, _GL_X, _GL_W) == math.inf
+
+
+def test_pulse_bias_is_the_bias_of_pulse_noise_and_braked_pulse_noise():
+    # the planner's bias-only path (issue 27) against the full moments, every branch
+    from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
+    p = PlantParams()
+    rng = np.random.default_rng(2728)
+    for _ in range(200):
+        ks = rng.uniform(0.5, 3.5)
+        kc = ks * rng.uniform(0.0, 1.0)
+        dtu, t_b = rng.uniform(0.3e-3, 3e-3), rng.uniform(0.0, 0.3e-3)
+        t_cz = t_b + rng.uniform(0.5e-3, 4e-3)
+        t_stop = t_cz + rng.uniform(-1e-3, 3e-3)
+        args = (p, ks, kc, dtu, t_b, t_cz, t_stop)
+        assert pulse_bias(*args) == pulse_noise(*args).bias, args
+        assert pulse_bias(*args, braked=True) == braked_pulse_noise(*args).bias, args
+    assert pulse_bias(p, 2.0, 1.0, 1e-3, None, 2e-3, 3e-3) == 0.0
+    quiet = PlantParams(friction_noise_psd=0.0)
+    assert pulse_bias(quiet, 2.0, 1.0, 1e-3, 1e-4, 2e-3, 3e-3) == pulse_noise(quiet, 2.0, 1.0, 1e-3, 1e-4, 2e-3, 3e-3).bias

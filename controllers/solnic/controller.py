@@ -72,7 +72,7 @@ from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic import idle_step as _idle
 from controllers.solnic.joint_filter import JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
-from controllers.solnic.noise_model import braked_pulse_noise, pulse_noise
+from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
 from controllers.solnic.predictor import LAZY, Predictor, PulsePrediction, peak_torque
 from controllers.solnic.options import KNOBS, PRESETS, SolnicOptions
 from controllers.solnic.series import cycle_event_times, log_series
@@ -450,7 +450,9 @@ class SolnicController(Controller):
             if gp is not None:
                 dc_plan = gp.dc_mean                        # w2 bias included
             elif self.options.noise_aware_model:
-                dc_plan += self._pulse_noise(pred, dtu)[0]
+                # a trigger here only evaluates the pending cycle and re-plans: the bias alone
+                dc_plan += (self._pulse_bias(pred, dtu) if self._pending is not None and attempt == 0
+                            else self._pulse_noise(pred, dtu)[0])
             trig = plan_trigger(x1, x4, self.mode2.drift_std(), dc_plan, horizon=ts,
                                 earliest=earliest, duration=pred.t_current_zero,
                                 overshoot_factor=self.options.overshoot_factor)
@@ -533,6 +535,15 @@ class SolnicController(Controller):
                 self._noise_memo.clear()
             self._noise_memo[key] = hit
         return hit
+
+    def _pulse_bias(self, pred: PulsePrediction, dtu: float) -> float:
+        """``self._pulse_noise(pred, dtu)[0]``, from the memo or by the mean-only solve."""
+        hit = self._noise_memo.get((self.friction.ks, self.friction.kc, dtu, pred.t_off))
+        if hit is not None:
+            return hit[0]
+        ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
+        return pulse_bias(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
+                          pred.t_current_zero, pred.t_nominal, braked=pred.t_off is not None)
 
     def _noise_ratios(self, dtu: float, pred: PulsePrediction | None = None) -> tuple[float, float]:
         """(VAR/f, bias/√f) of the w2 moments at the point estimate, f = α²σ2²T_m³/3; the grid

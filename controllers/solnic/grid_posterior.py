@@ -65,8 +65,11 @@ __all__ = ["FrictionGrid", "Predictive", "pulse_table"]
 
 
 @njit(cache=True)
-def _table_kernel(dt_u, U, t3, a, kc, ks, dc, t_stop, t_brk):
+def _table_kernel(dt_u, U, t3, a, kc, ks, need, dc, t_stop, t_brk):
     for i in range(kc.size):
+        if not need[i]:
+            dc[i], t_stop[i], t_brk[i] = 0.0, 0.0, -1.0
+            continue
         d, tb, _, ts = closed_form_kernel(dt_u, U, t3, a, ks[i], kc[i])
         if tb < 0.0:
             dc[i], t_stop[i], t_brk[i] = 0.0, 0.0, -1.0
@@ -74,17 +77,19 @@ def _table_kernel(dt_u, U, t3, a, kc, ks, dc, t_stop, t_brk):
             dc[i], t_stop[i], t_brk[i] = d, ts, tb
 
 
-def pulse_table(params: PlantParams, dt_u: float, kc: np.ndarray, ks: np.ndarray
+def pulse_table(params: PlantParams, dt_u: float, kc: np.ndarray, ks: np.ndarray, need: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Δc [rad], t_stop [s], t_breakaway [s] or −1) of a +u_max pulse for every (k_c, k_s).
 
     The same closed form as the noise-free :func:`plant.pulse_response`, looped in compiled
-    code; k_c must be > 0 (with k_c = 0 the shaft coasts for ever: Δc = nan).
+    code; k_c must be > 0 (with k_c = 0 the shaft coasts for ever: Δc = nan). With ``need``
+    (bool, one per point) only those points are evaluated; the others read (0, 0, −1).
     """
     kc = np.ascontiguousarray(kc, dtype=float)
     ks = np.ascontiguousarray(ks, dtype=float)
+    need = np.ones(kc.shape, dtype=np.bool_) if need is None else np.ascontiguousarray(need, dtype=np.bool_)
     dc, ts, tb = np.empty_like(kc), np.empty_like(kc), np.empty_like(kc)
-    _table_kernel(float(dt_u), params.u_max, params.motor_time_constant, params.alpha, kc, ks, dc, ts, tb)
+    _table_kernel(float(dt_u), params.u_max, params.motor_time_constant, params.alpha, kc, ks, need, dc, ts, tb)
     return dc, ts, tb
 
 
@@ -155,6 +160,15 @@ class FrictionGrid:
         pts = self.centre[:, None] + self.axes @ np.vstack([U.ravel(), V.ravel()])
         self.kc, self.ks = pts[0], pts[1]
         self.valid = (self.kc > 0) & (self.kc <= self.ks) & (self.ks < self.u_max)
+        # the points a valid point's Δc and cell spread read: itself and its lattice neighbours
+        # (np.gradient's central and one-sided differences)
+        v = self.valid.reshape(n, n)
+        need = v.copy()
+        need[1:] |= v[:-1]
+        need[:-1] |= v[1:]
+        need[:, 1:] |= v[:, :-1]
+        need[:, :-1] |= v[:, 1:]
+        self._need = need.ravel()
         self._idx = np.flatnonzero(self.valid)
         e = pts[:, self._idx] - self.k0[:, None]
         self._log_prior = -0.5 * np.einsum("in,ij,jn->n", e, self.P0inv, e)
@@ -186,7 +200,7 @@ class FrictionGrid:
             # extension, for the cell spread of their valid neighbours only)
             ks = np.clip(self.ks, 1e-6, self.u_max * (1 - 1e-9))
             kc = np.clip(self.kc, 1e-6, ks)
-            dc, ts, tb = pulse_table(self.params, key, kc, ks)
+            dc, ts, tb = pulse_table(self.params, key, kc, ks, self._need)
             grid = dc.reshape(self.n, self.n)
             spread = np.zeros_like(grid)
             for ax in (0, 1):

@@ -28,9 +28,12 @@ inside the step cannot propagate: the call returns 0, the hand-back, and the Pyt
 meets the same case (the filters' divisions are the only places; they raise
 ZeroDivisionError in Python too).
 
-Only the faithful estimators run here (two filters, no grid, no noise-aware model, i.e.
-``solnic``); ``solnic-modern``'s joint EKF moves k̂ at every sample and keeps the Python path.
-Bit-identity is tested against the recorded (Python) path, tests/test_solnic_idle_step.py.
+:func:`idle_step` serves the faithful estimators (two filters, no grid, no noise-aware model,
+i.e. ``solnic``); :func:`joint_idle_step` the joint EKF with the noise-aware model
+(``solnic-modern``), whose k̂ moves at every sample: it predicts the next pulse afresh (keeping
+the last sample's plan by its key) and solves only the mean's backward equation for the w2 bias
+(:func:`~controllers.solnic.noise_model._pulse_bias`). Bit-identity is tested against the
+recorded (Python) path, tests/test_solnic_idle_step.py.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from numba import njit
 from numba.experimental.function_type import _get_wrapper_address
 
 from controllers.solnic.filter_kernels import joint_predict, joint_update
-from controllers.solnic.noise_model import _GL_X, _GL_W, _coasting_moments, _pulse_noise
+from controllers.solnic.noise_model import _GL_X, _GL_W, _coasting_moments, _pulse_bias
 from controllers.solnic.predictor import _conditional_kernel
 from plant.law_step import STEP_SIGNATURE, STEP_TYPE
 
@@ -230,7 +233,14 @@ J_SBUF = J_P + 25
 N_SINCE = 128                     # (t, y) pairs kept in the array; more: the sample is handed back
 J_MTAB = J_SBUF + 2 * N_SINCE
 N_MEMO = 258                      # Predictor.conditional's memo holds ≤ 257 keys (cleared past 256)
-N_JOINT_STATE = J_MTAB + 3 * N_MEMO
+J_CACHE = J_MTAB + 3 * N_MEMO
+# the last sample's plan (a pure function of its key): valid, key (k̂s, k̂c, Δt_u, brake, margin,
+# peak torque), Predictor.conditional's status, runs and (Δc, t_breakaway, t_cz, t_stop, t_off),
+# the w2 bias (valid flag, value). The shaft moves and the measurement update is skipped until
+# t_max, so k̂ and the plan repeat on those samples.
+(C_VALID, C_KS, C_KC, C_DTU, C_BRAKE, C_MARGIN, C_PEAK, C_R0, C_R1, C_RUNS0, C_DC, C_TB, C_TCZ, C_TSTOP, C_TOFF,
+ C_BIAS_OK, C_BIAS) = range(17)
+N_JOINT_STATE = J_CACHE + 17
 # params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants
 (J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX) = range(9, 17)
 N_JOINT_PARAMS = 17
@@ -300,10 +310,19 @@ def joint_idle_step(s, p, y, offs, levs):
         earliest = 0.0
     ks, kc, dtu = z[3], z[2], s[J_DTU]
     hit = _memo_hit(s, ks, kc, dtu)
-    r, ks_u, kc_u, runs0 = _conditional_kernel(ks, kc, dtu, p[J_U], p[J_T3], p[J_ALPHA], p[J_FD],
-                                               s[J_BRAKE] != 0.0, s[J_MARGIN], p[J_S2], p[J_CAP],
-                                               p[J_MINRATIO], 1e-6)
-    if r[0] != 0:
+    c = J_CACHE
+    brake, margin, peak = s[J_BRAKE], s[J_MARGIN], s[J_PEAK]
+    if not (s[c + C_VALID] != 0.0 and s[c + C_KS] == ks and s[c + C_KC] == kc and s[c + C_DTU] == dtu
+            and s[c + C_BRAKE] == brake and s[c + C_MARGIN] == margin and s[c + C_PEAK] == peak):
+        r, ks_u, kc_u, runs0 = _conditional_kernel(ks, kc, dtu, p[J_U], p[J_T3], p[J_ALPHA], p[J_FD],
+                                                   brake != 0.0, margin, p[J_S2], p[J_CAP],
+                                                   p[J_MINRATIO], 1e-6)
+        s[c + C_VALID], s[c + C_KS], s[c + C_KC], s[c + C_DTU] = 1.0, ks, kc, dtu
+        s[c + C_BRAKE], s[c + C_MARGIN], s[c + C_PEAK] = brake, margin, peak
+        s[c + C_R0], s[c + C_R1], s[c + C_RUNS0] = r[0], r[1], runs0
+        s[c + C_DC], s[c + C_TB], s[c + C_TCZ], s[c + C_TSTOP], s[c + C_TOFF] = r[2], r[3], r[4], r[5], r[10]
+        s[c + C_BIAS_OK] = 0.0
+    if s[c + C_R0] != 0:
         return 0                                  # Predictor._prediction raises: in Python
     if not hit:
         if s[J_MCOUNT] > 256:                     # memo.clear()
@@ -314,13 +333,15 @@ def joint_idle_step(s, p, y, offs, levs):
         s[j], s[j + 1], s[j + 2] = ks, kc, dtu
         s[J_MK] += 1.0
         s[J_MCOUNT] += 1.0
-        s[J_RUNS] += runs0 + r[1]
-    dc, tb, tcz, t_stop, t_off = r[2], r[3], r[4], r[5], r[10]
+        s[J_RUNS] += s[c + C_RUNS0] + s[c + C_R1]
+    dc, tb, tcz, t_stop, t_off = s[c + C_DC], s[c + C_TB], s[c + C_TCZ], s[c + C_TSTOP], s[c + C_TOFF]
     dc_plan = abs(dc)
     if s[J_GRID] != 0.0 and s[J_GP_OK] != 0.0:
         dc_plan = s[J_GP_DC]                      # the grid's predictive (w2 bias included)
+    elif s[c + C_BIAS_OK] != 0.0:
+        dc_plan += s[c + C_BIAS]                  # the same plan's bias, computed at an earlier sample
     else:                                         # SolnicController._pulse_noise(pred, dtu)[0]
-        cap = s[J_PEAK] * (1.0 - 1e-6)
+        cap = peak * (1.0 - 1e-6)
         ksn = cap if cap < ks else ks
         kcn = ksn if ksn < kc else kc
         s2 = p[J_S2]
@@ -331,7 +352,8 @@ def joint_idle_step(s, p, y, offs, levs):
                 bias = _coasting_moments(al, U, tau, s2, ksn, kcn, dtu, tb, tcz, t_stop,
                                          U * -math.expm1(-dtu / tau), _GL_X, _GL_W, al * kcn * (t_stop - tcz))[0]
             else:
-                bias = _pulse_noise(al, U, tau, s2, ksn, kcn, dtu, tb, tcz, t_stop, _GL_X, _GL_W)[0]
+                bias = _pulse_bias(al, U, tau, s2, ksn, kcn, dtu, tb, tcz, t_stop, _GL_X, _GL_W)
+        s[c + C_BIAS_OK], s[c + C_BIAS] = 1.0, bias
         dc_plan += bias
     x4_std = math.sqrt(0.0 if 0.0 > P[1, 1] else P[1, 1])
     if _fires(z[0], z[1], x4_std, dc_plan, p[TS], earliest, tcz, p[OVERSHOOT]):

@@ -83,7 +83,7 @@ from numba import njit
 from plant.params import PlantParams
 from controllers.models.acker import closed_form_kernel
 
-__all__ = ["PulseNoise", "pulse_noise", "braked_pulse_noise", "velocity_std_after"]
+__all__ = ["PulseNoise", "pulse_noise", "pulse_bias", "braked_pulse_noise", "velocity_std_after"]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 # the backward-equation solver: grid points in x, time steps after/before t_ks, domain width in
@@ -171,6 +171,20 @@ def pulse_noise(params: PlantParams, ks: float, kc: float, dt_u: float, t_breaka
     bias, variance = _pulse_noise(params.alpha, params.u_max, params.motor_time_constant, s2, ks, kc, dt_u,
                                   t_breakaway, t_current_zero, t_stop, _GL_X, _GL_W)
     return PulseNoise(bias, variance)
+
+
+def pulse_bias(params: PlantParams, ks: float, kc: float, dt_u: float, t_breakaway: float | None,
+               t_current_zero: float, t_stop: float, braked: bool = False) -> float:
+    """``(braked_pulse_noise if braked else pulse_noise)(...).bias`` without the variance (the
+    backward solve for the mean only, :func:`_pulse_bias`): what a trigger test reads [rad]."""
+    s2 = params.alpha**2 * params.sigma2_sq
+    if t_breakaway is None or s2 <= 0 or not t_stop > t_breakaway:
+        return 0.0
+    al, U, tau = params.alpha, params.u_max, params.motor_time_constant
+    if braked and t_stop > t_current_zero and kc > 0:
+        return _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop,
+                                 U * -math.expm1(-dt_u / tau), _GL_X, _GL_W, al * kc * (t_stop - t_current_zero))[0]
+    return _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, _GL_X, _GL_W)
 
 
 @njit(cache=True)
@@ -368,3 +382,102 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
                 u2[i] -= cp[i] * u2[i + 1]
             mu_o = mu_n
     return u1[0], u2[0]
+
+
+@njit(cache=True)
+def _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, gl_x, gl_w):
+    """The bias of :func:`_pulse_noise` alone (what the idle planner reads): the same operations
+    in the same order for the mean, without the second moment's equation (5) — about half the
+    backward solve. Bit for bit ``_pulse_noise(...)[0]`` (tests/test_solnic_noise_model.py)."""
+    x3_off = U * -math.expm1(-dt_u / tau)
+    if not kc > 0:
+        return math.inf
+    T1 = t_current_zero - t_breakaway
+    r = _v0(t_current_zero, dt_u, t_breakaway, al, U, tau, ks, kc, x3_off) / math.sqrt(s2 * T1)
+    w = min(max((_PDE_BLEND[1] - r) / (_PDE_BLEND[1] - _PDE_BLEND[0]), 0.0), 1.0)
+    bias = 0.0
+    if w > 0.0:
+        m1 = _absorbed_mean(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero,
+                            _PDE_N_X, _PDE_N_ABS, _PDE_N_REFL)
+        dc0 = closed_form_kernel(dt_u, U, tau, al, ks, kc)[0]
+        bias = w * (m1 - dc0)
+    if w < 1.0:
+        b, v = _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop,
+                                 x3_off, gl_x, gl_w)
+        bias += (1.0 - w) * b
+    return bias
+
+
+@njit(cache=True)
+def _absorbed_mean(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl):
+    """E[Δc] of :func:`_absorbed_moments` alone: its u1 arithmetic (equation (4)) line for line,
+    without u2 (equation (5) reads u1, u1 never reads u2)."""
+    x3_off = U * -math.expm1(-dt_u / tau)
+    a = al * kc
+    T = t_cz
+    t_ks = dt_u + tau * math.log((x3_off + U) / (ks + U)) if x3_off > ks else dt_u
+    t_ks = min(max(t_ks, t_b), T)
+    t_kc = dt_u + tau * math.log((x3_off + U) / (kc + U)) if x3_off > kc else dt_u
+    t_kc = min(max(t_kc, t_b), T)
+    v_peak = max(_v0(t_kc, dt_u, t_b, al, U, tau, ks, kc, x3_off), 0.0)
+    X = v_peak + _PDE_SIGMAS * math.sqrt(s2 * (T - t_b))
+    dx = X / n_x
+    D = 0.5 * s2 / (dx * dx)
+    D2 = 2 * D
+    n = n_x + 1
+    x = np.empty(n)
+    u1 = np.empty(n)
+    for i in range(n):
+        xi = i * dx
+        x[i] = xi
+        u1[i] = xi * xi / (2 * a) + s2 * xi / (2 * a * a)
+    r1 = np.empty(n)
+    cp = np.empty(n)
+    M = 0.0
+    K = 0.0
+    for phase in range(2):
+        t_hi, t_lo, m = (T, t_ks, n_abs) if phase == 0 else (t_ks, t_b, n_refl)
+        if not t_hi > t_lo:
+            continue
+        h = (t_hi - t_lo) / m
+        reflect = phase == 1
+        mu_o = al * (_x3(t_hi, dt_u, U, tau, x3_off) - kc)
+        for k in range(m):
+            t_o = t_hi - k * h
+            t_n = t_hi - (k + 1) * h
+            mu_n = al * (_x3(t_n, dt_u, U, tau, x3_off) - kc)
+            th = 1.0 if k < 2 else 0.5
+            e = (1.0 - th) * h
+            thh = th * h
+            ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
+            for i in range(1, n_x):
+                r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
+            an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
+            lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn
+            if reflect:
+                r1[0] = u1[0] + e * (D2 * (u1[1] - u1[0]))
+                di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
+            else:
+                r1[0] = 0.0
+                di_0, up_0 = 1.0, 0.0
+            M += 0.5 * h * (mu_o + mu_n)
+            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
+            w = T - t_n
+            y, vz = X + M, s2 * w
+            EI = X * w + K
+            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+            r1[n_x] = EI + EP1
+            cp[0] = up_0 / di_0
+            u1[0] = r1[0] / di_0
+            for i in range(1, n_x):
+                d = di_i - lo_i * cp[i - 1]
+                cp[i] = up_i / d
+                u1[i] = (r1[i] - lo_i * u1[i - 1]) / d
+            d = 1.0 - 0.0 * cp[n_x - 1]
+            cp[n_x] = 0.0 / d
+            u1[n_x] = (r1[n_x] - 0.0 * u1[n_x - 1]) / d
+            for i in range(n - 2, 0, -1):
+                u1[i] -= cp[i] * u1[i + 1]
+            u1[0] -= cp[0] * u1[1]
+            mu_o = mu_n
+    return u1[0]
