@@ -165,3 +165,15 @@ def test_solnic_modern_variants_are_the_rows_before_the_bias_only_paths(options,
         before, _, _ = _run(make_controller("solnic-modern", **options), "thesis", seed, 10.0, compiled=False)
         assert compiled.status == "ok" and n_python < 300
         assert _row(compiled) == _row(before), seed
+
+
+def test_a_numba_without_the_wrapper_address_helper_gives_the_same_rows(monkeypatch):
+    """``StepAddress`` rests on numba's semi-internal ``_get_wrapper_address``; without it the
+    dispatcher itself is the step (typed at every entry): the rows must not change."""
+    addressed, _, _ = _run("solnic", "thesis", 5, 8.0)
+    monkeypatch.setattr(idle, "_get_wrapper_address", None)
+    monkeypatch.setattr(idle, "_ADDRESS", [])
+    plain, n_python, _ = _run("solnic", "thesis", 5, 8.0)
+    assert not isinstance(idle.idle_step_address(), idle.StepAddress)
+    assert _row(plain) == _row(addressed)
+    assert plain.summary["pulses"] > 5 and n_python <= 3 * plain.summary["pulses"] + 5   # still the compiled loop
