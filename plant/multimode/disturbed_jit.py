@@ -591,26 +591,53 @@ def _ladder_width(room, sub, kind, c0, c1, c2, c3, c4, c5, c6, lad):
 
 
 @njit(cache=True)
+def _edot(e, x):
+    """e·x for a barrier functional e (entries 0 or ±1, at most two non-zero): numpy's ``e @ x``
+    (OpenBLAS ddot sums an order-8 vector from the first entry, ``dot += y[i]·x[i]``; the products
+    are exact, so the two non-zero terms give the same double in any order)."""
+    acc = 0.0
+    for i in range(e.shape[0]):
+        acc += e[i] * x[i]
+    return acc
+
+
+@njit(cache=True)
 def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out):
-    """disturbed._bisect: the offset of the first crossing; the state there into ``out``."""
+    """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
+
+    The cached bridge law and conditional law are looked up here before calling their builders
+    (a call passes ~20 tables, each an atomic reference-count pair), and Φ·Y, G·(…) are
+    :func:`_gemv` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
+    :func:`_edot`: no allocation per level but the noise factor's column-ordered products."""
     rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN = C
     t0 = 0.0
-    Ya = Ya0.copy()
-    Yb = Yb0.copy()
+    R = np.empty((6, _N))
+    Ya, Yb, Ym, mean, diff, tmp = R[0], R[1], R[2], R[3], R[4], R[5]
+    for i in range(_N):
+        Ya[i] = Ya0[i]
+        Yb[i] = Yb0[i]
     while w > tol:
-        k = _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
-        Ph, Pw, G = BPH[k], BPW[k], BG[k]
-        diff = Yb - np.dot(Pw, Ya)
-        mean = np.dot(Ph, Ya) + np.dot(G, diff)
-        _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN)
+        k = _slot(mode, w, _NB_BITS)
+        if not (BK[k, 0] == mode and BK[k, 1] == w):
+            k = _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
+        _gemv(BPW[k], Ya, tmp)
+        for i in range(_N):
+            diff[i] = Yb[i] - tmp[i]
+        _gemv(BPH[k], Ya, mean)
+        _gemv(BG[k], diff, tmp)
+        for i in range(_N):
+            mean[i] = mean[i] + tmp[i]
+        if BCN[k, v] == -2:
+            _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN)
         var = BCV[k, v]
-        mu = np.dot(e, mean) + c0
-        a = np.dot(e, Ya) + c0
-        b = np.dot(e, Yb) + c0
+        mu = _edot(e, mean) + c0
+        a = _edot(e, Ya) + c0
+        b = _edot(e, Yb) + c0
         half = w / 2
         if not noisy:
-            Ym = mean
-            cm = np.dot(e, Ym) + c0
+            for i in range(_N):
+                Ym[i] = mean[i]
+            cm = _edot(e, Ym) + c0
         elif var > 0.0:
             sd = math.sqrt(var)
             if a > 0.0 and b > 0.0 and sig2 > 0.0:
@@ -618,29 +645,35 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out)
             else:
                 cm = mu + sd * normal(z, cursor)
             dc = cm - mu
-            Ym = np.empty(_N)
             for i in range(_N):
                 Ym[i] = mean[i] + BCK[k, v, i] * dc
             nf = BCN[k, v]
             if nf > 0:
                 FT = BCF[k, v, :_N * nf].reshape((nf, _N))
-                Ym += np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
+                add = np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
+                for i in range(_N):
+                    Ym[i] += add[i]
         else:
             nb = BNB[k]
             if nb:
                 BT = BBF[k, :_N * nb].reshape((nb, _N))
-                Ym = mean + np.dot(BT.T, _normals(z, cursor, nb))
+                add = np.dot(BT.T, _normals(z, cursor, nb))
+                for i in range(_N):
+                    Ym[i] = mean[i] + add[i]
             else:
-                Ym = mean + 0.0
-            cm = np.dot(e, Ym) + c0
+                for i in range(_N):
+                    Ym[i] = mean[i] + 0.0
+            cm = _edot(e, Ym) + c0
         pl = _cross_prob(a, cm, half, sig2)
         pr = _cross_prob(cm, b, half, sig2)
         pc = 1.0 - (1.0 - pl) * (1.0 - pr)
         S[_NSUB] += 1.0
         if pl >= 1.0 or (pl > 0.0 and uniform(z, cursor) * pc < pl):
-            Yb = Ym
+            for i in range(_N):
+                Yb[i] = Ym[i]
         else:
-            Ya = Ym
+            for i in range(_N):
+                Ya[i] = Ym[i]
             t0 = t0 + half
         w = half
     out[:] = Yb
