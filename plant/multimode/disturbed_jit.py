@@ -602,14 +602,14 @@ def _edot(e, x):
 
 
 @njit(cache=True)
-def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out):
+def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
     """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
 
-    The cached bridge law and conditional law are looked up here before calling their builders
-    (a call passes ~20 tables, each an atomic reference-count pair), and Φ·Y, G·(…) are
-    :func:`_gemv` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
-    :func:`_edot`: no allocation per level but the noise factor's column-ordered products."""
-    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN = C
+    The cached bridge law and conditional law are read from the flat tables by offset, their
+    builders called (with the table views, :func:`_views`) only on a miss; Φ·Y and G·(…) are
+    :func:`_gemv_flat` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
+    :func:`_edot`: per level no allocation and no reference count but the noise factor's
+    column-ordered product."""
     t0 = 0.0
     R = np.empty((6, _N))
     Ya, Yb, Ym, mean, diff, tmp = R[0], R[1], R[2], R[3], R[4], R[5]
@@ -618,18 +618,22 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out)
         Yb[i] = Yb0[i]
     while w > tol:
         k = _slot(mode, w, _NB_BITS)
-        if not (BK[k, 0] == mode and BK[k, 1] == w):
-            k = _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
-        _gemv(BPW[k], Ya, tmp)
+        if not (FB[_OFF_BK + 2 * k] == mode and FB[_OFF_BK + 2 * k + 1] == w):
+            C = _views(recs, rds, FB, IB)
+            k = _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
+                        C[13], C[14], C[15], C[19])
+        _gemv_flat(FB, _OFF_BPW + 64 * k, _N, Ya, 0, tmp)
         for i in range(_N):
             diff[i] = Yb[i] - tmp[i]
-        _gemv(BPH[k], Ya, mean)
-        _gemv(BG[k], diff, tmp)
+        _gemv_flat(FB, _OFF_BPH + 64 * k, _N, Ya, 0, mean)
+        _gemv_flat(FB, _OFF_BG + 64 * k, _N, diff, 0, tmp)
         for i in range(_N):
             mean[i] = mean[i] + tmp[i]
-        if BCN[k, v] == -2:
-            _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN)
-        var = BCV[k, v]
+        kv = 2 * k + v
+        if IB[_OFF_BCN + kv] == -2:
+            C = _views(recs, rds, FB, IB)
+            _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+        var = FB[_OFF_BCV + kv]
         mu = _edot(e, mean) + c0
         a = _edot(e, Ya) + c0
         b = _edot(e, Yb) + c0
@@ -646,17 +650,19 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out)
                 cm = mu + sd * normal(z, cursor)
             dc = cm - mu
             for i in range(_N):
-                Ym[i] = mean[i] + BCK[k, v, i] * dc
-            nf = BCN[k, v]
+                Ym[i] = mean[i] + FB[_OFF_BCK + _N * kv + i] * dc
+            nf = IB[_OFF_BCN + kv]
             if nf > 0:
-                FT = BCF[k, v, :_N * nf].reshape((nf, _N))
+                o = _OFF_BCF + 64 * kv
+                FT = FB[o:o + _N * nf].reshape((nf, _N))
                 add = np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
                 for i in range(_N):
                     Ym[i] += add[i]
         else:
-            nb = BNB[k]
+            nb = IB[_OFF_BNB + k]
             if nb:
-                BT = BBF[k, :_N * nb].reshape((nb, _N))
+                o = _OFF_BBF + 64 * k
+                BT = FB[o:o + _N * nb].reshape((nb, _N))
                 add = np.dot(BT.T, _normals(z, cursor, nb))
                 for i in range(_N):
                     Ym[i] = mean[i] + add[i]
@@ -923,8 +929,8 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
 
 @njit(cache=True)
 def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
-    """_bisect on the table views (cut here: the sub-step holds no reference to them)."""
-    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), out)
+    """_bisect (kept as the sub-step's entry to it)."""
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out)
 
 
 @njit(cache=True, _nrt=False)
@@ -1054,6 +1060,9 @@ def _offsets(layout):
 _OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
 _OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
 _OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
+_OFF_BK, _OFF_BPH, _OFF_BPW, _OFF_BG = _OFF_F["BK"], _OFF_F["BPH"], _OFF_F["BPW"], _OFF_F["BG"]
+_OFF_BBF, _OFF_BCV, _OFF_BCK, _OFF_BCF = _OFF_F["BBF"], _OFF_F["BCV"], _OFF_F["BCK"], _OFF_F["BCF"]
+_OFF_BNB, _OFF_BCN = _OFF_I["BNB"], _OFF_I["BCN"]
 
 
 @njit(cache=True)
