@@ -590,7 +590,7 @@ def _ladder_width(room, sub, kind, c0, c1, c2, c3, c4, c5, c6, lad):
     return min(sub, room), False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _edot(e, x):
     """e·x for a barrier functional e (entries 0 or ±1, at most two non-zero): numpy's ``e @ x``
     (OpenBLAS ddot sums an order-8 vector from the first entry, ``dot += y[i]·x[i]``; the products
