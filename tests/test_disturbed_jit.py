@@ -295,3 +295,20 @@ def test_the_x1_log_of_a_strong_disturbance_grows_its_scratch_and_redoes_the_sam
         for key in ("t", "x1"):
             np.testing.assert_array_equal(getattr(log, part)[key], getattr(rec, part)[key])
     assert _untimed(log.metrics) == _untimed(rec.metrics)
+
+
+def test_the_crossing_probability_skips_exp_only_where_exp_is_zero():
+    """_cross_prob returns 0.0 without exp below _EXP_ZERO: exp is exactly +0 there (and at the
+    next doubles above −745.1332… it is not yet 0, so the cut lies in exp's zero range)."""
+    import math
+    assert disturbed_jit._EXP_ZERO < -745.1332191019412
+    for x in (disturbed_jit._EXP_ZERO, np.nextafter(disturbed_jit._EXP_ZERO, 0.0), -745.14, -1e4, -1e300):
+        assert math.exp(x) == 0.0 and math.copysign(1.0, math.exp(x)) == 1.0
+    assert math.exp(-745.13) > 0.0
+    rng = np.random.default_rng(5)
+    for _ in range(20000):
+        va, vb = np.exp(rng.uniform(-30, 5, 2))
+        w, sig2 = np.exp(rng.uniform(-25, 0)), np.exp(rng.uniform(-30, 5))
+        fast = disturbed_jit._cross_prob(va, vb, w, sig2)
+        assert fast == disturbed._cross_prob(float(va), float(vb), float(w), float(sig2))
+        assert fast == math.exp(-2.0 * va * vb / (sig2 * w))
