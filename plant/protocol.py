@@ -42,7 +42,8 @@ and ``pendulum.py``: one protocol, parameters explicit) a family is a small stat
     around that step, with the quantized sensor and the compute delay, bit-identical to calling
     :meth:`observe`, the controller's ``step`` and :meth:`delayed_step`; returns a
     :class:`plant.law_driver.LawRun`. :meth:`compiled_loop` offers it without a disturbance
-    torque.
+    torque; a family whose disturbed plant has its own compiled loop overrides
+    :meth:`compiled_loop` (and :meth:`law_loop`) to offer that one (multimode does).
 ``compiled_loop_logs``
     True when ``compiled_law_loop`` takes ``log`` (a :class:`plant.law_driver.X1Log`: t and x1 at
     every sample and plant event, for a run that keeps only those); otherwise such a run calls

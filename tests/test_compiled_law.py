@@ -61,6 +61,11 @@ def _run(name_or_controller, scenario, seed, *, duration=3.0, noise=True, **kw):
     ("linear", "delayed", 12, True, {}),
     ("dithered", "delayed", 13, True, {}),
     ("dithered", "quantized", 14, True, {}),
+    ("pulse-width", "disturbed", 15, True, {}),                  # the disturbed plant's compiled loop
+    ("reset-pid", "disturbed", 16, True, {}),
+    ("observer-pid", "disturbed", 17, True, {}),
+    ("friction-ff-pid", "disturbed", 18, True, {}),
+    ("linear", "disturbed", 19, False, {}),
 ])
 def test_compiled_rows_are_the_python_rows(name, scenario, seed, noise, options):
     c = make_controller(name, **options)
@@ -126,7 +131,7 @@ class _Handing(Controller):
 
 
 @pytest.mark.parametrize("scenario, hand_at", [("thesis", 137.0), ("delayed", 137.0), ("quantized", 0.0),
-                                                ("stribeck", 299.0), ("compliant", 50.0)])
+                                                ("stribeck", 299.0), ("compliant", 50.0), ("disturbed", 137.0)])
 def test_a_sample_handed_back_is_done_in_python_and_the_loop_resumes_compiled(scenario, hand_at):
     compiled, n_python, c = _run(_Handing(hand_at=hand_at), scenario, 2)
     python, n_all, _ = _run(_Handing(hand_at=hand_at), scenario, 2, compiled=False)
@@ -230,12 +235,13 @@ def test_compiled_law_checks_its_fields():
         CompiledLaw(_handing_step, s, p, "linear")
 
 
-def test_the_compiled_loop_is_offered_without_a_disturbance_torque_only():
+def test_the_compiled_loop_with_a_disturbance_torque_is_the_disturbed_plants():
+    from plant.multimode import disturbed_loop
     fam = get_family("multimode")
     sc = builtin_scenarios()
     for name in ("thesis", "quantized", "delayed"):
         assert fam.compiled_loop(sc[name].params) is fam.compiled_law_loop is not None
-    assert fam.compiled_loop(sc["disturbed"].params) is None
+    assert fam.compiled_loop(sc["disturbed"].params) is disturbed_loop.run_compiled_law
 
 
 def test_time_limit_stops_the_compiled_law_loop():
@@ -264,6 +270,7 @@ def test_a_lead_path_outside_the_compiled_kernels_is_fed_in_and_not_compiled():
 
 @pytest.mark.parametrize("name, scenario, seed", [
     ("observer-pid", "thesis", 21), ("reset-pid", "delayed", 22), ("friction-ff-pid", "stribeck", 23),
+    ("pulse-width", "disturbed", 24),
 ])
 def test_an_interval_that_runs_out_of_noise_is_undone_and_redone(monkeypatch, name, scenario, seed):
     """The compiled law loop's ``NoiseExhausted`` branch: with a 64-normal block and no margin,

@@ -194,3 +194,121 @@ def test_transition_cache_slots_separate_widths_that_differ_in_low_bits():
     assert len(slots) >= 66
     # the mode is part of the key: the same width in the three modes
     assert len({disturbed_jit._slot(m, 4e-4, disturbed_jit._NT_BITS) for m in (1, 2, 3)}) == 3
+
+
+# --- the compiled loop of a controller step (disturbed_loop.run_compiled_law) --------------------
+
+def _loop(controller, params, seed, duration, **kw):
+    """A run and the number of samples the controller's Python ``step`` did."""
+    calls = []
+    step = controller.step
+    controller.step = lambda y: calls.append(1) or step(y)
+    r = run_closed_loop(params, controller, duration_s=duration, warmup_s=0.5, seed=seed, family=_SCEN.family,
+                        model=_SCEN.model, **kw)
+    return r, len(calls)
+
+
+def _delayed_quantized():
+    import dataclasses
+    return dataclasses.replace(_SCEN.params, command_delay=2e-3, quantization=1e-6)
+
+
+@_NEEDS_SAME_BLAS
+@pytest.mark.parametrize("name", ["pulse-width", "reset-pid", "observer-pid", "friction-ff-pid", "linear", "solnic",
+                                  "pulses"])
+def test_compiled_steps_on_the_disturbed_plant_are_the_python_rows(name):
+    """Every controller with a compiled step (a linear law through CompiledLaw, solnic's idle step
+    with its hand-backs, bridge pulses) runs on the disturbed plant with a 2 ms delay and a 1 µrad
+    quantizer in the compiled loop, and its row, x1 log and final state are those of the runner's
+    Python loop (plant.multimode.disturbed.advance per sample), exactly."""
+    from tests.test_compiled_law import _Pulses
+    p = _delayed_quantized()
+    make = _Pulses if name == "pulses" else (lambda: make_controller(name))
+    fam = get_family("multimode")
+    assert fam.law_loop(p) is None and fam.compiled_loop(p) is disturbed_loop.run_compiled_law
+    fast, n_fast = _loop(make(), p, 7, 3.0)
+    logged, n_logged = _loop(make(), p, 7, 3.0, x1_log=True)
+    plain, n_plain = _loop(make(), p, 7, 3.0, compiled=False)
+    recorded, _ = _loop(make(), p, 7, 3.0, record=True)
+    assert n_plain == 300
+    if name == "solnic":                     # hands its pulse cycles back, the idle samples compiled
+        assert 0 < n_fast < 150 and n_logged == n_fast
+    else:
+        assert n_fast == n_logged == 0
+    assert fast.status == "ok" and plain.metrics["n_events"] > 0
+    for res in (fast, logged, recorded):
+        assert (res.status, res.message, res.summary, res.simulated_s) == (plain.status, plain.message, plain.summary,
+                                                                          plain.simulated_s)
+        assert _untimed(res.metrics) == _untimed(plain.metrics), name
+    for part in ("samples", "events"):
+        for key in ("t", "x1"):
+            np.testing.assert_array_equal(getattr(logged, part)[key], getattr(recorded, part)[key])
+
+
+@_NEEDS_SAME_BLAS
+def test_the_compiled_step_loop_is_the_python_reference_kernel(monkeypatch):
+    """Anchored on the plain Python kernel (advance_python): pulse-width on the disturbed plant,
+    delayed and quantized, and on the built-in scenario."""
+    for p in (_SCEN.params, _delayed_quantized()):
+        fast, n_fast = _loop(make_controller("pulse-width"), p, 5, 0.8)
+        with monkeypatch.context() as m:
+            m.setattr(disturbed, "advance", disturbed.advance_python)
+            ref, _ = _loop(make_controller("pulse-width"), p, 5, 0.8, compiled=False)
+        assert n_fast == 0 and ref.metrics["n_events"] > 0
+        assert (fast.status, fast.summary, _untimed(fast.metrics)) == (ref.status, ref.summary, _untimed(ref.metrics))
+
+
+def test_a_compiled_step_that_diverges_ends_as_the_python_loop():
+    """A divergence inside the compiled loop: the same status, message and row as the Python loop."""
+    from tests.test_compiled_law import _Handing
+    opts = SimOptions(diverge_error=2e-5)
+    rows = []
+    for compiled in (True, False):
+        r, _ = _loop(_Handing(hand_at=-1.0), _SCEN.params, 3, 3.0, options=opts, compiled=compiled)
+        rows.append((r.status, r.message, r.summary, _untimed(r.metrics)))
+    assert rows[0][0] == "diverged" and rows[0] == rows[1]
+
+
+@_NEEDS_SAME_BLAS
+def test_the_x1_log_of_a_strong_disturbance_grows_its_scratch_and_redoes_the_sample(monkeypatch):
+    """A strong disturbance (σd = 1.2 ozf·in, τd = 5 ms) under bridge pulses: intervals with several
+    plant events overflow a one-row event scratch (disturbed_jit.RecordFull); the compiled loop
+    undoes the sample, grows the scratch and redoes it, and the log is the recorded run's."""
+    import bench.runner as runner
+    from plant.law_driver import X1Log
+    from tests.test_compiled_law import _Pulses
+
+    made = []
+
+    class _Tiny(X1Log):
+        def __init__(self, n):
+            super().__init__(n)
+            self.events, self.scratch = np.empty((2, 2)), np.empty((1, self.scratch.shape[1]))
+            made.append(self)
+
+    monkeypatch.setattr(runner, "X1Log", _Tiny)
+    rec, _ = _loop(_Pulses(), _STRONG, 2, 2.0, record=True)
+    log, n_python = _loop(_Pulses(), _STRONG, 2, 2.0, x1_log=True)
+    assert n_python == 0 and log.status == rec.status == "ok"
+    assert made[0].scratch.shape[0] > 1 and made[0].events.shape[0] > 2      # both growth paths taken
+    for part in ("samples", "events"):
+        for key in ("t", "x1"):
+            np.testing.assert_array_equal(getattr(log, part)[key], getattr(rec, part)[key])
+    assert _untimed(log.metrics) == _untimed(rec.metrics)
+
+
+def test_the_crossing_probability_skips_exp_only_where_exp_is_zero():
+    """_cross_prob returns 0.0 without exp below _EXP_ZERO: exp is exactly +0 there (and at the
+    next doubles above −745.1332… it is not yet 0, so the cut lies in exp's zero range)."""
+    import math
+    assert disturbed_jit._EXP_ZERO < -745.1332191019412
+    for x in (disturbed_jit._EXP_ZERO, np.nextafter(disturbed_jit._EXP_ZERO, 0.0), -745.14, -1e4, -1e300):
+        assert math.exp(x) == 0.0 and math.copysign(1.0, math.exp(x)) == 1.0
+    assert math.exp(-745.13) > 0.0
+    rng = np.random.default_rng(5)
+    for _ in range(20000):
+        va, vb = np.exp(rng.uniform(-30, 5, 2))
+        w, sig2 = np.exp(rng.uniform(-25, 0)), np.exp(rng.uniform(-30, 5))
+        fast = disturbed_jit._cross_prob(va, vb, w, sig2)
+        assert fast == disturbed._cross_prob(float(va), float(vb), float(w), float(sig2))
+        assert fast == math.exp(-2.0 * va * vb / (sig2 * w))

@@ -173,7 +173,8 @@ def test_a_phase_controller_takes_the_compiled_loop_and_keeps_its_peaks(tmp_path
 
 
 @pytest.mark.parametrize("scenario, tiny", [("thesis", ""), ("stribeck", "events"), ("lugre", ""),
-                                            ("compliant", "events"), ("delayed", "scratch"), ("quantized", "")])
+                                            ("compliant", "events"), ("delayed", "scratch"), ("quantized", ""),
+                                            ("disturbed", "events")])
 def test_the_x1_log_is_the_recorded_samples_and_events(scenario, tiny, monkeypatch):
     """t and x1 of every sample and plant event, compiled, equal the recorded run's exactly; with
     tiny buffers the log grows, and where an interval has two events the kernel's one-row event

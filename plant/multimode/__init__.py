@@ -12,7 +12,7 @@ whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse``
 response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``em_family`` (the
 Euler–Maruyama reference behind the family seam, for closed-loop comparisons), ``disturbed``
 (the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when
-``disturbance_torque_std`` > 0; compiled in ``disturbed_jit``, its linear-law loop ``disturbed_loop``).
+``disturbance_torque_std`` > 0; compiled in ``disturbed_jit``, its closed loops in ``disturbed_loop``).
 """
 
 from __future__ import annotations
@@ -56,6 +56,14 @@ class Multimode(PlantFamily):
         if params.disturbance_torque_std != 0.0 and params.quantization == 0.0 and params.command_delay == 0.0:
             return disturbed_loop.run_law
         return super().law_loop(params)
+
+    def compiled_loop(self, params):
+        """As :meth:`PlantFamily.compiled_loop`; with the disturbance torque on, the disturbed
+        plant's compiled loop of a controller step (:func:`plant.multimode.disturbed_loop.run_compiled_law`:
+        sensor, delay and x1 log as the plain one's)."""
+        if params.disturbance_torque_std != 0.0:
+            return disturbed_loop.run_compiled_law
+        return super().compiled_loop(params)
 
     def step(self, state, command, params, noise, options, *, duration=None, record=False):
         if params.disturbance_torque_std != 0.0:

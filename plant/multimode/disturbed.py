@@ -33,7 +33,7 @@ itself, bit for bit. This module is the Python reference (``advance_python``), k
 it caches what depends only on (mode, h) or (mode, h, e) — Φ, Q and their factors, the bridge
 law, and the bisection's conditional law given c — and does the sub-step's tests in scalar
 arithmetic on Python floats (the same doubles). The same law runs compiled in
-:mod:`plant.multimode.disturbed_jit` (and its linear-law loop, :mod:`~plant.multimode.disturbed_loop`),
+:mod:`plant.multimode.disturbed_jit` (and its closed loops, :mod:`~plant.multimode.disturbed_loop`),
 bit for bit where OpenBLAS sums in the same order (tests/test_disturbed_jit.py).
 """
 

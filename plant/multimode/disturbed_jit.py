@@ -522,11 +522,21 @@ def _apply_level(Y, S, level, bridge, dp):
 
 @njit(cache=True)
 def _cross_prob(va, vb, w, sig2):
+    """disturbed._cross_prob. An exponent below :data:`_EXP_ZERO` gives 0.0 without calling exp:
+    the value exp returns there (it underflows to +0 below ln 2⁻¹⁰⁷⁵ ≈ −745.13), but libm's
+    underflow path (errno, the SVID wrapper) cost ~⅕ of a linear cell's CPU on the disturbed
+    plant, where a sub-step far from its barrier has exponents of −10⁴ and below."""
     if vb <= 0.0 or va <= 0.0:
         return 1.0
     if sig2 <= 0.0 or not w > 0.0:
         return 0.0
-    return math.exp(-2.0 * va * vb / (sig2 * w))
+    x = -2.0 * va * vb / (sig2 * w)
+    if x < _EXP_ZERO:
+        return 0.0
+    return math.exp(x)
+
+
+_EXP_ZERO = -746.0      # exp(x) == 0.0 for every double x < −745.1332191019412 (tests/test_disturbed_jit.py)
 
 
 @njit(cache=True)
@@ -590,27 +600,58 @@ def _ladder_width(room, sub, kind, c0, c1, c2, c3, c4, c5, c6, lad):
     return min(sub, room), False
 
 
+@njit(cache=True, inline="always")
+def _edot(e, x):
+    """e·x for a barrier functional e (entries 0 or ±1, at most two non-zero): numpy's ``e @ x``
+    (OpenBLAS ddot sums an order-8 vector from the first entry, ``dot += y[i]·x[i]``; the products
+    are exact, so the two non-zero terms give the same double in any order)."""
+    acc = 0.0
+    for i in range(e.shape[0]):
+        acc += e[i] * x[i]
+    return acc
+
+
 @njit(cache=True)
-def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out):
-    """disturbed._bisect: the offset of the first crossing; the state there into ``out``."""
-    rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN = C
+def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+    """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
+
+    The cached bridge law and conditional law are read from the flat tables by offset, their
+    builders called (with the table views, :func:`_views`) only on a miss; Φ·Y and G·(…) are
+    :func:`_gemv_flat` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
+    :func:`_edot`: per level no allocation and no reference count but the noise factor's
+    column-ordered product."""
     t0 = 0.0
-    Ya = Ya0.copy()
-    Yb = Yb0.copy()
+    R = np.empty((6, _N))
+    Ya, Yb, Ym, mean, diff, tmp = R[0], R[1], R[2], R[3], R[4], R[5]
+    for i in range(_N):
+        Ya[i] = Ya0[i]
+        Yb[i] = Yb0[i]
     while w > tol:
-        k = _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
-        Ph, Pw, G = BPH[k], BPW[k], BG[k]
-        diff = Yb - np.dot(Pw, Ya)
-        mean = np.dot(Ph, Ya) + np.dot(G, diff)
-        _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN)
-        var = BCV[k, v]
-        mu = np.dot(e, mean) + c0
-        a = np.dot(e, Ya) + c0
-        b = np.dot(e, Yb) + c0
+        k = _slot(mode, w, _NB_BITS)
+        if not (FB[_OFF_BK + 2 * k] == mode and FB[_OFF_BK + 2 * k + 1] == w):
+            C = _views(recs, rds, FB, IB)
+            k = _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
+                        C[13], C[14], C[15], C[19])
+        _gemv_flat(FB, _OFF_BPW + 64 * k, _N, Ya, 0, tmp)
+        for i in range(_N):
+            diff[i] = Yb[i] - tmp[i]
+        _gemv_flat(FB, _OFF_BPH + 64 * k, _N, Ya, 0, mean)
+        _gemv_flat(FB, _OFF_BG + 64 * k, _N, diff, 0, tmp)
+        for i in range(_N):
+            mean[i] = mean[i] + tmp[i]
+        kv = 2 * k + v
+        if IB[_OFF_BCN + kv] == -2:
+            C = _views(recs, rds, FB, IB)
+            _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+        var = FB[_OFF_BCV + kv]
+        mu = _edot(e, mean) + c0
+        a = _edot(e, Ya) + c0
+        b = _edot(e, Yb) + c0
         half = w / 2
         if not noisy:
-            Ym = mean
-            cm = np.dot(e, Ym) + c0
+            for i in range(_N):
+                Ym[i] = mean[i]
+            cm = _edot(e, Ym) + c0
         elif var > 0.0:
             sd = math.sqrt(var)
             if a > 0.0 and b > 0.0 and sig2 > 0.0:
@@ -618,29 +659,37 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, C, out)
             else:
                 cm = mu + sd * normal(z, cursor)
             dc = cm - mu
-            Ym = np.empty(_N)
             for i in range(_N):
-                Ym[i] = mean[i] + BCK[k, v, i] * dc
-            nf = BCN[k, v]
+                Ym[i] = mean[i] + FB[_OFF_BCK + _N * kv + i] * dc
+            nf = IB[_OFF_BCN + kv]
             if nf > 0:
-                FT = BCF[k, v, :_N * nf].reshape((nf, _N))
-                Ym += np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
+                o = _OFF_BCF + 64 * kv
+                FT = FB[o:o + _N * nf].reshape((nf, _N))
+                add = np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
+                for i in range(_N):
+                    Ym[i] += add[i]
         else:
-            nb = BNB[k]
+            nb = IB[_OFF_BNB + k]
             if nb:
-                BT = BBF[k, :_N * nb].reshape((nb, _N))
-                Ym = mean + np.dot(BT.T, _normals(z, cursor, nb))
+                o = _OFF_BBF + 64 * k
+                BT = FB[o:o + _N * nb].reshape((nb, _N))
+                add = np.dot(BT.T, _normals(z, cursor, nb))
+                for i in range(_N):
+                    Ym[i] = mean[i] + add[i]
             else:
-                Ym = mean + 0.0
-            cm = np.dot(e, Ym) + c0
+                for i in range(_N):
+                    Ym[i] = mean[i] + 0.0
+            cm = _edot(e, Ym) + c0
         pl = _cross_prob(a, cm, half, sig2)
         pr = _cross_prob(cm, b, half, sig2)
         pc = 1.0 - (1.0 - pl) * (1.0 - pr)
         S[_NSUB] += 1.0
         if pl >= 1.0 or (pl > 0.0 and uniform(z, cursor) * pc < pl):
-            Yb = Ym
+            for i in range(_N):
+                Yb[i] = Ym[i]
         else:
-            Ya = Ym
+            for i in range(_N):
+                Ya[i] = Ym[i]
             t0 = t0 + half
         w = half
     out[:] = Yb
@@ -890,8 +939,8 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
 
 @njit(cache=True)
 def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
-    """_bisect on the table views (cut here: the sub-step holds no reference to them)."""
-    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, _views(recs, rds, FB, IB), out)
+    """_bisect (kept as the sub-step's entry to it)."""
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out)
 
 
 @njit(cache=True, _nrt=False)
@@ -1021,6 +1070,9 @@ def _offsets(layout):
 _OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
 _OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
 _OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
+_OFF_BK, _OFF_BPH, _OFF_BPW, _OFF_BG = _OFF_F["BK"], _OFF_F["BPH"], _OFF_F["BPW"], _OFF_F["BG"]
+_OFF_BBF, _OFF_BCV, _OFF_BCK, _OFF_BCF = _OFF_F["BBF"], _OFF_F["BCV"], _OFF_F["BCK"], _OFF_F["BCF"]
+_OFF_BNB, _OFF_BCN = _OFF_I["BNB"], _OFF_I["BCN"]
 
 
 @njit(cache=True)
