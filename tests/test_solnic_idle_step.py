@@ -4,7 +4,7 @@ The reference is the runner's Python loop with the controller's own Python logic
 run (``record=True``, which never takes the compiled loop) and ``compiled=False``. The compiled
 run must give every metric and the whole summary (counters, estimates, the predictor's model
 runs) bit for bit, on every family the compiled loop serves, with the quantized sensor and the
-compute delay, and the disturbed plant (no compiled loop: the Python path, unchanged). The
+compute delay, and the disturbed plant (its own compiled loop, plant/multimode/disturbed_loop.py). The
 compiled transition of the mode-2 filter is compared with
 :func:`~controllers.solnic.mode2_filter.mode2_transition` on random steps.
 """
@@ -47,9 +47,8 @@ def test_compiled_solnic_rows_are_the_python_rows(scenario, seed):
     assert compiled.status == "ok"
     assert _row(compiled) == _row(recorded) == _row(python)       # every metric and the summary, exactly
     assert n_recorded == 1200
-    if scenario != "disturbed":                                  # no compiled loop with a disturbance torque
-        pulses = compiled.summary["pulses"]
-        assert 10 < pulses and n_python <= 3 * pulses + 5          # hand-backs per pulse cycle, not per sample
+    pulses = compiled.summary["pulses"]
+    assert 10 < pulses and n_python <= 3 * pulses + 5              # hand-backs per pulse cycle, not per sample
 
 
 @pytest.mark.parametrize("scenario, seed, duration", [("thesis", 0, 20.0), ("quantized", 1, 12.0),
