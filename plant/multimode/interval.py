@@ -204,8 +204,10 @@ def _velocity_zero(X, S, p):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
-    """Moving until t_end or the next event; True when the interval must stop."""
+def _moving_plan(X, S, t_end, p):
+    """The moving segment's horizon: (mode, s, x3, u, ks, h_end, h_fb, reflecting, h).
+
+    Sets X[AKC] to the clamped Coulomb level (a function of X[A5] and p: idempotent)."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     x3, u = X[A3], X[AU]
@@ -221,20 +223,53 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, 
         if h_reg == math.inf:          # within rounding of ks and heading below it
             reflecting = False
     h = min(h_end, h_fb, h_reg)
+    return mode, s, x3, u, ks, h_end, h_fb, reflecting, h
+
+
+@njit(cache=True)
+def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W):
+    """The bridge locator (or the reflection) over the segment; (stopped, must stop now)."""
+    budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
+    TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
+    advanced, stopped, peak, n, chattered = bridge_segment(
+        X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
+        S[_PEAK], budget, W)
+    _torque_metrics(S, x3, u, advanced, bridge, p)
+    S[_PEAK] = peak
+    S[_NSUB] += n
+    S[_T] += advanced
+    if chattered or _tick(S, n, o):
+        S[_STATUS] = _CHATTER
+        return stopped, True
+    return stopped, False
+
+
+@njit(cache=True)
+def _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev):
+    """The event that ended the moving segment; True when the interval must stop."""
+    if stopped:
+        kind = _velocity_zero(X, S, p)
+        return _event(S, X, kind, o, ev)
+    if h == h_end:
+        S[_T] = t_end
+        return False
+    if h == h_fb:
+        _end_flyback(X, S)
+        return _event(S, X, _FLYBACK_END, o, ev)
+    X[A3] = s * ks              # end of the reflection regime: exactly at stiction
+    return _event(S, X, _REGIME_END, o, ev)
+
+
+@njit(cache=True)
+def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """Moving until t_end or the next event; True when the interval must stop."""
+    mode, s, x3, u, ks, h_end, h_fb, reflecting, h = _moving_plan(X, S, t_end, p)
     noise_on = o[_O_NOISE] != 0.0
     white = noise_on and p.sigma2_sq > 0.0
     if white and (reflecting or o[_O_NEWTON] == 0.0):
-        budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-        TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
-        advanced, stopped, peak, n, chattered = bridge_segment(
-            X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
-            S[_PEAK], budget, W)
-        _torque_metrics(S, x3, u, advanced, bridge, p)
-        S[_PEAK] = peak
-        S[_NSUB] += n
-        S[_T] += advanced
-        if chattered or _tick(S, n, o):
-            S[_STATUS] = _CHATTER
+        stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC,
+                                            z, cursor, W)
+        if chattered:
             return True
     elif white:
         advanced, stopped, peak = newton_segment(X, mode, h, p, z, cursor, S[_PEAK])
@@ -251,17 +286,35 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, 
         S[_T] += advanced
         if stopped:
             X[A2] = 0.0
-    if stopped:
-        kind = _velocity_zero(X, S, p)
-        return _event(S, X, kind, o, ev)
-    if h == h_end:
-        S[_T] = t_end
-        return False
-    if h == h_fb:
-        _end_flyback(X, S)
-        return _event(S, X, _FLYBACK_END, o, ev)
-    X[A3] = s * ks              # end of the reflection regime: exactly at stiction
-    return _event(S, X, _REGIME_END, o, ev)
+    return _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev)
+
+
+@njit(cache=True, _nrt=False)
+def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """The interval loop's body (:func:`interval_kernel`) up to ``t_end`` while every moving
+    segment takes the bridge locator: the same calls in the same order. Compiled without numba's
+    reference counting (nothing it calls allocates), which otherwise costs atomic increments
+    and decrements of every array argument and view at each of the ~25 events and ~125 noisy
+    sub-steps of a dithered sample. Returns 0 at ``t_end``, 1 when the interval must stop, −1
+    when the next moving segment needs another locator (Newton): nothing of it has happened yet
+    but X[AKC] (set again by :func:`_moving`), and the caller runs that segment.
+    """
+    while S[_T] < t_end:
+        if S[_MODE] == 2.0:
+            stop = _stuck(X, S, t_end, bridge, p, o, z, cursor, ev)
+        else:
+            mode, s, x3, u, ks, h_end, h_fb, reflecting, h = _moving_plan(X, S, t_end, p)
+            if not (reflecting or o[_O_NEWTON] == 0.0):
+                return -1
+            stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw,
+                                                BG, BC, z, cursor, W)
+            stop = chattered or _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev)
+        if stop:
+            return 1
+        if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
+            S[_STATUS] = _DIVERGED
+            return 1
+    return 0
 
 
 # --- the interval -----------------------------------------------------------------------------
@@ -285,6 +338,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
+    white = o[_O_NOISE] != 0.0 and p.sigma2_sq > 0.0     # noisy moving segments: _fast_span
     k = offsets.shape[0]
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
@@ -295,6 +349,13 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             break
         stop = False
         while S[_T] < t_seg_end:
+            if white:
+                r = _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
+                if r == 1:
+                    stop = True
+                    break
+                if r == 0:
+                    break
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
             else:

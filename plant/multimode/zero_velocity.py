@@ -37,6 +37,14 @@ A1, A2, A3, A4, A5, AKC, AU = range(7)
 
 
 @njit(cache=True)
+def _copy(dst, src):
+    """dst[:] = src element by element (a slice assignment needs numba's runtime, which the
+    interval's fast path, plant.multimode.interval._fast_span, is compiled without)."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@njit(cache=True)
 def _cross_prob(va, vb, h, sig_v2):
     """Probability that a Brownian bridge of x2 from va to vb over h crosses 0."""
     if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
@@ -222,8 +230,8 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     C = V[135:151].reshape((4, 4))
     Vl = V[151:267]
     Fb = V[267:274]
-    Xa[:] = Xa0
-    Xb[:] = Xb0
+    _copy(Xa, Xa0)
+    _copy(Xb, Xb0)
     ta = 0.0
     w = h
     levels = 0
@@ -236,13 +244,13 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
             _bridge_law(mode, w, p, Ph, Pw, G, C, Vl)
             left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor)
         if left:
-            Xb[:] = Xm                  # the first crossing is in the left half
+            _copy(Xb, Xm)                  # the first crossing is in the left half
         else:
             ta += half
-            Xa[:] = Xm
+            _copy(Xa, Xm)
         w = half
         levels += 1
-    Xout[:] = Xb
+    _copy(Xout, Xb)
     return ta + w, levels
 
 
@@ -552,11 +560,11 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
                                      BG[:, :0], BG[:, :0], W[96:])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
-                X[:] = Xc
+                _copy(X, Xc)
                 X[A2] = 0.0
                 return t + tc, True, peak, n, False
         peak = substep_peak(X, Xb, step, peak)
-        X[:] = Xb
+        _copy(X, Xb)
         t += step
     return h, False, peak, n, False
 
