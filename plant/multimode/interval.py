@@ -319,6 +319,52 @@ def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, e
 
 # --- the interval -----------------------------------------------------------------------------
 
+@njit(cache=True, _nrt=False)
+def _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """:func:`interval_kernel`'s loop over the command's segments when every moving segment takes
+    the bridge locator (noise on, σ2 > 0, no Newton): the same calls in the same order, all
+    inside code compiled without reference counting (:func:`_fast_span`)."""
+    k = offsets.shape[0]
+    for seg in range(k):
+        t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
+        if not _apply_level(X, S, levels[seg], bridge, p):
+            S[_STATUS] = _BAD_LEVEL
+            return
+        if seg > 0 and _event(S, X, _LEVEL, o, ev):
+            return
+        if _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W) == 1:
+            return
+
+
+@njit(cache=True)
+def fast_applies(prm, o):
+    """True when every moving segment takes the bridge locator (noise on, σ2 > 0, no Newton):
+    then :func:`interval_fast` is the whole interval."""
+    return o[_O_NOISE] != 0.0 and prm[0].sigma2_sq > 0.0 and o[_O_NEWTON] == 0.0
+
+
+@njit(cache=True, _nrt=False)
+def interval_fast(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos,
+                  ev, out, cursor, X, W):
+    """:func:`interval_kernel` when :func:`fast_applies`, compiled without reference counting,
+    on the caller's scratch: ``cursor`` (1 int64), ``X`` (7 floats) and ``W`` (_WORK floats,
+    zeroed here as interval_kernel's own). A compiled loop allocates them once per chunk."""
+    p = prm[0]
+    cursor[0] = zpos
+    for i in range(_WORK):
+        W[i] = 0.0
+    X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
+    S = out[6:]
+    for i in range(_SHEET):
+        S[i] = 0.0
+    S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
+    _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
+    if S[_STATUS] == _OK:
+        S[_T] = t0 + duration
+    out[0], out[1], out[2], out[3], out[4], out[5] = X[A1], X[A2], X[A3], X[A4], X[A5], X[AU]
+    return cursor[0]
+
+
 @njit(cache=True)
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z,
                     zpos, ev, out):
@@ -328,6 +374,9 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     position in the normal buffer ``z`` (from ``zpos``).
     """
     p = prm[0]
+    if fast_applies(prm, o):
+        return interval_fast(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC,
+                             z, zpos, ev, out, np.empty(1, dtype=np.int64), np.empty(7), np.empty(_WORK))
     x_out = out[:6]
     S = out[6:]
     cursor = np.empty(1, dtype=np.int64)
@@ -546,7 +595,7 @@ def _message(code: int, state: PlantState, options: SimOptions) -> str:
 SHEET_T, SHEET_MODE, SHEET_FLYBACK, SHEET_PEAK = _T, _MODE, _FB, _PEAK
 SHEET_ABS, SHEET_SQ, SHEET_CHARGE, SHEET_DURATION = _IABS, _ISQ, _CHG, _DUR
 SHEET_EVENTS, SHEET_BREAKAWAYS, SHEET_STICKS, SHEET_SUBSTEPS, SHEET_STATUS = _NEV, _NBRK, _NSTK, _NSUB, _STATUS
-SHEET_SIZE, STATUS_OK = _SHEET, _OK
+SHEET_SIZE, STATUS_OK, WORK_SIZE = _SHEET, _OK, _WORK
 NO_EVENTS = _NO_EVENTS
 
 

@@ -46,7 +46,7 @@ _SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def phi_moving(mode, h, p, P):
     """Φ_1 or Φ_3 of (3-20)/(3-21) into P (7 × 7, augmented vector)."""
     a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
@@ -132,7 +132,7 @@ def _fint(y, kind):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
     """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
 
@@ -155,7 +155,7 @@ def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
     Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def q_moving(mode, h, p, Q):
     """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8).
 
@@ -214,7 +214,7 @@ def _sqrt_pos(q):
     return math.sqrt(q) if q > 0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def chol_psd(Q, L):
     """Lower factor L·Lᵀ = Q of a PSD 4 × 4 (4-29)–(4-34), in diagonally scaled coordinates;
     zero rows (4-28) and rank-deficient directions give zero columns."""

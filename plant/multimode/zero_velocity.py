@@ -539,9 +539,11 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
             if sig_v2 > 0:
                 # the bridge minimum is below 0 iff U < exp(−2·va·vb/(σ_v²·h)) (va, vb > 0): when the
                 # normal behind U already decides "no", skip the inversion
-                p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+                # (p_push = exp(e) only decides this test: e < −0.7 gives p_push < 0.497 without exp)
+                both = va > 0.0 and vb > 0.0
+                e = -2.0 * va * vb / (sig_v2 * step) if both else 0.0
                 x = normal(z, cursor)
-                if x >= 0.0 and p_push <= 0.5:
+                if x >= 0.0 and both and (e < -0.7 or math.exp(e) <= 0.5):
                     low = min(va, vb)
                 else:
                     u = 0.5 * math.erfc(-x / math.sqrt(2.0))
