@@ -68,7 +68,7 @@ class _RecordFull(Exception):
 
 # --- bookkeeping ------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _event(S, X, kind, o, ev):
     """Count an event (chatter guard) and record it if asked; True when the interval must stop."""
     S[_NEV] += 1.0
@@ -87,7 +87,7 @@ def _event(S, X, kind, o, ev):
     return _tick(S, 1.0, o)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tick(S, n, o):
     S[_COUNT] += n
     if S[_COUNT] > o[_O_MAXEV]:
@@ -96,7 +96,7 @@ def _tick(S, n, o):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _torque_metrics(S, x3, u, h, bridge, p):
     if h <= 0.0:
         return
@@ -110,7 +110,7 @@ def _torque_metrics(S, x3, u, h, bridge, p):
     S[_DUR] += h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply_level(X, S, level, bridge, p):
     """Set u for a new command level; False for a level the bridge cannot produce."""
     umax = p.u_max
@@ -131,14 +131,14 @@ def _apply_level(X, S, level, bridge, p):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _flyback_time(X, S, p):
     if S[_FB] == 0.0:
         return math.inf
     return p.tau3 * math.log1p(abs(X[A3]) / p.u_max)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _end_flyback(X, S):
     X[A3] = 0.0
     X[AU] = 0.0
@@ -147,7 +147,7 @@ def _end_flyback(X, S):
 
 # --- mode 2 -----------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _stuck(X, S, t_end, bridge, p, o, z, cursor, ev):
     """Stuck until t_end, the flyback end or breakaway; True when the interval must stop."""
     x3, u = X[A3], X[AU]
@@ -184,7 +184,7 @@ def _stuck(X, S, t_end, bridge, p, o, z, cursor, ev):
 
 # --- modes 1 and 3 ----------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _velocity_zero(X, S, p):
     """x2 has reached 0 in mode 1 or 3: reflect, reverse or stick (SPEC §2); the event kind."""
     mode = int(S[_MODE])
@@ -203,7 +203,7 @@ def _velocity_zero(X, S, p):
     return _STICK
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _moving_plan(X, S, t_end, p):
     """The moving segment's horizon: (mode, s, x3, u, ks, h_end, h_fb, reflecting, h).
 
@@ -226,7 +226,7 @@ def _moving_plan(X, S, t_end, p):
     return mode, s, x3, u, ks, h_end, h_fb, reflecting, h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W):
     """The bridge locator (or the reflection) over the segment; (stopped, must stop now)."""
     budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
@@ -244,7 +244,7 @@ def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, 
     return stopped, False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev):
     """The event that ended the moving segment; True when the interval must stop."""
     if stopped:

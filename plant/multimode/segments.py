@@ -17,7 +17,7 @@ from plant.expfun import e1
 __all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def torque_crossing_time(x3, u, level, tau3):
     """Time for x3(τ) = u + (x3 − u)e^(−τ/τ3) to reach ``level``; ``inf`` if it never does.
 
@@ -36,7 +36,7 @@ def torque_crossing_time(x3, u, level, tau3):
     return tau3 * math.log(ratio)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def torque_integrals(x3, u, h, tau3):
     """Exact (∫x3 dτ, ∫|x3| dτ, ∫x3² dτ) over [0, h]."""
     if h <= 0:
@@ -56,7 +56,7 @@ def torque_integrals(x3, u, h, tau3):
     return integral, absolute, square
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def hermite_peak(h, ya, da, yb, db):
     """Largest |y| at interior critical points of the cubic Hermite interpolant on [0, h].
 
