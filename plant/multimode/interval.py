@@ -382,12 +382,12 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
     X = np.empty(7)
-    W = np.zeros(_WORK)
+    white = o[_O_NOISE] != 0.0 and p.sigma2_sq > 0.0     # noisy moving segments: _fast_span
+    W = np.zeros(_WORK if white else 1)                  # bridge_segment's scratch (noise-free: unused)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    white = o[_O_NOISE] != 0.0 and p.sigma2_sq > 0.0     # noisy moving segments: _fast_span
     k = offsets.shape[0]
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
