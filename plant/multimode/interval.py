@@ -371,7 +371,8 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance().
 
     ``out[:6]`` receives the new state, ``out[6:]`` the work sheet; returns the new read
-    position in the normal buffer ``z`` (from ``zpos``).
+    position in the normal buffer ``z`` (from ``zpos``). When :func:`fast_applies` the interval
+    is :func:`interval_fast` (no reference counting); otherwise the general loop below.
     """
     p = prm[0]
     if fast_applies(prm, o):
