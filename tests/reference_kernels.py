@@ -5,6 +5,10 @@ them: each is the code as it was before an optimisation that must not change a s
 for the tridiagonal matrix and separate factorisation, elimination and source loops (issue 27).
 ``step``: :func:`plant.multimode.zero_velocity._step` drawing its four normals by four checked
 calls of :func:`plant.randomness.normal` (issue 27).
+``bridge_low``: the reflecting sub-step's bridge minimum in
+:func:`plant.multimode.zero_velocity.bridge_segment`, computing p = exp(e) always (issue 27).
+``hermite_peak``: :func:`plant.multimode.segments.hermite_peak` with its roots in an array
+(issue 27).
 """
 
 import math
@@ -136,3 +140,46 @@ def absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl
                 u2[i] -= cp[i] * u2[i + 1]
             mu_o = mu_n
     return u1[0], u2[0]
+
+
+@njit(cache=True)
+def bridge_low(va, vb, step, sig_v2, z, cursor):
+    p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+    x = normal(z, cursor)
+    if x >= 0.0 and p_push <= 0.5:
+        low = min(va, vb)
+    else:
+        u = 0.5 * math.erfc(-x / math.sqrt(2.0))
+        low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
+    return low
+
+
+@njit(cache=True)
+def hermite_peak(h, ya, da, yb, db):
+    if h <= 0:
+        return 0.0
+    c2 = 3 * (yb - ya) - (2 * da + db) * h
+    c3 = -2 * (yb - ya) + (da + db) * h
+    A, B, C = 3 * c3, 2 * c2, da * h
+    best = 0.0
+    roots = np.empty(2)
+    nr = 0
+    if A == 0.0:
+        if B != 0.0:
+            roots[0] = -C / B
+            nr = 1
+    else:
+        disc = B * B - 4 * A * C
+        if disc >= 0:
+            sq = math.sqrt(disc)
+            q = -0.5 * (B + math.copysign(sq, B))
+            if q != 0.0:
+                roots[0], roots[1] = q / A, C / q
+                nr = 2
+    for i in range(nr):
+        s = roots[i]
+        if 0.0 < s < 1.0:
+            v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
+            if v > best:
+                best = v
+    return best

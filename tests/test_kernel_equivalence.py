@@ -5,6 +5,9 @@
 * :func:`plant.multimode.zero_velocity._crossed` against ``pc >= 1.0 or uniform_below(pc)``
   with pc = :func:`_cross_prob`: the same decision from the same number of normals, also where
   its shortcut applies (exponent < −70) and around its bounds;
+* :func:`plant.multimode.zero_velocity._bridge_low` (the reflecting sub-step's push, exp skipped
+  where it cannot decide) and :func:`plant.multimode.segments.hermite_peak` (roots in scalars,
+  for the interval's reference-count-free fast path) against the forms they replaced;
 * the multimode family's compiled ``pulse_motion`` against the generic
   :meth:`plant.protocol.PlantFamily.pulse_motion` (Python intervals through ``advance``), from
   stuck states with friction offsets, including no-pulse and failing cases.
@@ -16,11 +19,14 @@ import numpy as np
 import pytest
 
 from plant.multimode.interval import _tables
-from plant.multimode.zero_velocity import _cross_prob, _crossed, _step
+from plant.multimode.segments import hermite_peak
+from plant.multimode.zero_velocity import _bridge_low, _cross_prob, _crossed, _step
 from plant.params import PlantParams
 from plant.protocol import PlantFamily, get_family
 from plant.randomness import NoiseExhausted, uniform_below
 from plant.state import PlantState, SimOptions
+from tests.reference_kernels import bridge_low as reference_bridge_low
+from tests.reference_kernels import hermite_peak as reference_hermite_peak
 from tests.reference_kernels import step as reference_step
 
 
@@ -107,3 +113,41 @@ def test_compiled_log1p_is_pythons():
     rng = np.random.default_rng(1)
     for v in np.concatenate((rng.uniform(0.0, 1.0, 5000), 10.0 ** rng.uniform(-18, 0, 5000))):
         assert f(v) == math.log1p(v)
+
+
+def test_reflection_push_skips_exp_only_where_it_cannot_decide():
+    """The same minimum (bit for bit) and the same normal read as the form that always computes
+    p = exp(e): across e from −200 to +1 (both velocities positive, one or both ≤ 0), dense
+    around the shortcut's bound e = −0.7 and the test's own p = ½ (e = −ln 2), x of both signs."""
+    rng = np.random.default_rng(7)
+    sig_v2, h = 0.37, 1e-5
+    es = np.concatenate((-np.geomspace(1e-6, 200.0, 400), np.linspace(-0.75, -0.65, 400),
+                         -math.log(2.0) + np.linspace(-1e-12, 1e-12, 41), [0.0, 1.0]))
+    z = rng.standard_normal(4096)
+    pushed = 0
+    for i, e in enumerate(es):
+        va = rng.uniform(0.1, 10.0) * math.sqrt(sig_v2 * h)
+        vb = -e * sig_v2 * h / (2.0 * va) if e < 0 else (-va if e > 0 else 0.0)
+        for k in range(3):
+            start = (7 * i + k) % 4000
+            c1, c2 = np.array([start], dtype=np.int64), np.array([start], dtype=np.int64)
+            a, b = ((va, vb), (vb, va), (va, -vb))[k]
+            m1 = _bridge_low(a, b, h, sig_v2, z, c1)
+            m2 = reference_bridge_low(a, b, h, sig_v2, z, c2)
+            assert c1[0] == c2[0] == start + 1
+            assert m1 == m2 or (math.isnan(m1) and math.isnan(m2))
+            pushed += m2 < 0.0
+    assert pushed > 100                  # the push itself is exercised, not only the shortcut
+
+
+def test_hermite_peak_with_scalar_roots_is_the_array_form():
+    rng = np.random.default_rng(3)
+    for _ in range(3000):
+        h = 10.0 ** rng.uniform(-7, -3)
+        ya, yb = rng.normal(0.0, 1e-5, 2)
+        da, db = rng.normal(0.0, 1e-2, 2)
+        if rng.uniform() < 0.1:
+            da = -db                        # A = 0 cases: 3·c3 vanishes with ya = yb
+            yb = ya
+        assert hermite_peak(h, ya, da, yb, db) == reference_hermite_peak(h, ya, da, yb, db)
+    assert hermite_peak(0.0, 1.0, 1.0, 2.0, -1.0) == 0.0

@@ -68,7 +68,7 @@ class _RecordFull(Exception):
 
 # --- bookkeeping ------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _event(S, X, kind, o, ev):
     """Count an event (chatter guard) and record it if asked; True when the interval must stop."""
     S[_NEV] += 1.0
@@ -87,7 +87,7 @@ def _event(S, X, kind, o, ev):
     return _tick(S, 1.0, o)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tick(S, n, o):
     S[_COUNT] += n
     if S[_COUNT] > o[_O_MAXEV]:
@@ -96,7 +96,7 @@ def _tick(S, n, o):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _torque_metrics(S, x3, u, h, bridge, p):
     if h <= 0.0:
         return
@@ -110,7 +110,7 @@ def _torque_metrics(S, x3, u, h, bridge, p):
     S[_DUR] += h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply_level(X, S, level, bridge, p):
     """Set u for a new command level; False for a level the bridge cannot produce."""
     umax = p.u_max
@@ -131,14 +131,14 @@ def _apply_level(X, S, level, bridge, p):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _flyback_time(X, S, p):
     if S[_FB] == 0.0:
         return math.inf
     return p.tau3 * math.log1p(abs(X[A3]) / p.u_max)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _end_flyback(X, S):
     X[A3] = 0.0
     X[AU] = 0.0
@@ -147,7 +147,7 @@ def _end_flyback(X, S):
 
 # --- mode 2 -----------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _stuck(X, S, t_end, bridge, p, o, z, cursor, ev):
     """Stuck until t_end, the flyback end or breakaway; True when the interval must stop."""
     x3, u = X[A3], X[AU]
@@ -184,7 +184,7 @@ def _stuck(X, S, t_end, bridge, p, o, z, cursor, ev):
 
 # --- modes 1 and 3 ----------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _velocity_zero(X, S, p):
     """x2 has reached 0 in mode 1 or 3: reflect, reverse or stick (SPEC §2); the event kind."""
     mode = int(S[_MODE])
@@ -203,9 +203,11 @@ def _velocity_zero(X, S, p):
     return _STICK
 
 
-@njit(cache=True)
-def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
-    """Moving until t_end or the next event; True when the interval must stop."""
+@njit(cache=True, _nrt=False)
+def _moving_plan(X, S, t_end, p):
+    """The moving segment's horizon: (mode, s, x3, u, ks, h_end, h_fb, reflecting, h).
+
+    Sets X[AKC] to the clamped Coulomb level (a function of X[A5] and p: idempotent)."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     x3, u = X[A3], X[AU]
@@ -221,20 +223,53 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, 
         if h_reg == math.inf:          # within rounding of ks and heading below it
             reflecting = False
     h = min(h_end, h_fb, h_reg)
+    return mode, s, x3, u, ks, h_end, h_fb, reflecting, h
+
+
+@njit(cache=True, _nrt=False)
+def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W):
+    """The bridge locator (or the reflection) over the segment; (stopped, must stop now)."""
+    budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
+    TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
+    advanced, stopped, peak, n, chattered = bridge_segment(
+        X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
+        S[_PEAK], budget, W)
+    _torque_metrics(S, x3, u, advanced, bridge, p)
+    S[_PEAK] = peak
+    S[_NSUB] += n
+    S[_T] += advanced
+    if chattered or _tick(S, n, o):
+        S[_STATUS] = _CHATTER
+        return stopped, True
+    return stopped, False
+
+
+@njit(cache=True, _nrt=False)
+def _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev):
+    """The event that ended the moving segment; True when the interval must stop."""
+    if stopped:
+        kind = _velocity_zero(X, S, p)
+        return _event(S, X, kind, o, ev)
+    if h == h_end:
+        S[_T] = t_end
+        return False
+    if h == h_fb:
+        _end_flyback(X, S)
+        return _event(S, X, _FLYBACK_END, o, ev)
+    X[A3] = s * ks              # end of the reflection regime: exactly at stiction
+    return _event(S, X, _REGIME_END, o, ev)
+
+
+@njit(cache=True)
+def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """Moving until t_end or the next event; True when the interval must stop."""
+    mode, s, x3, u, ks, h_end, h_fb, reflecting, h = _moving_plan(X, S, t_end, p)
     noise_on = o[_O_NOISE] != 0.0
     white = noise_on and p.sigma2_sq > 0.0
     if white and (reflecting or o[_O_NEWTON] == 0.0):
-        budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-        TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
-        advanced, stopped, peak, n, chattered = bridge_segment(
-            X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
-            S[_PEAK], budget, W)
-        _torque_metrics(S, x3, u, advanced, bridge, p)
-        S[_PEAK] = peak
-        S[_NSUB] += n
-        S[_T] += advanced
-        if chattered or _tick(S, n, o):
-            S[_STATUS] = _CHATTER
+        stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC,
+                                            z, cursor, W)
+        if chattered:
             return True
     elif white:
         advanced, stopped, peak = newton_segment(X, mode, h, p, z, cursor, S[_PEAK])
@@ -251,20 +286,84 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, 
         S[_T] += advanced
         if stopped:
             X[A2] = 0.0
-    if stopped:
-        kind = _velocity_zero(X, S, p)
-        return _event(S, X, kind, o, ev)
-    if h == h_end:
-        S[_T] = t_end
-        return False
-    if h == h_fb:
-        _end_flyback(X, S)
-        return _event(S, X, _FLYBACK_END, o, ev)
-    X[A3] = s * ks              # end of the reflection regime: exactly at stiction
-    return _event(S, X, _REGIME_END, o, ev)
+    return _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev)
+
+
+@njit(cache=True, _nrt=False)
+def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """The interval loop's body (:func:`interval_kernel`) up to ``t_end`` while every moving
+    segment takes the bridge locator: the same calls in the same order. Compiled without numba's
+    reference counting (nothing it calls allocates), which otherwise costs atomic increments
+    and decrements of every array argument and view at each of the ~25 events and ~125 noisy
+    sub-steps of a dithered sample. Returns 0 at ``t_end``, 1 when the interval must stop, −1
+    when the next moving segment needs another locator (Newton): nothing of it has happened yet
+    but X[AKC] (set again by :func:`_moving`), and the caller runs that segment.
+    """
+    while S[_T] < t_end:
+        if S[_MODE] == 2.0:
+            stop = _stuck(X, S, t_end, bridge, p, o, z, cursor, ev)
+        else:
+            mode, s, x3, u, ks, h_end, h_fb, reflecting, h = _moving_plan(X, S, t_end, p)
+            if not (reflecting or o[_O_NEWTON] == 0.0):
+                return -1
+            stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw,
+                                                BG, BC, z, cursor, W)
+            stop = chattered or _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev)
+        if stop:
+            return 1
+        if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
+            S[_STATUS] = _DIVERGED
+            return 1
+    return 0
 
 
 # --- the interval -----------------------------------------------------------------------------
+
+@njit(cache=True, _nrt=False)
+def _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
+    """:func:`interval_kernel`'s loop over the command's segments when every moving segment takes
+    the bridge locator (noise on, σ2 > 0, no Newton): the same calls in the same order, all
+    inside code compiled without reference counting (:func:`_fast_span`)."""
+    k = offsets.shape[0]
+    for seg in range(k):
+        t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
+        if not _apply_level(X, S, levels[seg], bridge, p):
+            S[_STATUS] = _BAD_LEVEL
+            return
+        if seg > 0 and _event(S, X, _LEVEL, o, ev):
+            return
+        if _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W) == 1:
+            return
+
+
+@njit(cache=True)
+def fast_applies(prm, o):
+    """True when every moving segment takes the bridge locator (noise on, σ2 > 0, no Newton):
+    then :func:`interval_fast` is the whole interval."""
+    return o[_O_NOISE] != 0.0 and prm[0].sigma2_sq > 0.0 and o[_O_NEWTON] == 0.0
+
+
+@njit(cache=True, _nrt=False)
+def interval_fast(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos,
+                  ev, out, cursor, X, W):
+    """:func:`interval_kernel` when :func:`fast_applies`, compiled without reference counting,
+    on the caller's scratch: ``cursor`` (1 int64), ``X`` (7 floats) and ``W`` (_WORK floats,
+    zeroed here as interval_kernel's own). A compiled loop allocates them once per chunk."""
+    p = prm[0]
+    cursor[0] = zpos
+    for i in range(_WORK):
+        W[i] = 0.0
+    X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
+    S = out[6:]
+    for i in range(_SHEET):
+        S[i] = 0.0
+    S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
+    _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
+    if S[_STATUS] == _OK:
+        S[_T] = t0 + duration
+    out[0], out[1], out[2], out[3], out[4], out[5] = X[A1], X[A2], X[A3], X[A4], X[A5], X[AU]
+    return cursor[0]
+
 
 @njit(cache=True)
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z,
@@ -272,15 +371,20 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance().
 
     ``out[:6]`` receives the new state, ``out[6:]`` the work sheet; returns the new read
-    position in the normal buffer ``z`` (from ``zpos``).
+    position in the normal buffer ``z`` (from ``zpos``). When :func:`fast_applies` the interval
+    is :func:`interval_fast` (no reference counting); otherwise the general loop below.
     """
     p = prm[0]
+    if fast_applies(prm, o):
+        return interval_fast(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, o, TP, TL, BPh, BPw, BG, BC,
+                             z, zpos, ev, out, np.empty(1, dtype=np.int64), np.empty(7), np.empty(_WORK))
     x_out = out[:6]
     S = out[6:]
     cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
     X = np.empty(7)
-    W = np.zeros(_WORK)
+    white = o[_O_NOISE] != 0.0 and p.sigma2_sq > 0.0     # noisy moving segments: _fast_span
+    W = np.zeros(_WORK if white else 1)                  # bridge_segment's scratch (noise-free: unused)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
         S[i] = 0.0
@@ -295,6 +399,13 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             break
         stop = False
         while S[_T] < t_seg_end:
+            if white:
+                r = _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
+                if r == 1:
+                    stop = True
+                    break
+                if r == 0:
+                    break
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
             else:
@@ -485,7 +596,7 @@ def _message(code: int, state: PlantState, options: SimOptions) -> str:
 SHEET_T, SHEET_MODE, SHEET_FLYBACK, SHEET_PEAK = _T, _MODE, _FB, _PEAK
 SHEET_ABS, SHEET_SQ, SHEET_CHARGE, SHEET_DURATION = _IABS, _ISQ, _CHG, _DUR
 SHEET_EVENTS, SHEET_BREAKAWAYS, SHEET_STICKS, SHEET_SUBSTEPS, SHEET_STATUS = _NEV, _NBRK, _NSTK, _NSUB, _STATUS
-SHEET_SIZE, STATUS_OK = _SHEET, _OK
+SHEET_SIZE, STATUS_OK, WORK_SIZE = _SHEET, _OK, _WORK
 NO_EVENTS = _NO_EVENTS
 
 

@@ -23,7 +23,8 @@ from plant.multimode.interval import _NREC as _LOG_NREC, _RecordFull
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.multimode.interval import (NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION, SHEET_EVENTS,
                             SHEET_FLYBACK, SHEET_MODE, SHEET_PEAK, SHEET_SIZE, SHEET_SQ, SHEET_STATUS,
-                            SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel, interval_status, kernel_inputs)
+                            SHEET_SUBSTEPS, SHEET_T, STATUS_OK, WORK_SIZE, fast_applies, interval_fast, interval_kernel,
+                            interval_status, kernel_inputs)
 from plant.params import PlantParams
 from plant.randomness import NoiseStream
 from plant.state import N_STATE, PlantState, SimOptions, Status
@@ -46,6 +47,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
     n_max = int(2.0 * freq * tau) + 4 if amp != 0.0 else 1
     offs = np.empty(n_max)
     levs = np.empty(n_max)
+    fast = fast_applies(prm, o)          # the interval's scratch, once per chunk (interval_fast)
+    cur, Xs, Ws = np.empty(1, dtype=np.int64), np.empty(7), np.empty(WORK_SIZE)
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
@@ -55,8 +58,12 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
         v = compensator_step(A, B, C, D, cx, cxn, y)
         level = min(max(-v, -u_max), u_max)
         k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
-        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
-                              levs[:k].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
+        if fast:
+            pos = interval_fast(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k], levs[:k], bridge, prm,
+                                o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out, cur, Xs, Ws)
+        else:
+            pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
+                                  levs[:k].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
         S = out[N_STATE:]
         if n >= n_warm:
             x1_window[n - n_warm] = x1
@@ -105,6 +112,8 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
     """
     n_s = s.shape[0]
     logging = xs.shape[0] > 0
+    fast = fast_applies(prm, o)          # the interval's scratch, once per chunk (interval_fast)
+    cur, Xs, Ws = np.empty(1, dtype=np.int64), np.empty(7), np.empty(WORK_SIZE)
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
@@ -126,12 +135,16 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
         if delay != 0.0:
             n_now, n_carry = delay_segments(offs, levs, k, pend_o, pend_l, n_pend, delay, tau, now_o, now_l,
                                             carry_o, carry_l)
-            seg_o, seg_l = now_o[:n_now].copy(), now_l[:n_now].copy()
+            seg_o, seg_l = now_o[:n_now], now_l[:n_now]
         else:
             n_carry = 0
-            seg_o, seg_l = offs[:k].copy(), levs[:k].copy()
-        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o, seg_l, bridge, prm, o, TP,
-                              TL, BPh, BPw, BG, BC, z, zpos, ev, out)
+            seg_o, seg_l = offs[:k], levs[:k]
+        if fast:
+            pos = interval_fast(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o, seg_l, bridge, prm, o,
+                                TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out, cur, Xs, Ws)
+        else:
+            pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o.copy(), seg_l.copy(),
+                                  bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, zpos, ev, out)
         S = out[N_STATE:]
         if logging:                         # ... and the interval's plant events (t, x1)
             log_events(xe, prog, ev, int(S[_LOG_NREC]))

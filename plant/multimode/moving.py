@@ -46,7 +46,7 @@ _SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def phi_moving(mode, h, p, P):
     """Φ_1 or Φ_3 of (3-20)/(3-21) into P (7 × 7, augmented vector)."""
     a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
@@ -72,7 +72,7 @@ def phi_moving(mode, h, p, P):
     P[A2, AKC] = s * a * h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def mean_path(mode, tau, X, p):
     """(x1, x2, x3, x4) of Φ(τ)·X by the scalar closed forms in the module docstring."""
     a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
@@ -88,7 +88,7 @@ def mean_path(mode, tau, X, p):
     return x1, x2, x3, x4
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def mean_velocity(mode, tau, X, p):
     """x2(τ) of Φ(τ)·X, the second line of the mean path in the module docstring."""
     a, b3, b5 = p.alpha, p.beta3, p.beta5
@@ -98,7 +98,7 @@ def mean_velocity(mode, tau, X, p):
             + s * a * tau * X[AKC])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _fint(y, kind):
     """F(y) = ∫₀^y f(x) dx for f = e2(x)·e^(−x) (kind 0), e2(x)·e1(x) (1), e2(x)² (2), |y| < 0.5.
 
@@ -132,7 +132,7 @@ def _fint(y, kind):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
     """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
 
@@ -155,7 +155,7 @@ def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
     Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def q_moving(mode, h, p, Q):
     """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8).
 
@@ -214,7 +214,7 @@ def _sqrt_pos(q):
     return math.sqrt(q) if q > 0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def chol_psd(Q, L):
     """Lower factor L·Lᵀ = Q of a PSD 4 × 4 (4-29)–(4-34), in diagonally scaled coordinates;
     zero rows (4-28) and rank-deficient directions give zero columns."""
@@ -268,7 +268,7 @@ def gaussian_step(X, P, L, z, cursor, out):
         out[NOISY_BLOCK[r]] += L[r, 0] * z0 + L[r, 1] * z1 + L[r, 2] * z2 + L[r, 3] * z3
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def substep_peak(Xa, Xb, h, peak):
     """max(peak, |x1| at both ends, the interior extremum of the cubic Hermite of x1)."""
     pk = max(peak, abs(Xa[A1]), abs(Xb[A1]))
@@ -280,14 +280,14 @@ def substep_peak(Xa, Xb, h, peak):
 
 # --- roots of the mean path -----------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mean_value(which, mode, tau, X, p):
     """which = 0: mean velocity x2(τ); which = 1: ẋ1 = x2(τ) − x4(τ)."""
     _, x2, _, x4 = mean_path(mode, tau, X, p)
     return x2 if which == 0 else x2 - x4
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def brent_mean(which, mode, X, p, a, b, fa, fb):
     """Brent's root of _mean_value on [a, b] with f(a)·f(b) ≤ 0, to ~1e-16 s (scipy's brentq)."""
     xtol, rtol = 1e-16, 8.9e-16
@@ -331,7 +331,7 @@ def brent_mean(which, mode, X, p, a, b, fa, fb):
     return xcur
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def velocity_extremum_time(mode, X, p):
     """τ where ẋ2 ∝ x3(τ) ∓ kc changes sign (x2's only extremum), or inf."""
     s = -1.0 if mode == 1 else 1.0          # direction of motion
@@ -339,7 +339,7 @@ def velocity_extremum_time(mode, X, p):
     return torque_crossing_time(X[A3], X[AU], s * kc, p.tau3)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def first_mean_zero(mode, X, p, h):
     """First τ in (0, h] where the mean velocity reaches 0, or inf (exact to ~1e-15 s).
 
@@ -365,7 +365,7 @@ def first_mean_zero(mode, X, p, h):
     return math.inf
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def mean_x1_peak(mode, X, p, h):
     """Largest |x1| at the interior roots of ẋ1 = x2 − x4 of the mean path on (0, h)."""
     t_ext = velocity_extremum_time(mode, X, p)

@@ -126,11 +126,11 @@ def _simulate(params: PlantParams, dt_u: float, sign: int, seed: int | None,
 # --- the noise-free pulse motion of PlantFamily.pulse_motion, compiled --------------------------
 
 @njit(cache=True)
-def _interval(xs, mode, flyback, t, h, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out, t_stop):
+def _interval(xs, mode, flyback, t, h, level, offsets, levels, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out, t_stop):
     """One noise-free interval of ``h`` at ``level``; (status, time of its last stick event or
-    ``t_stop``), the new state and sheet in ``out``."""
-    offsets = np.zeros(1)
-    levels = np.full(1, level)
+    ``t_stop``), the new state and sheet in ``out``. ``offsets`` (= [0]) and ``levels`` are the
+    caller's one-element command arrays."""
+    levels[0] = level
     interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev, out)
     S = out[N_STATE:]
     for i in range(int(S[_SHEET_NREC])):
@@ -146,26 +146,29 @@ def _pulse_motion(x0, mode, flyback, dt_u, level, tau, u_max, horizon, prm, o, T
     max(2τ·ln(1 + |x3|/u_max), 1 ms) while the shaft moves or the flyback lasts and t < ``horizon``.
     Returns (status code, Δx1, time of the last stick event (0 if none), final mode)."""
     xs = x0.copy()
+    offsets, levels = np.zeros(1), np.empty(1)    # the command of every interval (one segment)
     xs[3] = 0.0                                   # x4 = 0: the shaft's own motion
     x1_0 = xs[0]
     t_stop = 0.0
     t = 0.0
     S = out[N_STATE:]
     if dt_u > 0:
-        code, t_stop = _interval(xs, mode, flyback, t, dt_u, level, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
-                                 t_stop)
+        code, t_stop = _interval(xs, mode, flyback, t, dt_u, level, offsets, levels, prm, o, TP, TL, BPh, BPw, BG, BC,
+                                 z, ev, out, t_stop)
         if code != STATUS_OK:
             return code, 0.0, t_stop, mode
         t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
-        xs = out[:N_STATE].copy()
+        for i in range(N_STATE):                  # the new state, in place
+            xs[i] = out[i]
     chunk = max(2.0 * tau * math.log1p(abs(xs[2]) / u_max), 1e-3)
     while (mode != 2 or flyback) and t < horizon:
-        code, t_stop = _interval(xs, mode, flyback, t, chunk, 0.0, prm, o, TP, TL, BPh, BPw, BG, BC, z, ev, out,
-                                 t_stop)
+        code, t_stop = _interval(xs, mode, flyback, t, chunk, 0.0, offsets, levels, prm, o, TP, TL, BPh, BPw, BG, BC,
+                                 z, ev, out, t_stop)
         if code != STATUS_OK:
             return code, 0.0, t_stop, mode
         t, mode, flyback = S[SHEET_T], int(S[SHEET_MODE]), S[SHEET_FLYBACK] != 0.0
-        xs = out[:N_STATE].copy()
+        for i in range(N_STATE):                  # the new state, in place
+            xs[i] = out[i]
     return STATUS_OK, xs[0] - x1_0, t_stop, mode
 
 

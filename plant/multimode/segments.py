@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from plant.expfun import e1
@@ -18,7 +17,7 @@ from plant.expfun import e1
 __all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def torque_crossing_time(x3, u, level, tau3):
     """Time for x3(τ) = u + (x3 − u)e^(−τ/τ3) to reach ``level``; ``inf`` if it never does.
 
@@ -37,7 +36,7 @@ def torque_crossing_time(x3, u, level, tau3):
     return tau3 * math.log(ratio)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def torque_integrals(x3, u, h, tau3):
     """Exact (∫x3 dτ, ∫|x3| dτ, ∫x3² dτ) over [0, h]."""
     if h <= 0:
@@ -57,7 +56,7 @@ def torque_integrals(x3, u, h, tau3):
     return integral, absolute, square
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def hermite_peak(h, ya, da, yb, db):
     """Largest |y| at interior critical points of the cubic Hermite interpolant on [0, h].
 
@@ -70,11 +69,11 @@ def hermite_peak(h, ya, da, yb, db):
     c3 = -2 * (yb - ya) + (da + db) * h
     A, B, C = 3 * c3, 2 * c2, da * h
     best = 0.0
-    roots = np.empty(2)
-    nr = 0
+    r0 = r1 = 0.0           # the roots in scalars: nothing allocated (plant.multimode.interval's
+    nr = 0                  # fast path is compiled without reference counting)
     if A == 0.0:
         if B != 0.0:
-            roots[0] = -C / B
+            r0 = -C / B
             nr = 1
     else:
         disc = B * B - 4 * A * C
@@ -82,10 +81,10 @@ def hermite_peak(h, ya, da, yb, db):
             sq = math.sqrt(disc)
             q = -0.5 * (B + math.copysign(sq, B))
             if q != 0.0:
-                roots[0], roots[1] = q / A, C / q
+                r0, r1 = q / A, C / q
                 nr = 2
     for i in range(nr):
-        s = roots[i]
+        s = r0 if i == 0 else r1
         if 0.0 < s < 1.0:
             v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
             if v > best:

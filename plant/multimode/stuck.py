@@ -27,7 +27,7 @@ __all__ = ["stuck_propagate"]
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def stuck_propagate(X, h, p, noisy, z, cursor):
     """Advance the stuck shaft by h [s] in place; draws two normals when σ4 > 0 and noisy."""
     b3, b4, s4 = p.beta3, p.beta4, p.sigma4_sq

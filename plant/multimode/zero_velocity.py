@@ -37,6 +37,14 @@ A1, A2, A3, A4, A5, AKC, AU = range(7)
 
 
 @njit(cache=True)
+def _copy(dst, src):
+    """dst[:] = src element by element (a slice assignment needs numba's runtime, which the
+    interval's fast path, plant.multimode.interval._fast_span, is compiled without)."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@njit(cache=True)
 def _cross_prob(va, vb, h, sig_v2):
     """Probability that a Brownian bridge of x2 from va to vb over h crosses 0."""
     if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
@@ -222,8 +230,8 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     C = V[135:151].reshape((4, 4))
     Vl = V[151:267]
     Fb = V[267:274]
-    Xa[:] = Xa0
-    Xb[:] = Xb0
+    _copy(Xa, Xa0)
+    _copy(Xb, Xb0)
     ta = 0.0
     w = h
     levels = 0
@@ -236,13 +244,13 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
             _bridge_law(mode, w, p, Ph, Pw, G, C, Vl)
             left = _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor)
         if left:
-            Xb[:] = Xm                  # the first crossing is in the left half
+            _copy(Xb, Xm)                  # the first crossing is in the left half
         else:
             ta += half
-            Xa[:] = Xm
+            _copy(Xa, Xm)
         w = half
         levels += 1
-    Xout[:] = Xb
+    _copy(Xout, Xb)
     return ta + w, levels
 
 
@@ -435,6 +443,23 @@ def _step(X, P, L, z, cursor, out):
     out[AU] = u
 
 
+@njit(cache=True, inline="always")
+def _bridge_low(va, vb, h, sig_v2, z, cursor):
+    """The bridge minimum m of s·x2 over a reflecting sub-step from va to vb (σ_v² = ``sig_v2``),
+    drawn from one normal x, U = Φ(x): m = ½(va + vb − √((vb − va)² − 2σ_v²h·ln U)), or min(va, vb)
+    when that is certain not to be below 0. m < 0 iff U < p = exp(e), e = −2·va·vb/(σ_v²h)
+    (va, vb > 0); when x ≥ 0 (U ≥ ½) and p ≤ ½ the inversion is skipped, and so is exp itself
+    when e < −0.7 (p < 0.497): p decides only this test (tests/test_kernel_equivalence.py checks
+    it against the form that always computes p)."""
+    both = va > 0.0 and vb > 0.0
+    e = -2.0 * va * vb / (sig_v2 * h) if both else 0.0
+    x = normal(z, cursor)
+    if x >= 0.0 and both and (e < -0.7 or math.exp(e) <= 0.5):
+        return min(va, vb)
+    u = 0.5 * math.erfc(-x / math.sqrt(2.0))
+    return 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * h * math.log(u)))
+
+
 @njit(cache=True)
 def _mean_min(mode, X, p, h, t_ext):
     """min over τ in [0, h] of s·x̄2(τ), the mean velocity in the direction of motion.
@@ -528,18 +553,7 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
             return t, False, peak, n, True
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
-            if sig_v2 > 0:
-                # the bridge minimum is below 0 iff U < exp(−2·va·vb/(σ_v²·h)) (va, vb > 0): when the
-                # normal behind U already decides "no", skip the inversion
-                p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
-                x = normal(z, cursor)
-                if x >= 0.0 and p_push <= 0.5:
-                    low = min(va, vb)
-                else:
-                    u = 0.5 * math.erfc(-x / math.sqrt(2.0))
-                    low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(u)))
-            else:
-                low = min(va, vb)
+            low = _bridge_low(va, vb, step, sig_v2, z, cursor) if sig_v2 > 0 else min(va, vb)
             if low < 0.0:
                 Xb[A2] += s * (-low)
                 Xb[A1] += s * (-low) * step / 2.0
@@ -552,11 +566,11 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
                                      BG[:, :0], BG[:, :0], W[96:])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
-                X[:] = Xc
+                _copy(X, Xc)
                 X[A2] = 0.0
                 return t + tc, True, peak, n, False
         peak = substep_peak(X, Xb, step, peak)
-        X[:] = Xb
+        _copy(X, Xb)
         t += step
     return h, False, peak, n, False
 
