@@ -31,8 +31,8 @@ from plant.drive import DriveCommand, DriveType
 from plant.multimode.interval import _apply_level, _end_flyback, _flyback_time, _torque_metrics
 from plant.multimode.moving import substep_peak
 from plant.multimode.stuck import stuck_propagate
-from plant.multimode.zero_velocity import _cross_prob
-from plant.randomness import NoiseExhausted, NoiseStream, normal, uniform_below
+from plant.multimode.zero_velocity import _crossed
+from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import bisect, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
@@ -286,6 +286,24 @@ def _gauss_step(X, P, L, z, cursor, out):
     _apply_factor(out, L, z, cursor)
 
 
+@njit(cache=True, _nrt=False)
+def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
+    """:func:`_gauss_step` with P = TP[m, j], L = TL[m, j] read in place (no views) and ζ in the
+    scratch ``zeta``: the same operations and draws, allocation-free, without reference counting."""
+    for i in range(NX):
+        acc = 0.0
+        for k in range(NX):
+            acc += TP[m, j, i, k] * X[k]
+        out[i] = acc
+    for i in range(NNB):
+        zeta[i] = normal(z, cursor)
+    for i in range(NNB):
+        acc = 0.0
+        for k in range(i + 1):
+            acc += TL[m, j, i, k] * zeta[k]
+        out[NB[i]] += acc
+
+
 @njit(cache=True)
 def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, W):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
@@ -301,6 +319,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
     P = np.empty((NX, NX))
     Q = np.empty((NNB, NNB))
     L = np.empty((NNB, NNB))
+    zeta = np.empty(NNB)
     t = 0.0
     n = 0
     while h - t > 0.0:
@@ -318,7 +337,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
             _gauss_step(X, P, L, z, cursor, Xb)
         else:
             step = sub
-            _gauss_step(X, TP[m, j], TL[m, j], z, cursor, Xb)
+            _gauss_step_t(X, TP, TL, m, j, z, cursor, Xb, zeta)
         n += 1
         if n > max_steps:
             return t, False, peak, n, True
@@ -336,8 +355,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 Xb[A1] += s * (-low) * step / 2.0
                 Xb[PHI] -= s * (-low) * step / 2.0
         else:
-            pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
-            if pc >= 1.0 or uniform_below(z, cursor, pc):
+            if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
                 tc, lv = bisect(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
                                 BT[m] if not fresh else BT[m, :0])
                 n += lv
@@ -346,7 +364,8 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 X[A2] = 0.0
                 return t + tc, True, peak, n, False
         peak = substep_peak(X, Xb, step, peak)
-        X[:] = Xb
+        for i in range(NX):
+            X[i] = Xb[i]
         t += step
     return h, False, peak, n, False
 
