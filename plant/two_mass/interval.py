@@ -343,10 +343,16 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
             return t, False, peak, n, True
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
-            p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+            both = va > 0.0 and vb > 0.0
+            e = -2.0 * va * vb / (sig_v2 * step) if both else 0.0
             x = normal(z, cursor)
-            if x >= 0.0 and p_push <= 0.5:
+            # p_push = e^e (1 unless both > 0) is only compared with ½: exp only near ln ½
+            if x >= 0.0 and both and (e < -0.7 or math.exp(e) <= 0.5):
                 low = min(va, vb)
+            elif both and e < -70.0 and x > -11.0 and min(va, vb) >= 1e-6 * max(va, vb):
+                # U = Φ(x) > 1.9e-28 > e^e: the bridge minimum below is ≥ 0 with a relative
+                # margin ≥ 1e-7 (far above rounding), so no push — decided without erfc and log
+                low = 0.0
             else:
                 uu = 0.5 * math.erfc(-x / math.sqrt(2.0))
                 low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(uu)))
