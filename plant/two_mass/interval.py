@@ -35,8 +35,8 @@ from plant.multimode.zero_velocity import _crossed
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import bisect, bridge_tables
-from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
+from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _start_coords_w,
                                    propagate, psd_factor, start_coords, transition)
 from plant.two_mass.params import TwoMassParams
 
@@ -105,6 +105,26 @@ def _torque_exit(X, ks, horizon, p, q, V, Vi, lam):
     return first_exit(ca, cb, lm, n, -ks, ks, horizon)
 
 
+@njit(cache=True, _nrt=False)
+def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F, CW, al):
+    """:func:`_torque_exit` in the scratch C, F (plant.two_mass.motion.propagate_w's), CW
+    (3 × NCORE complex: the coefficients and exponents) and ``al``: the same operations,
+    allocation-free and without reference counting."""
+    n = _start_coords_w(X, 2, p, Vi, C, F)
+    for i in range(NCORE):
+        CW[0, i] = 0j
+        CW[1, i] = 0j
+        CW[2, i] = 0j
+    for i in range(n):
+        cv = q[0] * V[M_STUCK, 0, i] + q[1] * V[M_STUCK, 1, i]
+        CW[0, i] = cv * C[0, i]
+        CW[1, i] = cv * C[1, i]
+        CW[2, i] = lam[M_STUCK, i]
+    for i in range(n):
+        al[i] = abs(CW[2, i])
+    return first_exit_al(CW[0], CW[1], CW[2], al, n, -ks, ks, horizon)
+
+
 @njit(cache=True)
 def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
     """First root of the mean x2 (which = 0) or of ẋ1 = x2 − x4 (which = 1) while moving."""
@@ -130,19 +150,19 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
 # --- mode 2 -----------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn):
+def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F, CW, al):
     ks = max(p.stiction + X[A5], 0.0)
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
     horizon = min(h_end, h_fb)
-    h_brk, side = _torque_exit(X, ks, horizon, p, q, V, Vi, lam)
+    h_brk, side = _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F, CW, al)
     if h_brk < 0.0:
         S[_STATUS] = _NO_ROOT
         return True
     h = min(h_end, h_fb, h_brk)
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
-    propagate(X, 2, h, p, q, V, Vi, lam, Xn)
+    propagate_w(X, 2, h, p, V, Vi, lam, Xn, C, F)
     X[PHI], X[WM] = Xn[PHI], Xn[WM]
     stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)    # x1, x4 (with w4) and x3
     S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))
@@ -389,6 +409,10 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     X = np.empty(NX)
     Xn = np.empty(NX)
     W = np.zeros(8)
+    C = np.empty((4, NCORE), dtype=np.complex128)
+    F = np.empty((2, NCORE))
+    CW = np.empty((3, NCORE), dtype=np.complex128)
+    al = np.empty(NCORE)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[PHI], X[WM] = (x[0], x[1], x[2], x[3], x[4], p.coulomb,
                                                                          x[5], x[6], x[7])
     for i in range(_SHEET):
@@ -405,7 +429,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         stop = False
         while S[_T] < t_seg_end:
             if S[_MODE] == 2.0:
-                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn)
+                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F, CW, al)
             else:
                 stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W)
             if stop:

@@ -130,6 +130,48 @@ def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
 
 
 @njit(cache=True, _nrt=False)
+def _modal_factors(mode, t, lam, G, k):
+    """G[0, k], G[1, k], G[2, k] = e^x, φ1(x), φ2(x) at x = λ_i·t for the modes of ``mode``: what
+    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike."""
+    r = mode_row(mode)
+    n = 3 if mode == 2 else 5
+    for i in range(n):
+        x = lam[r, i] * t
+        G[0, k, i] = np.exp(x)
+        G[1, k, i] = phi1(x)
+        G[2, k, i] = phi2(x)
+
+
+@njit(cache=True, _nrt=False)
+def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
+    """:func:`propagate_w` with e^x, φ1(x), φ2(x) read from G[:, k] (:func:`_modal_factors` at
+    the same t): the same operations on the same values."""
+    r = mode_row(mode)
+    n = _start_coords_w(X, mode, p, Vi, C, F)
+    for i in range(n):
+        f1 = G[1, k, i]
+        C[2, i] = G[0, k, i] * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * G[2, k, i] * C[1, i]
+    b4 = p.beta4
+    E4 = -math.expm1(-b4 * t)
+    for j in range(NX):
+        Xout[j] = X[j]
+    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
+    Xout[A4] = X[A4] * (1.0 - E4)
+    if mode == 2:
+        Xout[A1] = X[A1] - X[A4] * E4 / b4
+        Xout[A2] = 0.0
+        Xout[PHI] = _row_w(V, r, 0, C, 2, n)
+        Xout[WM] = _row_w(V, r, 1, C, 2, n)
+    else:
+        Xout[A2] = _row_w(V, r, 0, C, 2, n)
+        Xout[PHI] = _row_w(V, r, 1, C, 2, n)
+        Xout[WM] = _row_w(V, r, 2, C, 2, n)
+        Xout[A5] = _row_w(V, r, 4, C, 2, n)
+        Xout[A1] = X[A1] + _row_w(V, r, 0, C, 3, n) - X[A4] * E4 / b4
+
+
+@njit(cache=True, _nrt=False)
 def _row_w(V, r, k, C, c, n):
     acc = 0j
     for i in range(n):
@@ -152,9 +194,11 @@ def transition(mode, h, p, q, V, Vi, lam, P):
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
     F = np.empty((2, NCORE))
+    G = np.empty((3, 1, NCORE), dtype=np.complex128)
+    _modal_factors(mode, h, lam, G, 0)
     for j in range(NX):
         E[j] = 1.0
-        propagate_w(E, mode, h, p, V, Vi, lam, col, C, F)
+        _propagate_g(E, mode, h, p, V, Vi, lam, col, C, F, G, 0)
         for i in range(NX):
             P[i, j] = col[i]
         E[j] = 0.0
@@ -178,6 +222,11 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
     F = np.empty((2, NCORE))
+    G = np.empty((3, panels * 8, NCORE), dtype=np.complex128)
+    for pn in range(panels):
+        lo = pn * width
+        for k in range(8):
+            _modal_factors(mode, lo + 0.5 * width * (_GL_X[k] + 1.0), lam, G, pn * 8 + k)
     srcs = (A2, A4, A5)
     for s_i in range(3):
         j = srcs[s_i]
@@ -196,7 +245,7 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
             for k in range(8):
                 v = lo + 0.5 * width * (_GL_X[k] + 1.0)
                 E[j] = 1.0
-                propagate_w(E, mode, v, p, V, Vi, lam, col, C, F)
+                _propagate_g(E, mode, v, p, V, Vi, lam, col, C, F, G, pn * 8 + k)
                 E[j] = 0.0
                 wk = 0.5 * width * _GL_W[k] * qj
                 for a in range(NNB):
