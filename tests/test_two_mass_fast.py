@@ -108,10 +108,8 @@ def test_torque_exit_scratch_form_equals_the_plain_one_and_brentq():
     prm = p.kernel_record()[0]
     k, c = p.shaft_stiffness, p.shaft_damping
     rng = np.random.default_rng(3)
-    C = np.empty((4, NCORE), dtype=complex)
-    F = np.empty((2, NCORE))
-    CW = np.empty((3, NCORE), dtype=complex)
-    al = np.empty(NCORE)
+    C = np.empty((5, NCORE), dtype=complex)
+    F = np.empty((3, NCORE))
     hits = 0
     for _ in range(40):
         X = np.zeros(9)
@@ -122,7 +120,7 @@ def test_torque_exit_scratch_form_equals_the_plain_one_and_brentq():
         if abs(k * X[PHI] + c * X[WM]) >= p.stiction:
             continue
         plain = _torque_exit(X, p.stiction, 0.01, prm, q, V, Vi, lam)
-        fast = _torque_exit_w(X, p.stiction, 0.01, prm, q, V, Vi, lam, C, F, CW, al)
+        fast = _torque_exit_w(X, p.stiction, 0.01, prm, q, V, Vi, lam, C, F)
         assert plain == fast
         t, side = plain
         if side != 0:

@@ -106,23 +106,23 @@ def _torque_exit(X, ks, horizon, p, q, V, Vi, lam):
 
 
 @njit(cache=True, _nrt=False)
-def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F, CW, al):
-    """:func:`_torque_exit` in the scratch C, F (plant.two_mass.motion.propagate_w's), CW
-    (3 × NCORE complex: the coefficients and exponents) and ``al``: the same operations,
+def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
+    """:func:`_torque_exit` in the scratch C (5 × NCORE complex: w, b̃, then the coefficients
+    and exponents in rows 2-4) and F (3 × NCORE: z, b, |λ|): the same operations,
     allocation-free and without reference counting."""
     n = _start_coords_w(X, 2, p, Vi, C, F)
     for i in range(NCORE):
-        CW[0, i] = 0j
-        CW[1, i] = 0j
-        CW[2, i] = 0j
+        C[2, i] = 0j
+        C[3, i] = 0j
+        C[4, i] = 0j
     for i in range(n):
         cv = q[0] * V[M_STUCK, 0, i] + q[1] * V[M_STUCK, 1, i]
-        CW[0, i] = cv * C[0, i]
-        CW[1, i] = cv * C[1, i]
-        CW[2, i] = lam[M_STUCK, i]
+        C[2, i] = cv * C[0, i]
+        C[3, i] = cv * C[1, i]
+        C[4, i] = lam[M_STUCK, i]
     for i in range(n):
-        al[i] = abs(CW[2, i])
-    return first_exit_al(CW[0], CW[1], CW[2], al, n, -ks, ks, horizon)
+        F[2, i] = abs(C[4, i])
+    return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
 
 
 @njit(cache=True)
@@ -150,12 +150,12 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
 # --- mode 2 -----------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F, CW, al):
+def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     ks = max(p.stiction + X[A5], 0.0)
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
     horizon = min(h_end, h_fb)
-    h_brk, side = _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F, CW, al)
+    h_brk, side = _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F)
     if h_brk < 0.0:
         S[_STATUS] = _NO_ROOT
         return True
@@ -226,7 +226,7 @@ def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W):
+def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn):
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     X[AKC] = p.coulomb if p.coulomb + X[A5] >= 0.0 else -X[A5]
@@ -238,7 +238,7 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
     if noise_on and p.sigma2_sq > 0.0:
         budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
         advanced, stopped, peak, n, chattered = _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z,
-                                                               cursor, S[_PEAK], budget, W)
+                                                               cursor, S[_PEAK], budget)
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -325,7 +325,7 @@ def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
 
 
 @njit(cache=True)
-def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, W):
+def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
     ``substep`` (``reflect_substep`` while s·T > ks), the bridge crossing test and bisection.
 
@@ -408,11 +408,8 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor[0] = zpos
     X = np.empty(NX)
     Xn = np.empty(NX)
-    W = np.zeros(8)
-    C = np.empty((4, NCORE), dtype=np.complex128)
-    F = np.empty((2, NCORE))
-    CW = np.empty((3, NCORE), dtype=np.complex128)
-    al = np.empty(NCORE)
+    C = np.empty((5, NCORE), dtype=np.complex128)     # scratch of propagate_w and _torque_exit_w
+    F = np.empty((3, NCORE))
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[PHI], X[WM] = (x[0], x[1], x[2], x[3], x[4], p.coulomb,
                                                                          x[5], x[6], x[7])
     for i in range(_SHEET):
@@ -429,9 +426,9 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         stop = False
         while S[_T] < t_seg_end:
             if S[_MODE] == 2.0:
-                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F, CW, al)
+                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W)
+                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):
