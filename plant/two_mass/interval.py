@@ -31,12 +31,12 @@ from plant.drive import DriveCommand, DriveType
 from plant.multimode.interval import _apply_level, _end_flyback, _flyback_time, _torque_metrics
 from plant.multimode.moving import substep_peak
 from plant.multimode.stuck import stuck_propagate
-from plant.multimode.zero_velocity import _cross_prob
-from plant.randomness import NoiseExhausted, NoiseStream, normal, uniform_below
+from plant.multimode.zero_velocity import _crossed
+from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import bisect, bridge_tables
-from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
+from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _start_coords_w,
                                    propagate, psd_factor, start_coords, transition)
 from plant.two_mass.params import TwoMassParams
 
@@ -105,6 +105,26 @@ def _torque_exit(X, ks, horizon, p, q, V, Vi, lam):
     return first_exit(ca, cb, lm, n, -ks, ks, horizon)
 
 
+@njit(cache=True, _nrt=False)
+def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
+    """:func:`_torque_exit` in the scratch C (5 × NCORE complex: w, b̃, then the coefficients
+    and exponents in rows 2-4) and F (3 × NCORE: z, b, |λ|): the same operations,
+    allocation-free and without reference counting."""
+    n = _start_coords_w(X, 2, p, Vi, C, F)
+    for i in range(NCORE):
+        C[2, i] = 0j
+        C[3, i] = 0j
+        C[4, i] = 0j
+    for i in range(n):
+        cv = q[0] * V[M_STUCK, 0, i] + q[1] * V[M_STUCK, 1, i]
+        C[2, i] = cv * C[0, i]
+        C[3, i] = cv * C[1, i]
+        C[4, i] = lam[M_STUCK, i]
+    for i in range(n):
+        F[2, i] = abs(C[4, i])
+    return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
+
+
 @njit(cache=True)
 def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
     """First root of the mean x2 (which = 0) or of ẋ1 = x2 − x4 (which = 1) while moving."""
@@ -130,19 +150,19 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
 # --- mode 2 -----------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn):
+def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     ks = max(p.stiction + X[A5], 0.0)
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
     horizon = min(h_end, h_fb)
-    h_brk, side = _torque_exit(X, ks, horizon, p, q, V, Vi, lam)
+    h_brk, side = _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F)
     if h_brk < 0.0:
         S[_STATUS] = _NO_ROOT
         return True
     h = min(h_end, h_fb, h_brk)
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
-    propagate(X, 2, h, p, q, V, Vi, lam, Xn)
+    propagate_w(X, 2, h, p, V, Vi, lam, Xn, C, F)
     X[PHI], X[WM] = Xn[PHI], Xn[WM]
     stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)    # x1, x4 (with w4) and x3
     S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))
@@ -206,7 +226,7 @@ def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W):
+def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn):
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     X[AKC] = p.coulomb if p.coulomb + X[A5] >= 0.0 else -X[A5]
@@ -218,7 +238,7 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
     if noise_on and p.sigma2_sq > 0.0:
         budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
         advanced, stopped, peak, n, chattered = _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z,
-                                                               cursor, S[_PEAK], budget, W)
+                                                               cursor, S[_PEAK], budget)
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -286,8 +306,26 @@ def _gauss_step(X, P, L, z, cursor, out):
     _apply_factor(out, L, z, cursor)
 
 
+@njit(cache=True, _nrt=False)
+def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
+    """:func:`_gauss_step` with P = TP[m, j], L = TL[m, j] read in place (no views) and ζ in the
+    scratch ``zeta``: the same operations and draws, allocation-free, without reference counting."""
+    for i in range(NX):
+        acc = 0.0
+        for k in range(NX):
+            acc += TP[m, j, i, k] * X[k]
+        out[i] = acc
+    for i in range(NNB):
+        zeta[i] = normal(z, cursor)
+    for i in range(NNB):
+        acc = 0.0
+        for k in range(i + 1):
+            acc += TL[m, j, i, k] * zeta[k]
+        out[NB[i]] += acc
+
+
 @njit(cache=True)
-def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, W):
+def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
     ``substep`` (``reflect_substep`` while s·T > ks), the bridge crossing test and bisection.
 
@@ -301,6 +339,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
     P = np.empty((NX, NX))
     Q = np.empty((NNB, NNB))
     L = np.empty((NNB, NNB))
+    zeta = np.empty(NNB)
     t = 0.0
     n = 0
     while h - t > 0.0:
@@ -318,16 +357,22 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
             _gauss_step(X, P, L, z, cursor, Xb)
         else:
             step = sub
-            _gauss_step(X, TP[m, j], TL[m, j], z, cursor, Xb)
+            _gauss_step_t(X, TP, TL, m, j, z, cursor, Xb, zeta)
         n += 1
         if n > max_steps:
             return t, False, peak, n, True
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
-            p_push = math.exp(-2.0 * va * vb / (sig_v2 * step)) if va > 0.0 and vb > 0.0 else 1.0
+            both = va > 0.0 and vb > 0.0
+            e = -2.0 * va * vb / (sig_v2 * step) if both else 0.0
             x = normal(z, cursor)
-            if x >= 0.0 and p_push <= 0.5:
+            # p_push = e^e (1 unless both > 0) is only compared with ½: exp only near ln ½
+            if x >= 0.0 and both and (e < -0.7 or math.exp(e) <= 0.5):
                 low = min(va, vb)
+            elif both and e < -70.0 and x > -11.0 and min(va, vb) >= 1e-6 * max(va, vb):
+                # U = Φ(x) > 1.9e-28 > e^e: the bridge minimum below is ≥ 0 with a relative
+                # margin ≥ 1e-7 (far above rounding), so no push — decided without erfc and log
+                low = 0.0
             else:
                 uu = 0.5 * math.erfc(-x / math.sqrt(2.0))
                 low = 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * step * math.log(uu)))
@@ -336,8 +381,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 Xb[A1] += s * (-low) * step / 2.0
                 Xb[PHI] -= s * (-low) * step / 2.0
         else:
-            pc = _cross_prob(X[A2], Xb[A2], step, sig_v2)
-            if pc >= 1.0 or uniform_below(z, cursor, pc):
+            if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
                 tc, lv = bisect(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
                                 BT[m] if not fresh else BT[m, :0])
                 n += lv
@@ -346,7 +390,8 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 X[A2] = 0.0
                 return t + tc, True, peak, n, False
         peak = substep_peak(X, Xb, step, peak)
-        X[:] = Xb
+        for i in range(NX):
+            X[i] = Xb[i]
         t += step
     return h, False, peak, n, False
 
@@ -363,7 +408,8 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor[0] = zpos
     X = np.empty(NX)
     Xn = np.empty(NX)
-    W = np.zeros(8)
+    C = np.empty((5, NCORE), dtype=np.complex128)     # scratch of propagate_w and _torque_exit_w
+    F = np.empty((3, NCORE))
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[PHI], X[WM] = (x[0], x[1], x[2], x[3], x[4], p.coulomb,
                                                                          x[5], x[6], x[7])
     for i in range(_SHEET):
@@ -380,9 +426,9 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         stop = False
         while S[_T] < t_seg_end:
             if S[_MODE] == 2.0:
-                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn)
+                stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W)
+                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):

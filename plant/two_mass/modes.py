@@ -88,16 +88,42 @@ def decompose(params: TwoMassParams) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return V, Vi, lam
 
 
+@njit(cache=True, inline="always")
+def _small(x):
+    """abs(x) < 0.5, deciding by x.real² + x.imag² away from 0.25 (their relative error is a few
+    ulps, far inside the ±1e-3 margin) and by abs (hypot) only near it: the same branch, cheaper."""
+    r2 = x.real * x.real + x.imag * x.imag
+    if r2 < 0.2499:
+        return True
+    if r2 > 0.2501:
+        return False
+    return abs(x) < 0.5
+
+
+@njit(cache=True, inline="always")
+def _tiny(term, total):
+    """abs(term) < 1e-18·abs(total), by the squared moduli away from the threshold (relative
+    margin 1e-6, far above their few-ulp rounding; a square that underflows is a term below
+    1.5e-154 against a total ≥ 0.39 in the series here) and by abs (hypot) only near it."""
+    rt = term.real * term.real + term.imag * term.imag
+    rs = total.real * total.real + total.imag * total.imag
+    if rt < 0.999999e-36 * rs:
+        return True
+    if rt > 1.000001e-36 * rs:
+        return False
+    return abs(term) < 1e-18 * abs(total)
+
+
 @njit(cache=True)
 def phi1(x):
     """(eˣ − 1)/x for complex x, 1 at 0."""
-    if abs(x) < 0.5:
+    if _small(x):
         term = 1.0 + 0j
         total = 1.0 + 0j
         for k in range(2, 30):
             term = term * x / k
             total += term
-            if abs(term) < 1e-18 * abs(total):
+            if _tiny(term, total):
                 break
         return total
     return (cmath.exp(x) - 1.0) / x
@@ -106,13 +132,13 @@ def phi1(x):
 @njit(cache=True)
 def phi2(x):
     """(eˣ − 1 − x)/x² for complex x, ½ at 0."""
-    if abs(x) < 0.5:
+    if _small(x):
         term = 0.5 + 0j
         total = 0.5 + 0j
         for k in range(3, 32):
             term = term * x / k
             total += term
-            if abs(term) < 1e-18 * abs(total):
+            if _tiny(term, total):
                 break
         return total
     return (cmath.exp(x) - 1.0 - x) / (x * x)
@@ -137,6 +163,30 @@ def g_values(ca, cb, lam, n, t):
     return g, g1, m2, size
 
 
+@njit(cache=True, _nrt=False)
+def _g_fast(ca, cb, lam, al, n, t, want_size):
+    """:func:`g_values` with |λ_i| given (``al``), Σ|terms| only when ``want_size`` (else 0) and
+    the b-term skipped where b_i = 0: the same bits (a skipped product is a signed zero)."""
+    g = 0.0
+    g1 = 0.0
+    m2 = 0.0
+    size = 0.0
+    for i in range(n):
+        l = lam[i]
+        e = cmath.exp(l * t)
+        if cb[i].real == 0.0 and cb[i].imag == 0.0:
+            term = ca[i] * e
+        else:
+            term = ca[i] * e + cb[i] * (t * phi1(l * t))
+        g += term.real
+        if want_size:
+            size += abs(term)
+        d = e * (l * ca[i] + cb[i])
+        g1 += d.real
+        m2 += al[i] * abs(d)
+    return g, g1, m2, size
+
+
 @njit(cache=True)
 def first_exit(ca, cb, lam, n, lo, hi, horizon):
     """First t in (0, horizon] at which g leaves (lo, hi) [lo < g(0) < hi]: (t, +1 at hi, −1 at lo),
@@ -145,9 +195,18 @@ def first_exit(ca, cb, lam, n, lo, hi, horizon):
     :func:`first_root` for hi − g and g − lo at once: both share g, g' and M2, and each step is
     the smaller of the two safe steps.
     """
+    al = np.empty(max(n, 1))
+    for i in range(n):
+        al[i] = abs(lam[i])
+    return first_exit_al(ca, cb, lam, al, n, lo, hi, horizon)
+
+
+@njit(cache=True, _nrt=False)
+def first_exit_al(ca, cb, lam, al, n, lo, hi, horizon):
+    """first_exit with |λ_i| in ``al``, compiled without reference counting (allocates nothing); same bits."""
     t = 0.0
     for _ in range(100000):
-        g, g1, m2, size = g_values(ca, cb, lam, n, t)
+        g, g1, m2, size = _g_fast(ca, cb, lam, al, n, t, t == 0.0)
         best = math.inf
         side = 0
         for k in range(2):
@@ -174,7 +233,7 @@ def first_exit(ca, cb, lam, n, lo, hi, horizon):
                 best = s
                 side = 1 if k == 0 else -1
         if t + best >= horizon:
-            g, _, _, _ = g_values(ca, cb, lam, n, horizon)
+            g, _, _, _ = _g_fast(ca, cb, lam, al, n, horizon, False)
             if g >= hi:
                 return horizon, 1
             if g <= lo:
@@ -206,9 +265,18 @@ def first_root(ca, cb, lam, n, sigma, horizon):
     Returns 0 when σ·g(0) < 0 (or = 0, to 1e-14 of the terms' size, and falling): already past the level. Returns −1 if the
     safe steps did not converge within 100000 steps (the caller reports it).
     """
+    al = np.empty(max(n, 1))
+    for i in range(n):
+        al[i] = abs(lam[i])
+    return first_root_al(ca, cb, lam, al, n, sigma, horizon)
+
+
+@njit(cache=True, _nrt=False)
+def first_root_al(ca, cb, lam, al, n, sigma, horizon):
+    """first_root with |λ_i| in ``al``, compiled without reference counting (allocates nothing); same bits."""
     t = 0.0
     for _ in range(100000):
-        g, g1, m2, size = g_values(ca, cb, lam, n, t)
+        g, g1, m2, size = _g_fast(ca, cb, lam, al, n, t, t == 0.0)
         y = sigma * g
         y1 = sigma * g1
         if t == 0.0 and abs(y) <= 1e-14 * size:
@@ -233,7 +301,7 @@ def first_root(ca, cb, lam, n, sigma, horizon):
         else:
             s = 2.0 * y / (r - y1)
         if t + s >= horizon:
-            g, _, _, _ = g_values(ca, cb, lam, n, horizon)
+            g, _, _, _ = _g_fast(ca, cb, lam, al, n, horizon, False)
             return horizon if sigma * g <= 0.0 else math.inf
         if s < 1e-15:
             return t + s

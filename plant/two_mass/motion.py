@@ -67,17 +67,49 @@ def start_coords(X, mode, p, q, Vi, W0, B0):
 @njit(cache=True)
 def propagate(X, mode, t, p, q, V, Vi, lam, Xout):
     """Xout = the noise-free state t seconds after X in ``mode`` (exact)."""
+    C = np.empty((4, NCORE), dtype=np.complex128)
+    F = np.empty((2, NCORE))
+    propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F)
+
+
+@njit(cache=True, _nrt=False)
+def _start_coords_w(X, mode, p, Vi, C, F):
+    """:func:`start_coords` into C[0] (w), C[1] (b̃) with F[0], F[1] for z and b; returns n."""
     r = mode_row(mode)
-    W0 = np.empty(NCORE, dtype=np.complex128)
-    B0 = np.empty(NCORE, dtype=np.complex128)
-    n = start_coords(X, mode, p, q, Vi, W0, B0)
-    wt = np.empty(NCORE, dtype=np.complex128)
-    it = np.empty(NCORE, dtype=np.complex128)
+    for j in range(NCORE):
+        F[1, j] = 0.0
+    if mode == 2:
+        n = 3
+        F[0, 0], F[0, 1], F[0, 2] = X[PHI], X[WM], X[A3]
+        F[1, 2] = p.beta3 * X[AU]
+    else:
+        n = 5
+        s = 1.0 if mode == 3 else -1.0
+        F[0, 0], F[0, 1], F[0, 2], F[0, 3], F[0, 4] = X[A2], X[PHI], X[WM], X[A3], X[A5]
+        F[1, 0] = -s * p.alpha * X[AKC]
+        F[1, 3] = p.beta3 * X[AU]
+    for i in range(n):
+        acc = 0j
+        acc2 = 0j
+        for j in range(n):
+            acc += Vi[r, i, j] * F[0, j]
+            acc2 += Vi[r, i, j] * F[1, j]
+        C[0, i] = acc
+        C[1, i] = acc2
+    return n
+
+
+@njit(cache=True, _nrt=False)
+def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
+    """:func:`propagate` with scratch C (4 × NCORE complex) and F (2 × NCORE): the same
+    operations, allocation-free and compiled without reference counting."""
+    r = mode_row(mode)
+    n = _start_coords_w(X, mode, p, Vi, C, F)
     for i in range(n):
         x = lam[r, i] * t
         f1 = phi1(x)
-        wt[i] = np.exp(x) * W0[i] + t * f1 * B0[i]
-        it[i] = t * f1 * W0[i] + t * t * phi2(x) * B0[i]
+        C[2, i] = np.exp(x) * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * phi2(x) * C[1, i]
     b4 = p.beta4
     E4 = -math.expm1(-b4 * t)
     for j in range(NX):
@@ -87,14 +119,64 @@ def propagate(X, mode, t, p, q, V, Vi, lam, Xout):
     if mode == 2:
         Xout[A1] = X[A1] - X[A4] * E4 / b4
         Xout[A2] = 0.0
-        Xout[PHI] = _row(V, r, 0, wt, n)
-        Xout[WM] = _row(V, r, 1, wt, n)
+        Xout[PHI] = _row_w(V, r, 0, C, 2, n)
+        Xout[WM] = _row_w(V, r, 1, C, 2, n)
     else:
-        Xout[A2] = _row(V, r, 0, wt, n)
-        Xout[PHI] = _row(V, r, 1, wt, n)
-        Xout[WM] = _row(V, r, 2, wt, n)
-        Xout[A5] = _row(V, r, 4, wt, n)
-        Xout[A1] = X[A1] + _row(V, r, 0, it, n) - X[A4] * E4 / b4
+        Xout[A2] = _row_w(V, r, 0, C, 2, n)
+        Xout[PHI] = _row_w(V, r, 1, C, 2, n)
+        Xout[WM] = _row_w(V, r, 2, C, 2, n)
+        Xout[A5] = _row_w(V, r, 4, C, 2, n)
+        Xout[A1] = X[A1] + _row_w(V, r, 0, C, 3, n) - X[A4] * E4 / b4
+
+
+@njit(cache=True, _nrt=False)
+def _modal_factors(mode, t, lam, G, k):
+    """G[0, k], G[1, k], G[2, k] = e^x, φ1(x), φ2(x) at x = λ_i·t for the modes of ``mode``: what
+    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike."""
+    r = mode_row(mode)
+    n = 3 if mode == 2 else 5
+    for i in range(n):
+        x = lam[r, i] * t
+        G[0, k, i] = np.exp(x)
+        G[1, k, i] = phi1(x)
+        G[2, k, i] = phi2(x)
+
+
+@njit(cache=True, _nrt=False)
+def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
+    """:func:`propagate_w` with e^x, φ1(x), φ2(x) read from G[:, k] (:func:`_modal_factors` at
+    the same t): the same operations on the same values."""
+    r = mode_row(mode)
+    n = _start_coords_w(X, mode, p, Vi, C, F)
+    for i in range(n):
+        f1 = G[1, k, i]
+        C[2, i] = G[0, k, i] * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * G[2, k, i] * C[1, i]
+    b4 = p.beta4
+    E4 = -math.expm1(-b4 * t)
+    for j in range(NX):
+        Xout[j] = X[j]
+    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
+    Xout[A4] = X[A4] * (1.0 - E4)
+    if mode == 2:
+        Xout[A1] = X[A1] - X[A4] * E4 / b4
+        Xout[A2] = 0.0
+        Xout[PHI] = _row_w(V, r, 0, C, 2, n)
+        Xout[WM] = _row_w(V, r, 1, C, 2, n)
+    else:
+        Xout[A2] = _row_w(V, r, 0, C, 2, n)
+        Xout[PHI] = _row_w(V, r, 1, C, 2, n)
+        Xout[WM] = _row_w(V, r, 2, C, 2, n)
+        Xout[A5] = _row_w(V, r, 4, C, 2, n)
+        Xout[A1] = X[A1] + _row_w(V, r, 0, C, 3, n) - X[A4] * E4 / b4
+
+
+@njit(cache=True, _nrt=False)
+def _row_w(V, r, k, C, c, n):
+    acc = 0j
+    for i in range(n):
+        acc += V[r, k, i] * C[c, i]
+    return acc.real
 
 
 @njit(cache=True)
@@ -110,9 +192,13 @@ def transition(mode, h, p, q, V, Vi, lam, P):
     """P = Φ(h) (9 × 9) of ``mode``, the matrix of :func:`propagate`."""
     E = np.zeros(NX)
     col = np.empty(NX)
+    C = np.empty((4, NCORE), dtype=np.complex128)
+    F = np.empty((2, NCORE))
+    G = np.empty((3, 1, NCORE), dtype=np.complex128)
+    _modal_factors(mode, h, lam, G, 0)
     for j in range(NX):
         E[j] = 1.0
-        propagate(E, mode, h, p, q, V, Vi, lam, col)
+        _propagate_g(E, mode, h, p, V, Vi, lam, col, C, F, G, 0)
         for i in range(NX):
             P[i, j] = col[i]
         E[j] = 0.0
@@ -134,6 +220,13 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
     width = h / panels
     E = np.zeros(NX)
     col = np.empty(NX)
+    C = np.empty((4, NCORE), dtype=np.complex128)
+    F = np.empty((2, NCORE))
+    G = np.empty((3, panels * 8, NCORE), dtype=np.complex128)
+    for pn in range(panels):
+        lo = pn * width
+        for k in range(8):
+            _modal_factors(mode, lo + 0.5 * width * (_GL_X[k] + 1.0), lam, G, pn * 8 + k)
     srcs = (A2, A4, A5)
     for s_i in range(3):
         j = srcs[s_i]
@@ -152,7 +245,7 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
             for k in range(8):
                 v = lo + 0.5 * width * (_GL_X[k] + 1.0)
                 E[j] = 1.0
-                propagate(E, mode, v, p, q, V, Vi, lam, col)
+                _propagate_g(E, mode, v, p, V, Vi, lam, col, C, F, G, pn * 8 + k)
                 E[j] = 0.0
                 wk = 0.5 * width * _GL_W[k] * qj
                 for a in range(NNB):
