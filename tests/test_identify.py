@@ -283,6 +283,27 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
             assert choice.excess[other] > 2 * choice.excess_se[other] > 0
 
 
+def test_auto_rule_fewest_parameters_then_lower_score():
+    """The stated rule on given scores: the fewest fitted parameters among the families within
+    2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""
+    from plant.identification.fit import RULE, _rule
+
+    fams = ("multimode", "two-mass", "stribeck", "lugre")
+    score = {"multimode": -18.0, "two-mass": -18.1, "stribeck": -18.6, "lugre": -18.75}
+
+    def pick(se_of):
+        best = min(score, key=score.get)
+        excess = {f: score[f] - score[best] for f in fams}
+        return _rule(fams, score, excess, {f: se_of.get(f, 0.1) for f in fams})
+
+    assert pick({}) == "lugre"                                 # stribeck +0.15 ± 0.10: not separable, same count
+    assert pick({"two-mass": 0.4}) == "two-mass"               # +0.65 within 2 × 0.4: fewer parameters win
+    assert pick({"multimode": 0.4, "two-mass": 0.4}) == "multimode"
+    score["stribeck"] = -18.8                                  # stribeck best now: lugre not chosen
+    assert pick({}) == "stribeck"
+    assert "fewest" in RULE and "lower score" in RULE
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="the auto study (about 40 min CPU for 40 logs "
                     "on the plan with holds): set SOLNIC_AXIS_STUDY=1 to run it; its last, partial results are in "

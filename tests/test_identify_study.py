@@ -17,6 +17,7 @@ from plant.identification import design_experiment, fit_log, simulate_log
 from plant.identification.families import FAMILY_FREE
 
 CORE = ("coulomb", "stiction", "inertia", "motor_time_constant")
+AUTO_SEED = 6161   # the auto study of issue 25's third session (never run while writing the fit or the rule)
 
 
 def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10):
@@ -37,6 +38,23 @@ def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10)
         v = truth[k] if k in ("coulomb", "stiction") else getattr(p, k)
         out[k] = (v, fit.estimates[k], fit.interval[k], k not in fit.not_identified)
     return out, cpu
+
+
+def auto_case(family: str, case: int, seed: int = AUTO_SEED):
+    """``choose_family`` (bootstrap 0) on one log of ``family`` at the ``case``-th random axis of
+    tests/identify_draws.py (draws from ``default_rng([seed, f])``, log seed seed·1000 + 100·f +
+    case, f the family's index in FAMILY_FREE): (choice, CPU seconds)."""
+    from plant.identification.fit import choose_family
+    from tests.identify_draws import draw
+
+    f = list(FAMILY_FREE).index(family)
+    rng = np.random.default_rng([seed, f])
+    for _ in range(case + 1):
+        p = draw(family, rng)
+    log, _ = simulate_log(design_experiment(), family, p, seed * 1000 + 100 * f + case)
+    t0 = time.process_time()
+    _, choice = choose_family(log, bootstrap=0)
+    return choice, time.process_time() - t0
 
 
 @pytest.mark.slow
