@@ -283,6 +283,25 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
             assert choice.excess[other] > 2 * choice.excess_se[other] > 0
 
 
+def test_auto_folds_hold_every_kind_of_move_in_both_directions(plan):
+    """Each fold of the held-out split holds every ramp, hold level and pulse width of the default
+    plan in both directions (alternate pairs, the split before, put a hold level in one fold only)."""
+    from plant.identification.fit import _folds, moves
+
+    fold = _folds(plan)
+    kinds = {}
+    for m, (s, e) in enumerate(moves(plan)):
+        segs = plan.commands[s].segments
+        level = next(v for _, v in segs if v != 0.0)
+        width = segs[1][0] if len(segs) > 1 else None
+        kind = (len(segs), abs(level), width, plan.commands[s + 3].segments == segs)
+        kinds.setdefault(kind, set()).add((int(fold[m]), level > 0))
+    assert len(kinds) >= 10
+    for kind, seen in kinds.items():
+        assert seen == {(0, True), (0, False), (1, True), (1, False)}, (kind, seen)
+    assert abs(int(fold.sum()) - fold.size / 2) <= 1
+
+
 def test_auto_rule_fewest_parameters_then_lower_score():
     """The stated rule on given scores: the fewest fitted parameters among the families within
     2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""

@@ -474,7 +474,8 @@ _GRID = {"stribeck_velocity": (1e-3, 4e-3, 1.6e-2, 4e-2), "viscous": (0.05, 0.5,
 # Simpler first: parameter count (stribeck and lugre both six: the order of the fold fits only).
 _SIMPLER = ("multimode", "two-mass", "stribeck", "lugre")
 _SEPARABLE_SE = 2.0    # a family is separably worse when its mean excess exceeds 2 standard errors
-RULE = ("held-out prediction error, 2-fold over moves (alternate pairs of moves): each family is fitted on one "
+RULE = ("held-out prediction error, 2-fold over moves (each kind of move, the same commands up to direction, "
+        "split evenly: its occurrences go to folds 0, 1, 1, 0, 0, 1, …): each family is fitted on one "
         "half of the moves and predicts the other; score = mean over moves of ln(mean squared prediction error); "
         "among the families whose paired excess over the best score is within "
         f"{_SEPARABLE_SE:g} standard errors over moves (not separable from the best), the one with the fewest "
@@ -568,6 +569,24 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
     return z, np.sqrt(np.maximum(ms, sigma1 ** 2))
 
 
+def _folds(log: AxisLog) -> np.ndarray:
+    """The fold (0 or 1) of every move: moves of one kind (the same commands up to direction, up to
+    the last nonzero one) go to folds 0, 1, 1, 0, 0, 1, … in the order they occur, so each fold
+    holds both directions and every kind that occurs at least twice — every hold level, ramp and
+    pulse width. (Alternate pairs of moves, the split before, put both ladders' holds of a level
+    in one fold on the default plan: a fold fit then never saw the level next to k̄s.)"""
+    seen: dict = {}
+    out = []
+    for s, e in moves(log):
+        cmds = log.commands[s:e]
+        last = max(i for i, c in enumerate(cmds) if any(v != 0.0 for _, v in c.segments))
+        key = tuple(tuple((t, abs(v)) for t, v in c.segments) for c in cmds[:last + 1])
+        k = seen.get(key, 0)
+        seen[key] = k + 1
+        out.append((k + k // 2) % 2)
+    return np.array(out)
+
+
 def _rule(fams, score: dict, excess: dict, se: dict) -> str:
     """:data:`RULE` on the held-out scores: the fewest parameters among the families not separably
     worse than the best, the lower score among equally many."""
@@ -590,8 +609,9 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
                   budget_s: float = DEFAULT_BUDGET_S) -> tuple[AxisFit, FamilyChoice]:
     """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
 
-    Rule (:data:`RULE`): the moves are split into two folds by alternate pairs (a pair = one
-    move each way, so both folds hold ramps and every pulse width in both directions). Each
+    Rule (:data:`RULE`): the moves are split into two folds, each kind of move evenly
+    (:func:`_folds`), so both folds hold ramps, every hold level and every pulse width in both
+    directions. Each
     family is fitted on one fold (one weighted least-squares pass, weights per move from the
     multimode fit of that fold, start: that fit's k̄c, k̄s, J, τ3 with the extras at the best
     point of a coarse grid) and predicts the other; a move's score is ln(mean squared
@@ -627,7 +647,7 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     G = len(moves(log))
     if G < 8:
         raise ValueError(f"the log has {G} moves; choosing a family by held-out moves needs at least 8")
-    fold = np.array([(m // 2) % 2 for m in range(G)])
+    fold = _folds(log)
     per_move = {f: np.empty(G) for f in fams}
     cpu = dict.fromkeys(fams, 0.0)
     for k in (0, 1):
