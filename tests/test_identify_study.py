@@ -72,3 +72,20 @@ def test_stribeck_coverage_on_held_out_truth():
         print({k: (round(v, 5), round(e, 5), (round(lo, 5), round(hi, 5)), ok) for k, (v, e, (lo, hi), ok) in res.items()},
               f"cpu {cpu:.1f}")
     assert np.mean(inside) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 50 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_lugre_coverage_on_held_out_truth():
+    """10 random lugre axes (seed 2611, draws from ``default_rng([2611, 2])``, not used while writing
+    the fit): every fitted field (k̄c, k̄s, J, τ3, v_s, σ0) inside its stated 95 % interval in ≥ 90 %
+    of the cases (the must-show of issue 25). Each log costs about 300 CPU s (the point fit ~30 s
+    and the 10-replicate bootstrap; the default 300-s budget may cut the bootstrap, stated in
+    ``fit.method``). Measured so far: docs/axis.md, "Coverage of the lugre fit"."""
+    inside = []
+    for case in range(10):
+        res, cpu = coverage_case("lugre", case)
+        print({k: (round(v, 6), round(e, 6), (round(lo, 6), round(hi, 6)), ok) for k, (v, e, (lo, hi), ok) in res.items()},
+              f"cpu {cpu:.1f}")
+        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
+    assert np.mean(inside) >= 0.90

@@ -272,17 +272,23 @@ def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, de
     z = _start(model, sigma1) if z0 is None else z0
     scale = np.full(model.rows.size, sigma1)
     model.deadline = deadline
+    # the family's extras within a factor 30 of their start (k̄c, k̄s, J, τ3 free), the fold fits'
+    # bound: unbounded, a two-mass fit of a Table 2-1 log wandered to a shaft so stiff that one
+    # plant step outlasted the CPU budget by minutes (the budget is checked between moves)
+    lo, hi = np.full(z.size, -np.inf), np.full(z.size, np.inf)
+    lo[4:], hi[4:] = z[4:] - math.log(30.0), z[4:] + math.log(30.0)
+    box = (lo, hi) if z.size > 4 else (-np.inf, np.inf)
     try:
         for _ in range(2):
             model.best_cost = math.inf
-            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
+            sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
                                          x_scale=1.0, max_nfev=60 * len(z), xtol=1e-8, ftol=1e-10)
             z = sol.x
             r = sol.fun * scale
             ms = np.bincount(model.groups, weights=r * r) / np.bincount(model.groups)
             scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
         model.best_cost = math.inf
-        sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5,
+        sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
                                      x_scale=1.0, max_nfev=60 * len(z), xtol=1e-10, ftol=1e-12)
     except _OutOfTime:
         z = getattr(model, "best_z", z)
