@@ -2,7 +2,9 @@
 
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
-* the auto pick: tests/test_identify.py::test_auto_on_held_out_truth (SOLNIC_AXIS_STUDY=1).
+* coverage of the lugre fit (same seed and draws, family index 2);
+* the auto pick: seed 6161, 2 logs per family (test_auto_picks_the_generating_family) and
+  tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
 
 from __future__ import annotations
@@ -89,3 +91,19 @@ def test_lugre_coverage_on_held_out_truth():
               f"cpu {cpu:.1f}")
         inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
     assert np.mean(inside) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_auto_picks_the_generating_family():
+    """``--family auto`` on 2 fresh logs per family (seed 6161, cases 0–1, :func:`auto_case`; the
+    rule and the folds were fixed before these logs ran): the generating family picked in ≥ 90 %
+    of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has the
+    confusion matrix and the CPU per log)."""
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            choice, cpu = auto_case(family, case)
+            picked[family, case] = choice.family
+            print(family, case, choice.family, f"cpu {cpu:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
