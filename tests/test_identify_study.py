@@ -83,9 +83,8 @@ def test_lugre_coverage_on_held_out_truth():
     the fit): every fitted field (k̄c, k̄s, J, τ3, v_s, σ0) inside its stated 95 % interval in ≥ 90 %
     of the cases (the must-show of issue 25). Each log costs about 300 CPU s (the point fit ~30 s
     and the 10-replicate bootstrap; the default 300-s budget may cut the bootstrap, stated in
-    ``fit.method``). Measured so far (docs/axis.md, "Coverage of the lugre fit"): case 0 only,
-    3 of 6 inside (k̄c +2.3 %, k̄s +5.3 %, v_s −24 % outside; J, τ3, σ0 inside), 301 CPU s —
-    not run to the end; it is expected to fail."""
+    ``fit.method``). Measured so far (docs/axis.md, "Coverage of the lugre fit"): cases 0 and 1
+    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail."""
     inside = []
     for case in range(10):
         res, cpu = coverage_case("lugre", case)
