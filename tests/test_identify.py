@@ -283,6 +283,46 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
             assert choice.excess[other] > 2 * choice.excess_se[other] > 0
 
 
+def test_auto_folds_hold_every_kind_of_move_in_both_directions(plan):
+    """Each fold of the held-out split holds every ramp, hold level and pulse width of the default
+    plan in both directions (alternate pairs, the split before, put a hold level in one fold only)."""
+    from plant.identification.fit import _folds, moves
+
+    fold = _folds(plan)
+    kinds = {}
+    for m, (s, e) in enumerate(moves(plan)):
+        segs = plan.commands[s].segments
+        level = next(v for _, v in segs if v != 0.0)
+        width = segs[1][0] if len(segs) > 1 else None
+        kind = (len(segs), abs(level), width, plan.commands[s + 3].segments == segs)
+        kinds.setdefault(kind, set()).add((int(fold[m]), level > 0))
+    assert len(kinds) >= 10
+    for kind, seen in kinds.items():
+        assert seen == {(0, True), (0, False), (1, True), (1, False)}, (kind, seen)
+    assert abs(int(fold.sum()) - fold.size / 2) <= 1
+
+
+def test_auto_rule_fewest_parameters_then_lower_score():
+    """The stated rule on given scores: the fewest fitted parameters among the families within
+    2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""
+    from plant.identification.fit import RULE, _rule
+
+    fams = ("multimode", "two-mass", "stribeck", "lugre")
+    score = {"multimode": -18.0, "two-mass": -18.1, "stribeck": -18.6, "lugre": -18.75}
+
+    def pick(se_of):
+        best = min(score, key=score.get)
+        excess = {f: score[f] - score[best] for f in fams}
+        return _rule(fams, score, excess, {f: se_of.get(f, 0.1) for f in fams})
+
+    assert pick({}) == "lugre"                                 # stribeck +0.15 ± 0.10: not separable, same count
+    assert pick({"two-mass": 0.4}) == "two-mass"               # +0.65 within 2 × 0.4: fewer parameters win
+    assert pick({"multimode": 0.4, "two-mass": 0.4}) == "multimode"
+    score["stribeck"] = -18.8                                  # stribeck best now: lugre not chosen
+    assert pick({}) == "stribeck"
+    assert "fewest" in RULE and "lower score" in RULE
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="the auto study (about 40 min CPU for 40 logs "
                     "on the plan with holds): set SOLNIC_AXIS_STUDY=1 to run it; its last, partial results are in "

@@ -2,7 +2,9 @@
 
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
-* the auto pick: tests/test_identify.py::test_auto_on_held_out_truth (SOLNIC_AXIS_STUDY=1).
+* coverage of the lugre fit (same seed and draws, family index 2);
+* the auto pick: seed 6161, 2 logs per family (test_auto_picks_the_generating_family) and
+  tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from plant.identification import design_experiment, fit_log, simulate_log
 from plant.identification.families import FAMILY_FREE
 
 CORE = ("coulomb", "stiction", "inertia", "motor_time_constant")
+AUTO_SEED = 6161   # the auto study of issue 25's third session (never run while writing the fit or the rule)
 
 
 def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10):
@@ -39,6 +42,23 @@ def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10)
     return out, cpu
 
 
+def auto_case(family: str, case: int, seed: int = AUTO_SEED):
+    """``choose_family`` (bootstrap 0) on one log of ``family`` at the ``case``-th random axis of
+    tests/identify_draws.py (draws from ``default_rng([seed, f])``, log seed seed·1000 + 100·f +
+    case, f the family's index in FAMILY_FREE): (choice, CPU seconds)."""
+    from plant.identification.fit import choose_family
+    from tests.identify_draws import draw
+
+    f = list(FAMILY_FREE).index(family)
+    rng = np.random.default_rng([seed, f])
+    for _ in range(case + 1):
+        p = draw(family, rng)
+    log, _ = simulate_log(design_experiment(), family, p, seed * 1000 + 100 * f + case)
+    t0 = time.process_time()
+    _, choice = choose_family(log, bootstrap=0)
+    return choice, time.process_time() - t0
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
 def test_stribeck_coverage_on_held_out_truth():
@@ -54,3 +74,40 @@ def test_stribeck_coverage_on_held_out_truth():
         print({k: (round(v, 5), round(e, 5), (round(lo, 5), round(hi, 5)), ok) for k, (v, e, (lo, hi), ok) in res.items()},
               f"cpu {cpu:.1f}")
     assert np.mean(inside) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 50 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_lugre_coverage_on_held_out_truth():
+    """10 random lugre axes (seed 2611, draws from ``default_rng([2611, 2])``, not used while writing
+    the fit): every fitted field (k̄c, k̄s, J, τ3, v_s, σ0) inside its stated 95 % interval in ≥ 90 %
+    of the cases (the must-show of issue 25). Each log costs about 300 CPU s (the point fit ~30 s
+    and the 10-replicate bootstrap; the default 300-s budget may cut the bootstrap, stated in
+    ``fit.method``). Measured so far (docs/axis.md, "Coverage of the lugre fit"): cases 0 and 1
+    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail."""
+    inside = []
+    for case in range(10):
+        res, cpu = coverage_case("lugre", case)
+        print({k: (round(v, 6), round(e, 6), (round(lo, 6), round(hi, 6)), ok) for k, (v, e, (lo, hi), ok) in res.items()},
+              f"cpu {cpu:.1f}")
+        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
+    assert np.mean(inside) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured 3 of 8 (2026-11-27): multimode 2/2, lugre 1/2 (other: two-mass), "
+                   "stribeck 0/2 (two-mass, lugre), two-mass 0/2 (multimode, multimode); the must-show is ≥ 90 %")
+def test_auto_picks_the_generating_family():
+    """``--family auto`` on 2 fresh logs per family (seed 6161, cases 0–1, :func:`auto_case`; the
+    rule and the folds were fixed before these logs ran): the generating family picked in ≥ 90 %
+    of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has the
+    confusion matrix and the CPU per log). Measured: 3 of 8, CPU 29–87 s per log (median 36 s),
+    loaded machine; the generating family within 2 SE of the best on 6 of 8."""
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            choice, cpu = auto_case(family, case)
+            picked[family, case] = choice.family
+            print(family, case, choice.family, f"cpu {cpu:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
