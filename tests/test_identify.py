@@ -321,6 +321,30 @@ def test_auto_rule_fewest_parameters_then_lower_score():
     score["stribeck"] = -18.8                                  # stribeck best now: lugre not chosen
     assert pick({}) == "stribeck"
     assert "fewest" in RULE and "lower score" in RULE
+    score["two-mass"] = math.inf                               # a failed fold fit: score and SE infinite
+    assert pick({"two-mass": math.inf, "multimode": 0.1}) == "stribeck"
+    score["multimode"] = -18.7                                 # multimode within 2 SE: it wins, two-mass never
+    assert pick({"two-mass": math.inf}) == "multimode"
+
+
+def test_auto_folds_never_leave_a_fold_empty(plan):
+    """A plan whose every move is of its own kind (each level made unique) still splits into two
+    folds of equal size (within one move); the default plan's split is unchanged by that rule."""
+    import dataclasses
+
+    from plant.drive import DriveCommand
+    from plant.identification.fit import _folds, moves
+
+    before = _folds(plan)
+    cmds = list(plan.commands)
+    for i, (s, e) in enumerate(moves(plan)):
+        for j in range(s, e):
+            c = cmds[j]
+            cmds[j] = DriveCommand(tuple((t, v * (1 + 1e-6 * (i + 1))) for t, v in c.segments), c.drive)
+    unique = dataclasses.replace(plan, commands=tuple(cmds))
+    fold = _folds(unique)
+    assert fold.size == before.size and abs(int(fold.sum()) - fold.size / 2) <= 1
+    assert np.array_equal(_folds(plan), before)
 
 
 @pytest.mark.slow

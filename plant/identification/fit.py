@@ -489,7 +489,8 @@ RULE = ("held-out prediction error, 2-fold over moves (each kind of move, the sa
         "half of the moves and predicts the other; score = mean over moves of ln(mean squared prediction error); "
         "among the families whose paired excess over the best score is within "
         f"{_SEPARABLE_SE:g} standard errors over moves (not separable from the best), the one with the fewest "
-        "fitted parameters (multimode 4 < two-mass 5 < stribeck = lugre 6), and among equally many the lower score")
+        "fitted parameters (multimode 4 < two-mass 5 < stribeck = lugre 6), and among equally many the lower score; "
+        "a family whose fold fit failed to predict (infinite score) is never chosen over a finite one")
 
 
 def _elastic_stiffness(model: _Model) -> float | None:
@@ -583,25 +584,35 @@ def _folds(log: AxisLog) -> np.ndarray:
     """The fold (0 or 1) of every move: moves of one kind (the same commands up to direction, up to
     the last nonzero one) go to folds 0, 1, 1, 0, 0, 1, … in the order they occur, so each fold
     holds both directions and every kind that occurs at least twice — every hold level, ramp and
-    pulse width. (Alternate pairs of moves, the split before, put both ladders' holds of a level
-    in one fold on the default plan: a fold fit then never saw the level next to k̄s.)"""
-    seen: dict = {}
-    out = []
+    pulse width. Moves of a kind that occurs once (a user's plan may have them; the default plan
+    has none) follow the same pattern among themselves, so neither fold is ever empty. (Alternate
+    pairs of moves, the split before, put both ladders' holds of a level in one fold on the
+    default plan: a fold fit then never saw the level next to k̄s.)"""
+    keys = []
     for s, e in moves(log):
         cmds = log.commands[s:e]
         last = max(i for i, c in enumerate(cmds) if any(v != 0.0 for _, v in c.segments))
-        key = tuple(tuple((t, abs(v)) for t, v in c.segments) for c in cmds[:last + 1])
-        k = seen.get(key, 0)
-        seen[key] = k + 1
+        keys.append(tuple(tuple((t, abs(v)) for t, v in c.segments) for c in cmds[:last + 1]))
+    count: dict = {}
+    for key in keys:
+        count[key] = count.get(key, 0) + 1
+    seen: dict = {}
+    out = []
+    for key in keys:
+        group = key if count[key] > 1 else None     # the kinds seen once share one sequence
+        k = seen.get(group, 0)
+        seen[group] = k + 1
         out.append((k + k // 2) % 2)
     return np.array(out)
 
 
 def _rule(fams, score: dict, excess: dict, se: dict) -> str:
     """:data:`RULE` on the held-out scores: the fewest parameters among the families not separably
-    worse than the best, the lower score among equally many."""
+    worse than the best, the lower score among equally many; a family with an infinite score (its
+    fold fit failed to predict) is never kept."""
     best = min(fams, key=lambda f: score[f])
-    kept = [f for f in fams if f == best or excess[f] <= _SEPARABLE_SE * se[f]]
+    # a family whose fold fit failed (score ∞, and so SE ∞) is never "within 2 SE" of the best
+    kept = [f for f in fams if f == best or (math.isfinite(score[f]) and excess[f] <= _SEPARABLE_SE * se[f])]
     return min(kept, key=lambda f: (len(FAMILY_FREE[f]), score[f]))
 
 
