@@ -6,6 +6,7 @@
 * ``motion.transition`` / ``motion.process_noise`` (e^(λt), φ1, φ2 shared across columns and
   noise sources) against the same matrix and Gauss–Legendre sum built here from
   ``motion.propagate`` column by column;
+* ``modes._g_fast`` against ``modes.g_values`` on random modal sums;
 * ``interval._torque_exit_w`` (allocation-free, no reference counting) against
   ``interval._torque_exit``, and its root against brentq on the closed form.
 Bit-for-bit equality of whole compliant cells with main 77118a2 was checked once (docs/plant.md).
@@ -138,3 +139,37 @@ def test_torque_exit_scratch_form_equals_the_plain_one_and_brentq():
             lo = grid[-2]
             assert abs(brentq(torque, lo, t + 1e-9, xtol=1e-15) - t) < 1e-12
     assert hits >= 5
+
+
+def test_g_fast_gives_the_bits_of_g_values():
+    """``modes._g_fast`` (|λ| given, Σ|terms| only on request, the b-term skipped where b = 0)
+    against ``modes.g_values`` on random modal sums: g, g', M2 and Σ|terms| bit for bit (float.hex,
+    so signed zeros count), over λ with light and heavy damping, t = 0 included, b = ±0 included."""
+    from numba import njit
+
+    from plant.two_mass.modes import _g_fast, g_values
+
+    @njit
+    def moduli(lam):            # |λ_i| as the kernel takes them (numba's abs, not numpy's hypot)
+        out = np.empty(lam.shape[0])
+        for i in range(lam.shape[0]):
+            out[i] = abs(lam[i])
+        return out
+
+    rng = np.random.default_rng(2207)
+    checked_zero_b = 0
+    for case in range(3000):
+        n = int(rng.integers(1, 5))
+        lam = (-rng.uniform(0.0, 3e3, n) + 1j * rng.uniform(-2e3, 2e3, n)).astype(np.complex128)
+        ca = (rng.normal(size=n) + 1j * rng.normal(size=n)) * 10.0 ** rng.uniform(-3, 3, n)
+        cb = (rng.normal(size=n) + 1j * rng.normal(size=n)) * 10.0 ** rng.uniform(-3, 3, n)
+        zero = rng.random(n) < 0.4
+        cb[zero] = complex(-0.0, 0.0) if case % 2 else 0.0
+        checked_zero_b += int(zero.sum())
+        t = 0.0 if case % 7 == 0 else float(rng.uniform(0.0, 5e-3))
+        plain = g_values(ca, cb, lam, n, t)
+        fast = _g_fast(ca, cb, lam, moduli(lam), n, t, True)
+        assert [float(v).hex() for v in fast] == [float(v).hex() for v in plain], (case, fast, plain)
+        no_size = _g_fast(ca, cb, lam, moduli(lam), n, t, False)
+        assert [float(v).hex() for v in no_size[:3]] == [float(v).hex() for v in plain[:3]] and no_size[3] == 0.0
+    assert checked_zero_b > 1000
