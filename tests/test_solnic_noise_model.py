@@ -110,9 +110,9 @@ def test_backward_equation_solver_is_bit_identical_to_the_row_array_reference():
 
 
 def test_mean_only_solver_and_bias_are_bit_identical_to_the_full_moments():
-    # the idle planner reads only the bias (issue 27): _absorbed_mean / _pulse_bias must give
+    # the idle planner reads only the bias (issue 27): the mean-only solve / _pulse_bias must give
     # exactly the mean of the row-array reference and of _pulse_noise, in every blend regime
-    from controllers.solnic.noise_model import _GL_W, _GL_X, _absorbed_mean, _pulse_bias, _pulse_noise
+    from controllers.solnic.noise_model import _GL_W, _GL_X, _absorbed_moments, _pulse_bias, _pulse_noise
     from tests.reference_kernels import absorbed_moments
     p = PlantParams()
     al, U, tau, s2 = p.alpha, p.u_max, p.motor_time_constant, p.alpha**2 * p.sigma2_sq
@@ -125,7 +125,7 @@ def test_mean_only_solver_and_bias_are_bit_identical_to_the_full_moments():
         t_cz = t_b + rng.uniform(0.5e-3, 4e-3)
         t_stop = t_cz + rng.uniform(-0.3e-3, 3e-3)
         args = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, 64, 48, 16)
-        assert _absorbed_mean(*args) == absorbed_moments(*args)[0], args
+        assert _absorbed_moments(*args, False)[0] == absorbed_moments(*args)[0], args
         full = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, t_stop, _GL_X, _GL_W)
         b = _pulse_bias(*full)
         assert b == _pulse_noise(*full)[0], full

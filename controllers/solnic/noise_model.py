@@ -273,7 +273,7 @@ def _coasting_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero,
 
 
 @njit(cache=True)
-def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl):
+def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl, second=True):
     """(E[Δc], E[Δc²]) of a moving pulse from the backward equations (4)–(6) of the module
     docstring, solved on [t_b, t_cz] × [0, X] by Crank–Nicolson (two implicit Euler steps after
     each change of boundary condition), with the coasting polynomials (2) at t = t_cz and the
@@ -284,7 +284,9 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
     u1's forward elimination (two independent division chains), and the source of u2 is added
     during u1's back substitution. Every number is computed by the same operations in the same
     order as the row-array formulation it replaces (tests/test_solnic_noise_model.py compares
-    the two bit for bit)."""
+    the two bit for bit). With ``second`` False only u1 is solved (equation (5) reads u1, u1 never
+    reads u2: the same u1 bits, about half the work; E[Δc²] is returned as NaN) — what the idle
+    planner needs, the bias alone."""
     x3_off = U * -math.expm1(-dt_u / tau)
     a = al * kc
     T = t_cz
@@ -302,14 +304,15 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
     n = n_x + 1
     x = np.empty(n)
     u1 = np.empty(n)
-    u2 = np.empty(n)
+    u2 = np.empty(n if second else 1)
     for i in range(n):
         xi = i * dx
         x[i] = xi
         u1[i] = xi * xi / (2 * a) + s2 * xi / (2 * a * a)
-        u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
+        if second:
+            u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
     r1 = np.empty(n)
-    r2 = np.empty(n)
+    r2 = np.empty(n if second else 1)
     cp = np.empty(n)
     dm = np.empty(n)
     M = 0.0                                       # ∫_t^T μ
@@ -332,15 +335,19 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
             for i in range(1, n_x):
                 r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
-                r2[i] = u2[i] + e * (ao * u2[i - 1] - D2 * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
+                if second:
+                    r2[i] = u2[i] + e * (ao * u2[i - 1] - D2 * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
             an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
             lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn      # interior rows
             if reflect:                               # u_x(0) = 0: ghost u[-1] = u[1]
                 r1[0] = u1[0] + e * (D2 * (u1[1] - u1[0]))
-                r2[0] = u2[0] + e * (D2 * (u2[1] - u2[0]))
+                if second:
+                    r2[0] = u2[0] + e * (D2 * (u2[1] - u2[0]))
                 di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
             else:                                     # absorbed: u(0) = 0
-                r1[0] = r2[0] = 0.0
+                r1[0] = 0.0
+                if second:
+                    r2[0] = 0.0
                 di_0, up_0 = 1.0, 0.0
             # x = X: no absorption before T, Gaussian moments (7); its row is (0, 1, 0)
             M += 0.5 * h * (mu_o + mu_n)
@@ -349,13 +356,14 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             y, vz = X + M, s2 * w
             EI = X * w + K
             EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
-            Ez2 = y * y + vz
-            Ez3 = y * (y * y + 3 * vz)
-            Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
-            EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
             r1[n_x] = EI + EP1
-            r2[n_x] = (EI * EI + s2 * w**3 / 3.0 + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a)))
-                       + EP2)
+            if second:
+                Ez2 = y * y + vz
+                Ez3 = y * (y * y + 3 * vz)
+                Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
+                EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
+                r2[n_x] = (EI * EI + s2 * w**3 / 3.0
+                           + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a))) + EP2)
             # Thomas: factor while eliminating u1, then u2 with the new u1 in its source
             cp[0] = up_0 / di_0
             dm[0] = di_0
@@ -372,23 +380,27 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             src = th * h * 2
             for i in range(n - 2, 0, -1):
                 u1[i] -= cp[i] * u1[i + 1]
-                r2[i] += src * x[i] * u1[i]
+                if second:
+                    r2[i] += src * x[i] * u1[i]
             u1[0] -= cp[0] * u1[1]
+            mu_o = mu_n
+            if not second:
+                continue
             u2[0] = r2[0] / dm[0]
             for i in range(1, n_x):
                 u2[i] = (r2[i] - lo_i * u2[i - 1]) / dm[i]
             u2[n_x] = (r2[n_x] - 0.0 * u2[n_x - 1]) / dm[n_x]
             for i in range(n - 2, -1, -1):
                 u2[i] -= cp[i] * u2[i + 1]
-            mu_o = mu_n
-    return u1[0], u2[0]
+    return u1[0], (u2[0] if second else math.nan)
 
 
 @njit(cache=True)
 def _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_stop, gl_x, gl_w):
     """The bias of :func:`_pulse_noise` alone (what the idle planner reads): the same operations
-    in the same order for the mean, without the second moment's equation (5) — about half the
-    backward solve. Bit for bit ``_pulse_noise(...)[0]`` (tests/test_solnic_noise_model.py)."""
+    in the same order for the mean, the backward solve without the second moment's equation (5)
+    (``_absorbed_moments(..., second=False)``, about half of it). Bit for bit
+    ``_pulse_noise(...)[0]`` (tests/test_solnic_noise_model.py)."""
     x3_off = U * -math.expm1(-dt_u / tau)
     if not kc > 0:
         return math.inf
@@ -397,8 +409,8 @@ def _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_sto
     w = min(max((_PDE_BLEND[1] - r) / (_PDE_BLEND[1] - _PDE_BLEND[0]), 0.0), 1.0)
     bias = 0.0
     if w > 0.0:
-        m1 = _absorbed_mean(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero,
-                            _PDE_N_X, _PDE_N_ABS, _PDE_N_REFL)
+        m1 = _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero,
+                               _PDE_N_X, _PDE_N_ABS, _PDE_N_REFL, False)[0]
         dc0 = closed_form_kernel(dt_u, U, tau, al, ks, kc)[0]
         bias = w * (m1 - dc0)
     if w < 1.0:
@@ -406,78 +418,3 @@ def _pulse_bias(al, U, tau, s2, ks, kc, dt_u, t_breakaway, t_current_zero, t_sto
                                  x3_off, gl_x, gl_w)
         bias += (1.0 - w) * b
     return bias
-
-
-@njit(cache=True)
-def _absorbed_mean(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_refl):
-    """E[Δc] of :func:`_absorbed_moments` alone: its u1 arithmetic (equation (4)) line for line,
-    without u2 (equation (5) reads u1, u1 never reads u2)."""
-    x3_off = U * -math.expm1(-dt_u / tau)
-    a = al * kc
-    T = t_cz
-    t_ks = dt_u + tau * math.log((x3_off + U) / (ks + U)) if x3_off > ks else dt_u
-    t_ks = min(max(t_ks, t_b), T)
-    t_kc = dt_u + tau * math.log((x3_off + U) / (kc + U)) if x3_off > kc else dt_u
-    t_kc = min(max(t_kc, t_b), T)
-    v_peak = max(_v0(t_kc, dt_u, t_b, al, U, tau, ks, kc, x3_off), 0.0)
-    X = v_peak + _PDE_SIGMAS * math.sqrt(s2 * (T - t_b))
-    dx = X / n_x
-    D = 0.5 * s2 / (dx * dx)
-    D2 = 2 * D
-    n = n_x + 1
-    x = np.empty(n)
-    u1 = np.empty(n)
-    for i in range(n):
-        xi = i * dx
-        x[i] = xi
-        u1[i] = xi * xi / (2 * a) + s2 * xi / (2 * a * a)
-    r1 = np.empty(n)
-    cp = np.empty(n)
-    M = 0.0
-    K = 0.0
-    for phase in range(2):
-        t_hi, t_lo, m = (T, t_ks, n_abs) if phase == 0 else (t_ks, t_b, n_refl)
-        if not t_hi > t_lo:
-            continue
-        h = (t_hi - t_lo) / m
-        reflect = phase == 1
-        mu_o = al * (_x3(t_hi, dt_u, U, tau, x3_off) - kc)
-        for k in range(m):
-            t_o = t_hi - k * h
-            t_n = t_hi - (k + 1) * h
-            mu_n = al * (_x3(t_n, dt_u, U, tau, x3_off) - kc)
-            th = 1.0 if k < 2 else 0.5
-            e = (1.0 - th) * h
-            thh = th * h
-            ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
-            for i in range(1, n_x):
-                r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
-            an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
-            lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn
-            if reflect:
-                r1[0] = u1[0] + e * (D2 * (u1[1] - u1[0]))
-                di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
-            else:
-                r1[0] = 0.0
-                di_0, up_0 = 1.0, 0.0
-            M += 0.5 * h * (mu_o + mu_n)
-            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
-            w = T - t_n
-            y, vz = X + M, s2 * w
-            EI = X * w + K
-            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
-            r1[n_x] = EI + EP1
-            cp[0] = up_0 / di_0
-            u1[0] = r1[0] / di_0
-            for i in range(1, n_x):
-                d = di_i - lo_i * cp[i - 1]
-                cp[i] = up_i / d
-                u1[i] = (r1[i] - lo_i * u1[i - 1]) / d
-            d = 1.0 - 0.0 * cp[n_x - 1]
-            cp[n_x] = 0.0 / d
-            u1[n_x] = (r1[n_x] - 0.0 * u1[n_x - 1]) / d
-            for i in range(n - 2, 0, -1):
-                u1[i] -= cp[i] * u1[i + 1]
-            u1[0] -= cp[0] * u1[1]
-            mu_o = mu_n
-    return u1[0]
