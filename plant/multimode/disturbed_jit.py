@@ -36,7 +36,7 @@ from numba.extending import get_cython_function_address, intrinsic
 
 from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
-from plant.multimode.segments import torque_integrals
+from plant.multimode.segments import hermite_peak, torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
@@ -886,7 +886,7 @@ def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov,
 @njit(cache=True, inline="always")
 def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
     """Integrals, x3's closed form, the event (the peak is the caller's: a moving one needs
-    hermite_peak, which allocates)."""
+    the Hermite peak of :func:`_substep_peak`)."""
     x3, u = Y[Y3], Y[YU]
     _torque(S, x3, u, w, bridge, dp)
     for i in range(_N):
@@ -984,46 +984,13 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
 
 
 @njit(cache=True)
-def _hermite_peak(h, ya, da, yb, db):
-    """plant.multimode.segments.hermite_peak with its two roots in scalars instead of an array
-    (the same operations; no allocation, for _fast_segment)."""
-    if h <= 0:
-        return 0.0
-    c2 = 3 * (yb - ya) - (2 * da + db) * h
-    c3 = -2 * (yb - ya) + (da + db) * h
-    A, B, C = 3 * c3, 2 * c2, da * h
-    best = 0.0
-    r0 = r1 = 0.0
-    nr = 0
-    if A == 0.0:
-        if B != 0.0:
-            r0 = -C / B
-            nr = 1
-    else:
-        disc = B * B - 4 * A * C
-        if disc >= 0:
-            sq = math.sqrt(disc)
-            q = -0.5 * (B + math.copysign(sq, B))
-            if q != 0.0:
-                r0, r1 = q / A, C / q
-                nr = 2
-    for i in range(nr):
-        s = r0 if i == 0 else r1
-        if 0.0 < s < 1.0:
-            v = abs(ya + da * h * s + c2 * s * s + c3 * s ** 3)
-            if v > best:
-                best = v
-    return best
-
-
-@njit(cache=True)
 def _substep_peak(Xa, Xb, h, peak):
     """plant.multimode.moving.substep_peak on this plant's Y (x1, x2, x4 at the same positions)
-    through :func:`_hermite_peak`."""
+    through :func:`plant.multimode.segments.hermite_peak`."""
     pk = max(peak, abs(Xa[Y1]), abs(Xb[Y1]))
     da, db = Xa[Y2] - Xa[Y4], Xb[Y2] - Xb[Y4]
     if da * db < 0:
-        pk = max(pk, _hermite_peak(h, Xa[Y1], da, Xb[Y1], db))
+        pk = max(pk, hermite_peak(h, Xa[Y1], da, Xb[Y1], db))
     return pk
 
 
