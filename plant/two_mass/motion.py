@@ -100,16 +100,9 @@ def _start_coords_w(X, mode, p, Vi, C, F):
 
 
 @njit(cache=True, _nrt=False)
-def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
-    """:func:`propagate` with scratch C (4 × NCORE complex) and F (2 × NCORE): the same
-    operations, allocation-free and compiled without reference counting."""
-    r = mode_row(mode)
-    n = _start_coords_w(X, mode, p, Vi, C, F)
-    for i in range(n):
-        x = lam[r, i] * t
-        f1 = phi1(x)
-        C[2, i] = np.exp(x) * C[0, i] + t * f1 * C[1, i]
-        C[3, i] = t * f1 * C[0, i] + t * t * phi2(x) * C[1, i]
+def _state_from_coords(X, mode, t, p, V, r, n, Xout, C):
+    """The end state of :func:`propagate_w` / :func:`_propagate_g` from the propagated modal
+    coordinates C[2], C[3] (rows back through V) and the decoupled x3, x4, x1 closed forms."""
     b4 = p.beta4
     E4 = -math.expm1(-b4 * t)
     for j in range(NX):
@@ -127,6 +120,20 @@ def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
         Xout[WM] = _row_w(V, r, 2, C, 2, n)
         Xout[A5] = _row_w(V, r, 4, C, 2, n)
         Xout[A1] = X[A1] + _row_w(V, r, 0, C, 3, n) - X[A4] * E4 / b4
+
+
+@njit(cache=True, _nrt=False)
+def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
+    """:func:`propagate` with scratch C (4 × NCORE complex) and F (2 × NCORE): the same
+    operations, allocation-free and compiled without reference counting."""
+    r = mode_row(mode)
+    n = _start_coords_w(X, mode, p, Vi, C, F)
+    for i in range(n):
+        x = lam[r, i] * t
+        f1 = phi1(x)
+        C[2, i] = np.exp(x) * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * phi2(x) * C[1, i]
+    _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
 @njit(cache=True, _nrt=False)
@@ -152,23 +159,7 @@ def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
         f1 = G[1, k, i]
         C[2, i] = G[0, k, i] * C[0, i] + t * f1 * C[1, i]
         C[3, i] = t * f1 * C[0, i] + t * t * G[2, k, i] * C[1, i]
-    b4 = p.beta4
-    E4 = -math.expm1(-b4 * t)
-    for j in range(NX):
-        Xout[j] = X[j]
-    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
-    Xout[A4] = X[A4] * (1.0 - E4)
-    if mode == 2:
-        Xout[A1] = X[A1] - X[A4] * E4 / b4
-        Xout[A2] = 0.0
-        Xout[PHI] = _row_w(V, r, 0, C, 2, n)
-        Xout[WM] = _row_w(V, r, 1, C, 2, n)
-    else:
-        Xout[A2] = _row_w(V, r, 0, C, 2, n)
-        Xout[PHI] = _row_w(V, r, 1, C, 2, n)
-        Xout[WM] = _row_w(V, r, 2, C, 2, n)
-        Xout[A5] = _row_w(V, r, 4, C, 2, n)
-        Xout[A1] = X[A1] + _row_w(V, r, 0, C, 3, n) - X[A4] * E4 / b4
+    _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
 @njit(cache=True, _nrt=False)
