@@ -39,8 +39,9 @@ recorded (Python) path, tests/test_solnic_idle_step.py.
 from __future__ import annotations
 
 import math
+import weakref
 
-from numba import njit
+from numba import njit, objmode
 
 try:    # numba's wrapper-address helper (semi-internal; numba 0.59-0.68 have it)
     from numba.experimental.function_type import _get_wrapper_address
@@ -251,10 +252,16 @@ J_CACHE = J_MTAB + 3 * N_MEMO
 # t_max, so k̂ and the plan repeat on those samples.
 (C_VALID, C_KS, C_KC, C_DTU, C_BRAKE, C_MARGIN, C_PEAK, C_R0, C_R1, C_RUNS0, C_DC, C_TB, C_TCZ, C_TSTOP, C_TOFF,
  C_BIAS_OK, C_BIAS) = range(17)
-N_JOINT_STATE = J_CACHE + 17
-# params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants
-(J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX) = range(9, 17)
-N_JOINT_PARAMS = 17
+# the sample's entry state where the step writes before it may hand the sample to Python
+# (:func:`_python_sample`): s[:J_SBUF], the plan cache and the memo table's first key (the
+# only live entries a step overwrites; it appends to the since-buffer and the table otherwise)
+J_ENTRY = J_CACHE + 17
+N_ENTRY = J_SBUF + 17 + 3
+N_JOINT_STATE = J_ENTRY + N_ENTRY
+# params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants, and the
+# key of the controller that does a Python sample inside the loop (0: hand it back instead)
+(J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX, J_OWNER) = range(9, 18)
+N_JOINT_PARAMS = 18
 
 
 @njit(cache=True)
@@ -274,8 +281,67 @@ def _memo_hit(s, ks, kc, dtu):
     return False
 
 
+_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
+_LAST_KEY = [0]
+
+
+def register_owner(controller) -> float:
+    """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
+    weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
+    _LAST_KEY[0] += 1
+    _OWNERS[_LAST_KEY[0]] = controller
+    return float(_LAST_KEY[0])
+
+
+def _python_sample(p, y, offs, levs):
+    """Called from the compiled step (numba ``objmode``): the owner's Python sample, its command
+    in (offs, levs); returns the segment count, or 0 to hand the sample back after all."""
+    owner = _OWNERS.get(int(p[J_OWNER]))
+    return 0 if owner is None else owner._sample_in_loop(y, offs, levs)
+
+
+@njit(cache=True)
+def _save_entry(s):
+    e = J_ENTRY
+    for i in range(J_SBUF):
+        s[e + i] = s[i]
+    for i in range(17):
+        s[e + J_SBUF + i] = s[J_CACHE + i]
+    for i in range(3):
+        s[e + J_SBUF + 17 + i] = s[J_MTAB + i]
+
+
+@njit(cache=True)
+def _restore_entry(s):
+    e = J_ENTRY
+    for i in range(J_SBUF):
+        s[i] = s[e + i]
+    for i in range(17):
+        s[J_CACHE + i] = s[e + J_SBUF + i]
+    for i in range(3):
+        s[J_MTAB + i] = s[e + J_SBUF + 17 + i]
+
+
 @njit(cache=True)
 def joint_idle_step(s, p, y, offs, levs):
+    """:func:`_joint_idle` (solnic-modern's idle sample); where that hands the sample back and
+    the controller is registered (``p[J_OWNER]``), the sample from its entry state in Python
+    inside the loop (:func:`_python_sample`, what the runner would do after the hand-back, without
+    leaving the compiled loop)."""
+    owned = p[J_OWNER] != 0.0
+    if owned:
+        _save_entry(s)
+    k = _joint_idle(s, p, y, offs, levs)
+    if k != 0 or not owned:
+        return k
+    _restore_entry(s)
+    with objmode(k="intp"):
+        k = _python_sample(p, y, offs, levs)
+    return k
+
+
+@njit(cache=True)
+def _joint_idle(s, p, y, offs, levs):
     """solnic-modern's sample if it is idle, else 0 (hand back): the joint EKF's predict and
     update (:class:`~controllers.solnic.joint_filter.JointFilter`, its compiled kernels), the
     prediction of the next pulse at this sample's k̂ (:meth:`Predictor.conditional
