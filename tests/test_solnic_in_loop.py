@@ -1,6 +1,7 @@
-"""solnic-modern's Python samples inside the compiled loop (:func:`controllers.solnic.idle_step.joint_idle_step`).
+"""solnic's and solnic-modern's Python samples inside the compiled loop (:mod:`controllers.solnic.idle_step`).
 
-Where the joint idle step cannot do a sample (a pulse launch, a cycle's evaluation, a plan the
+Where the idle step (the faithful :func:`~controllers.solnic.idle_step.idle_step` or the joint
+EKF's :func:`~controllers.solnic.idle_step.joint_idle_step`) cannot do a sample (a pulse launch, a cycle's evaluation, a plan the
 cache cannot give) it restores the sample's entry state and calls the controller's Python step
 from the loop (numba ``objmode``) instead of handing the sample back to the runner. The
 reference is the runner's own Python loop (``compiled=False``, which never enters the compiled
@@ -28,9 +29,9 @@ def _row(r):
     return r.status, r.message, {k: v for k, v in r.metrics.items() if k not in RUNTIME}, r.summary
 
 
-def _run(scenario, seed, duration, *, in_loop=True, monkeypatch=None, **kw):
+def _run(scenario, seed, duration, *, in_loop=True, name="solnic-modern", **kw):
     sc = builtin_scenarios()[scenario]
-    c = make_controller("solnic-modern")
+    c = make_controller(name)
     c.python_in_loop = in_loop
     calls = []
     step = c.step
@@ -40,8 +41,10 @@ def _run(scenario, seed, duration, *, in_loop=True, monkeypatch=None, **kw):
     return r, len(calls), c
 
 
-@pytest.mark.parametrize("scenario, seed", [("thesis", 1), ("delayed", 2), ("disturbed", 3)])
-def test_samples_in_the_loop_are_the_python_rows(scenario, seed, monkeypatch):
+@pytest.mark.parametrize("name, scenario, seed", [("solnic-modern", "thesis", 1), ("solnic-modern", "delayed", 2),
+                                                  ("solnic-modern", "disturbed", 3), ("solnic", "thesis", 4),
+                                                  ("solnic", "quantized", 5), ("solnic", "disturbed", 6)])
+def test_samples_in_the_loop_are_the_python_rows(name, scenario, seed, monkeypatch):
     """In the loop, handed back, and the runner's Python loop: the same rows; the loop makes no
     hand-back at all (one compiled run), the hand-back path one per Python sample."""
     runs = []
@@ -53,12 +56,12 @@ def test_samples_in_the_loop_are_the_python_rows(scenario, seed, monkeypatch):
 
     for mod in ("plant.multimode.law_loop", "plant.multimode.disturbed_loop"):
         monkeypatch.setattr(f"{mod}.run_law_chunks", counting, raising=False)
-    in_loop, n_in, c = _run(scenario, seed, 10.0)
+    in_loop, n_in, c = _run(scenario, seed, 10.0, name=name)
     n_runs_in, runs[:] = len(runs), []
-    back, n_back, _ = _run(scenario, seed, 10.0, in_loop=False)
+    back, n_back, _ = _run(scenario, seed, 10.0, in_loop=False, name=name)
     n_runs_back = len(runs)
-    python, _, _ = _run(scenario, seed, 10.0, compiled=False)
-    assert in_loop.status == "ok" and in_loop.summary["pulses"] > 20
+    python, _, _ = _run(scenario, seed, 10.0, compiled=False, name=name)
+    assert in_loop.status == "ok" and in_loop.summary["pulses"] > 10
     assert _row(in_loop) == _row(back) == _row(python)
     assert n_in == n_back and 0 < n_in < 300                 # the same Python samples, few of them
     if scenario != "disturbed":                               # (its loop is plant.multimode.disturbed_loop's)
@@ -95,8 +98,9 @@ def test_a_sample_the_loop_redoes_is_not_a_second_python_sample(monkeypatch):
     assert (in_loop.events["t"] == python.events["t"]).all()
 
 
-@pytest.mark.parametrize("in_loop, kind", [(True, "diverged"), (True, "error"), (False, "error")])
-def test_an_exception_in_the_python_sample_ends_the_run_as_the_python_loop(in_loop, kind, monkeypatch):
+@pytest.mark.parametrize("name, in_loop, kind", [("solnic-modern", True, "diverged"), ("solnic-modern", True, "error"),
+                                                  ("solnic-modern", False, "error"), ("solnic", True, "error")])
+def test_an_exception_in_the_python_sample_ends_the_run_as_the_python_loop(name, in_loop, kind, monkeypatch):
     """The fifth launch raises: the same status, message (an error's names the raising line) and
     summary."""
     launch = SolnicController._launch
@@ -109,9 +113,9 @@ def test_an_exception_in_the_python_sample_ends_the_run_as_the_python_loop(in_lo
         return launch(self, *a)
 
     monkeypatch.setattr(SolnicController, "_launch", failing)
-    r, _, c = _run("thesis", 0, 6.0, in_loop=in_loop)
+    r, _, c = _run("thesis", 0, 6.0, in_loop=in_loop, name=name)
     n.clear()
-    python, _, _ = _run("thesis", 0, 6.0, compiled=False)
+    python, _, _ = _run("thesis", 0, 6.0, compiled=False, name=name)
     assert r.status == kind and "the fifth launch" in r.message
     assert ("test_solnic_in_loop.py" in r.message) == (kind == "error")
     assert _row(r) == _row(python)

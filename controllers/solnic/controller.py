@@ -144,7 +144,7 @@ class SolnicController(Controller):
     presets = PRESETS
     knobs = KNOBS
 
-    python_in_loop = True     # solnic-modern: the Python samples inside the compiled loop (False: hand-backs)
+    python_in_loop = True     # the compiled idle step's Python samples inside its loop (False: hand-backs)
 
     def __init__(self, options: SolnicOptions | None = None, /, *, preset: str | None = None,
                  **fields: Any) -> None:
@@ -238,19 +238,22 @@ class SolnicController(Controller):
         else:
             if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
                 return None
-            f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, _idle.N_STATE, _idle.idle_step_address()
+            f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, 2 * _idle.N_STATE, _idle.idle_step_address()
         p = np.empty(n_p)
         p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
         p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(f.tau4, f.sigma4_sq)
         p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
+        owner = _idle.register_owner(self) if self.python_in_loop else 0.0
+        if not joint:
+            p[_idle.OWNER] = owner
         if joint:
             U, t3, a, fd = self.predictor._constants
             s2, cap, min_ratio = self.predictor._brake_constants
             p[_idle.J_U:_idle.J_UMAX + 1] = U, t3, a, fd, s2, cap, min_ratio, f.u_max
-            p[_idle.J_OWNER] = _idle.register_owner(self) if self.python_in_loop else 0.0
+            p[_idle.J_OWNER] = owner
         self._in_loop: tuple | None = None
         self._replay: tuple | None = None
-        self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 4 if joint else 1)
+        self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 4)
         self._plan_key: tuple[float, float, float] | None = None
         self._memo_seen = (0, 0)
         self._export_idle()

@@ -59,9 +59,31 @@ __all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "StepAddress"
 (N, X1, X4, P11, P14, P44, FT, HAS_ANCHOR, C0, C1, HAS_MOTION, M0, M1, MMEAN, MVAR, T_MAX, SINCE, USED,
  REJECTED, POST, _P1, _P2, _P3, _P4, DUE, PLAN_OK, DC_PLAN, DURATION, PLAN_USED) = range(29)
 N_STATE = 29
-# params p: τs, R = σ1², τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4, evaluation_samples, overshoot_factor
-TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT = range(9)
-N_PARAMS = 9
+# params p: τs, R = σ1², τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4, evaluation_samples, overshoot_factor,
+# the key of the controller that does a Python sample inside the loop (0: hand it back instead;
+# then s[N_STATE:2·N_STATE] holds the sample's entry state)
+TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT, OWNER = range(10)
+N_PARAMS = 10
+
+
+_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
+_LAST_KEY = [0]
+
+
+def register_owner(controller) -> float:
+    """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
+    weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
+    _LAST_KEY[0] += 1
+    _OWNERS[_LAST_KEY[0]] = controller
+    return float(_LAST_KEY[0])
+
+
+def _python_sample(key, y, offs, levs):
+    """Called from a compiled step (numba ``objmode``): the Python sample of the controller
+    registered under ``key``, its command in (offs, levs); returns the segment count, or 0 to
+    hand the sample back after all."""
+    owner = _OWNERS.get(int(key))
+    return 0 if owner is None else owner._sample_in_loop(y, offs, levs)
 
 
 def mode2_coefficients(tau4: float, sigma4_sq: float) -> tuple[float, float, float, float, float]:
@@ -114,6 +136,25 @@ def _fires(x1, x4, x4_std, delta_c, horizon, earliest, duration, overshoot_facto
 
 @njit(cache=True)
 def idle_step(s, p, y, offs, levs):
+    """:func:`_idle` (solnic's idle sample); where that hands the sample back and the controller
+    is registered (``p[OWNER]``; ``s`` then has room for the entry state after the layout), the
+    sample from its entry state in Python inside the loop (:func:`_python_sample`)."""
+    owned = p[OWNER] != 0.0
+    if owned:
+        for i in range(N_STATE):
+            s[N_STATE + i] = s[i]
+    k = _idle(s, p, y, offs, levs)
+    if k != 0 or not owned:
+        return k
+    for i in range(N_STATE):
+        s[i] = s[N_STATE + i]
+    with objmode(k="intp"):
+        k = _python_sample(p[OWNER], y, offs, levs)
+    return k
+
+
+@njit(cache=True)
+def _idle(s, p, y, offs, levs):
     """One solnic sample if it is idle (the bridge off: k = 1, level 0), else 0 (hand back).
 
     The mode-2 filter's predict/update (:class:`~controllers.solnic.mode2_filter.Mode2Filter`,
@@ -281,25 +322,6 @@ def _memo_hit(s, ks, kc, dtu):
     return False
 
 
-_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
-_LAST_KEY = [0]
-
-
-def register_owner(controller) -> float:
-    """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
-    weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
-    _LAST_KEY[0] += 1
-    _OWNERS[_LAST_KEY[0]] = controller
-    return float(_LAST_KEY[0])
-
-
-def _python_sample(p, y, offs, levs):
-    """Called from the compiled step (numba ``objmode``): the owner's Python sample, its command
-    in (offs, levs); returns the segment count, or 0 to hand the sample back after all."""
-    owner = _OWNERS.get(int(p[J_OWNER]))
-    return 0 if owner is None else owner._sample_in_loop(y, offs, levs)
-
-
 @njit(cache=True)
 def _save_entry(s):
     e = J_ENTRY
@@ -336,7 +358,7 @@ def joint_idle_step(s, p, y, offs, levs):
         return k
     _restore_entry(s)
     with objmode(k="intp"):
-        k = _python_sample(p, y, offs, levs)
+        k = _python_sample(p[J_OWNER], y, offs, levs)
     return k
 
 
