@@ -139,3 +139,30 @@ def test_a_command_the_loop_rejects_is_handed_back_and_applied_by_the_runner(mon
     python, _, _ = _run("thesis", 2, 6.0, compiled=False)
     assert r.status == "error" and _row(r) == _row(python)
     assert c._replay is None                                  # the kept command was used
+
+
+def test_the_planner_reads_the_steps_bias_of_the_same_plan(monkeypatch):
+    """At a sample the step gives to Python with a pending cycle, the planner's first trigger
+    test needs the w2 bias of the plan the step has just solved for: it is read from the step's
+    array (key-matched), not solved again. Each value read equals ``noise_model.pulse_bias``
+    solved for that prediction (bit for bit), and the rows are the runner's Python loop's."""
+    import controllers.solnic.controller as ctl
+    solves, reads = [], []
+    solve, read = ctl.pulse_bias, SolnicController._pulse_bias
+
+    def checked(self, pred, dtu):
+        got = read(self, pred, dtu)
+        ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
+        want = solve(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway, pred.t_current_zero,
+                     pred.t_nominal, braked=pred.t_off is not None)
+        reads.append(got.hex() == want.hex())
+        return got
+
+    monkeypatch.setattr(ctl, "pulse_bias", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    monkeypatch.setattr(SolnicController, "_pulse_bias", checked)
+    in_loop, _, _ = _run("thesis", 7, 20.0)
+    n_solves = len(solves)
+    python, _, _ = _run("thesis", 7, 20.0, compiled=False)
+    assert len(reads) > 40 and all(reads)
+    assert n_solves == 0 and len(solves) > 20                     # solved only on the Python loop
+    assert _row(in_loop) == _row(python)

@@ -599,6 +599,13 @@ class SolnicController(Controller):
         hit = self._noise_memo.get((self.friction.ks, self.friction.kc, dtu, pred.t_off))
         if hit is not None:
             return hit[0]
+        if self.joint is not None and self._idle is not None:
+            s, c = self._idle.state, _idle.J_LAST       # the compiled step's plan of this sample
+            if s[c + _idle.C_VALID] != 0.0 and s[c + _idle.C_BIAS_OK] != 0.0 and s[c + _idle.C_R0] == 0.0:
+                brake, margin = self.predictor._brake_args()[:2]
+                if s[c + _idle.C_KS:c + _idle.C_PEAK + 1].tolist() == [
+                        self.friction.ks, self.friction.kc, dtu, brake, margin if brake else -1.0, pred.peak_torque]:
+                    return float(s[c + _idle.C_BIAS])     # the same key: the same solve's result
         ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
         return pulse_bias(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
                           pred.t_current_zero, pred.t_nominal, braked=pred.t_off is not None)

@@ -298,7 +298,10 @@ J_CACHE = J_MTAB + 3 * N_MEMO
 # only live entries a step overwrites; it appends to the since-buffer and the table otherwise)
 J_ENTRY = J_CACHE + 17
 N_ENTRY = J_SBUF + 17 + 3
-N_JOINT_STATE = J_ENTRY + N_ENTRY
+# the plan cache as the step left it at a sample it gave to Python (not restored): the Python
+# planner reads its w2 bias where the key matches (SolnicController._pulse_bias)
+J_LAST = J_ENTRY + N_ENTRY
+N_JOINT_STATE = J_LAST + 17
 # params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants, and the
 # key of the controller that does a Python sample inside the loop (0: hand it back instead)
 (J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX, J_OWNER) = range(9, 18)
@@ -356,6 +359,8 @@ def joint_idle_step(s, p, y, offs, levs):
     k = _joint_idle(s, p, y, offs, levs)
     if k != 0 or not owned:
         return k
+    for i in range(17):
+        s[J_LAST + i] = s[J_CACHE + i]
     _restore_entry(s)
     with objmode(k="intp"):
         k = _python_sample(p[J_OWNER], y, offs, levs)
