@@ -34,10 +34,19 @@ i.e. ``solnic``); :func:`joint_idle_step` the joint EKF with the noise-aware mod
 the last sample's plan by its key) and solves only the mean's backward equation for the w2 bias
 (:func:`~controllers.solnic.noise_model._pulse_bias`). Bit-identity is tested against the
 recorded (Python) path, tests/test_solnic_idle_step.py.
+
+A sample handed back need not leave the loop: when the controller registers itself
+(:func:`register_owner`, its key in ``p``), the step restores the sample's entry state (saved
+behind the layout at each entry) and calls the controller's Python sample from inside the loop
+through numba's ``objmode`` (:func:`_python_sample`, ~1 µs), which returns the command's segments
+— the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
+interval (:meth:`SolnicController._sample_in_loop
+<controllers.solnic.controller.SolnicController._sample_in_loop>`; tests/test_solnic_in_loop.py).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import weakref
 
@@ -67,15 +76,15 @@ N_PARAMS = 10
 
 
 _OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
-_LAST_KEY = [0]
+_KEYS = itertools.count(1)       # next() is atomic under the GIL: threads get distinct keys
 
 
 def register_owner(controller) -> float:
     """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
     weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
-    _LAST_KEY[0] += 1
-    _OWNERS[_LAST_KEY[0]] = controller
-    return float(_LAST_KEY[0])
+    key = next(_KEYS)
+    _OWNERS[key] = controller
+    return float(key)
 
 
 def _python_sample(key, y, offs, levs):
