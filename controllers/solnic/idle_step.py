@@ -38,7 +38,7 @@ recorded (Python) path, tests/test_solnic_idle_step.py.
 A sample handed back need not leave the loop: when the controller registers itself
 (:func:`register_owner`, its key in ``p``), the step restores the sample's entry state (saved
 behind the layout at each entry) and calls the controller's Python sample from inside the loop
-through numba's ``objmode`` (:func:`_python_sample`, ~1 µs), which returns the command's segments
+through numba's ``objmode`` (:func:`_python_sample`, ~1–2 µs), which returns the command's segments
 — the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
 interval (:meth:`SolnicController._sample_in_loop
 <controllers.solnic.controller.SolnicController._sample_in_loop>`; tests/test_solnic_in_loop.py).
