@@ -144,6 +144,8 @@ class SolnicController(Controller):
     presets = PRESETS
     knobs = KNOBS
 
+    python_in_loop = True     # the compiled idle step's Python samples inside its loop (False: hand-backs)
+
     def __init__(self, options: SolnicOptions | None = None, /, *, preset: str | None = None,
                  **fields: Any) -> None:
         if options is None and preset is None:
@@ -236,16 +238,22 @@ class SolnicController(Controller):
         else:
             if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
                 return None
-            f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, _idle.N_STATE, _idle.idle_step_address()
+            f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, 2 * _idle.N_STATE, _idle.idle_step_address()
         p = np.empty(n_p)
         p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
         p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(f.tau4, f.sigma4_sq)
         p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
+        owner = _idle.register_owner(self) if self.python_in_loop else 0.0
+        if not joint:
+            p[_idle.OWNER] = owner
         if joint:
             U, t3, a, fd = self.predictor._constants
             s2, cap, min_ratio = self.predictor._brake_constants
             p[_idle.J_U:_idle.J_UMAX + 1] = U, t3, a, fd, s2, cap, min_ratio, f.u_max
-        self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 1)
+            p[_idle.J_OWNER] = owner
+        self._in_loop: tuple | None = None
+        self._replay: tuple | None = None
+        self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 4)
         self._plan_key: tuple[float, float, float] | None = None
         self._memo_seen = (0, 0)
         self._export_idle()
@@ -386,12 +394,62 @@ class SolnicController(Controller):
             self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
         s[_idle.PLAN_USED] = 0.0
 
+    def _sample_in_loop(self, y: float, offs: np.ndarray, levs: np.ndarray) -> int:
+        """A sample the joint idle step cannot do, done from inside the compiled loop
+        (:func:`~controllers.solnic.idle_step._python_sample`): :meth:`step` on the state array
+        as the step found it, the command into (offs, levs); returns its segment count.
+
+        Returns 0 (the loop hands the sample back to the runner, which calls :meth:`step`) with
+        the outcome kept for that call (``_replay``) where the command does not fit the loop's
+        test (:func:`plant.law_step.check_command`, mirrored) or :meth:`step` raised: the runner
+        then applies or raises exactly what the hand-back would have. A sample the loop redoes
+        (its interval needed more noise or log room, :func:`plant.law_driver.run_law_chunks`)
+        gets the same command and state again, not a second Python sample.
+        """
+        s = self._idle.state
+        n = s[_idle.N]
+        done = self._in_loop
+        if done is not None and done[0] == n:             # the loop redoes sample n
+            _, k, o, v, after = done
+            s[:] = after
+            offs[:k], levs[:k] = o, v
+            return k
+        try:
+            command = self.step(y)
+        except BaseException as exc:
+            self._replay = (exc, None)
+            return 0
+        o, v = command.arrays()
+        k = o.shape[0]
+        u = self.params.u_max
+        ok = command.drive is DriveType.BRIDGE and k <= offs.shape[0] and o[0] == 0.0
+        prev = -1.0
+        for oi, vi in zip(o.tolist(), v.tolist()) if ok else ():
+            if (not (oi > prev and oi - oi == 0.0 and vi - vi == 0.0) or not oi < self.params.sample_period
+                    or (vi != 0.0 and abs(abs(vi) - u) > 1e-9 * u)):
+                ok = False
+                break
+            prev = oi
+        if not ok:
+            self._replay = (command, s.copy())
+            return 0
+        offs[:k], levs[:k] = o, v
+        self._in_loop = (n, k, o.copy(), v.copy(), s.copy())
+        return k
+
     # ------------------------------------------------------------------ per sample
     def step(self, y: float) -> DriveCommand:
         if not self._ready:
             raise RuntimeError("SolnicController.step called before reset")
         if self._idle is None:
             return self._step(y)
+        if self._replay is not None:                  # a sample done in the loop, handed back
+            outcome, after = self._replay
+            self._replay = None
+            if after is None:
+                raise outcome
+            self._idle.state[:] = after
+            return outcome
         self._import_idle()
         command = self._step(y)
         self._export_idle()
@@ -541,6 +599,13 @@ class SolnicController(Controller):
         hit = self._noise_memo.get((self.friction.ks, self.friction.kc, dtu, pred.t_off))
         if hit is not None:
             return hit[0]
+        if self.joint is not None and self._idle is not None:
+            s, c = self._idle.state, _idle.J_LAST       # the compiled step's plan of this sample
+            if s[c + _idle.C_VALID] != 0.0 and s[c + _idle.C_BIAS_OK] != 0.0 and s[c + _idle.C_R0] == 0.0:
+                brake, margin = self.predictor._brake_args()[:2]
+                if s[c + _idle.C_KS:c + _idle.C_PEAK + 1].tolist() == [
+                        self.friction.ks, self.friction.kc, dtu, brake, margin if brake else -1.0, pred.peak_torque]:
+                    return float(s[c + _idle.C_BIAS])     # the same key: the same solve's result
         ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
         return pulse_bias(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway,
                           pred.t_current_zero, pred.t_nominal, braked=pred.t_off is not None)

@@ -34,13 +34,23 @@ i.e. ``solnic``); :func:`joint_idle_step` the joint EKF with the noise-aware mod
 the last sample's plan by its key) and solves only the mean's backward equation for the w2 bias
 (:func:`~controllers.solnic.noise_model._pulse_bias`). Bit-identity is tested against the
 recorded (Python) path, tests/test_solnic_idle_step.py.
+
+A sample handed back need not leave the loop: when the controller registers itself
+(:func:`register_owner`, its key in ``p``), the step restores the sample's entry state (saved
+behind the layout at each entry) and calls the controller's Python sample from inside the loop
+through numba's ``objmode`` (:func:`_python_sample`, ~1–2 µs), which returns the command's segments
+— the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
+interval (:meth:`SolnicController._sample_in_loop
+<controllers.solnic.controller.SolnicController._sample_in_loop>`; tests/test_solnic_in_loop.py).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
+import weakref
 
-from numba import njit
+from numba import njit, objmode
 
 try:    # numba's wrapper-address helper (semi-internal; numba 0.59-0.68 have it)
     from numba.experimental.function_type import _get_wrapper_address
@@ -58,9 +68,31 @@ __all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "StepAddress"
 (N, X1, X4, P11, P14, P44, FT, HAS_ANCHOR, C0, C1, HAS_MOTION, M0, M1, MMEAN, MVAR, T_MAX, SINCE, USED,
  REJECTED, POST, _P1, _P2, _P3, _P4, DUE, PLAN_OK, DC_PLAN, DURATION, PLAN_USED) = range(29)
 N_STATE = 29
-# params p: τs, R = σ1², τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4, evaluation_samples, overshoot_factor
-TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT = range(9)
-N_PARAMS = 9
+# params p: τs, R = σ1², τ4, 1/τ4, σ4²τ4³, −σ4²τ4², σ4²τ4, evaluation_samples, overshoot_factor,
+# the key of the controller that does a Python sample inside the loop (0: hand it back instead;
+# then s[N_STATE:2·N_STATE] holds the sample's entry state)
+TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT, OWNER = range(10)
+N_PARAMS = 10
+
+
+_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
+_KEYS = itertools.count(1)       # next() is atomic under the GIL: threads get distinct keys
+
+
+def register_owner(controller) -> float:
+    """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
+    weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
+    key = next(_KEYS)
+    _OWNERS[key] = controller
+    return float(key)
+
+
+def _python_sample(key, y, offs, levs):
+    """Called from a compiled step (numba ``objmode``): the Python sample of the controller
+    registered under ``key``, its command in (offs, levs); returns the segment count, or 0 to
+    hand the sample back after all."""
+    owner = _OWNERS.get(int(key))
+    return 0 if owner is None else owner._sample_in_loop(y, offs, levs)
 
 
 def mode2_coefficients(tau4: float, sigma4_sq: float) -> tuple[float, float, float, float, float]:
@@ -113,6 +145,25 @@ def _fires(x1, x4, x4_std, delta_c, horizon, earliest, duration, overshoot_facto
 
 @njit(cache=True)
 def idle_step(s, p, y, offs, levs):
+    """:func:`_idle` (solnic's idle sample); where that hands the sample back and the controller
+    is registered (``p[OWNER]``; ``s`` then has room for the entry state after the layout), the
+    sample from its entry state in Python inside the loop (:func:`_python_sample`)."""
+    owned = p[OWNER] != 0.0
+    if owned:
+        for i in range(N_STATE):
+            s[N_STATE + i] = s[i]
+    k = _idle(s, p, y, offs, levs)
+    if k != 0 or not owned:
+        return k
+    for i in range(N_STATE):
+        s[i] = s[N_STATE + i]
+    with objmode(k="intp"):
+        k = _python_sample(p[OWNER], y, offs, levs)
+    return k
+
+
+@njit(cache=True)
+def _idle(s, p, y, offs, levs):
     """One solnic sample if it is idle (the bridge off: k = 1, level 0), else 0 (hand back).
 
     The mode-2 filter's predict/update (:class:`~controllers.solnic.mode2_filter.Mode2Filter`,
@@ -251,10 +302,19 @@ J_CACHE = J_MTAB + 3 * N_MEMO
 # t_max, so k̂ and the plan repeat on those samples.
 (C_VALID, C_KS, C_KC, C_DTU, C_BRAKE, C_MARGIN, C_PEAK, C_R0, C_R1, C_RUNS0, C_DC, C_TB, C_TCZ, C_TSTOP, C_TOFF,
  C_BIAS_OK, C_BIAS) = range(17)
-N_JOINT_STATE = J_CACHE + 17
-# params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants
-(J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX) = range(9, 17)
-N_JOINT_PARAMS = 17
+# the sample's entry state where the step writes before it may hand the sample to Python
+# (:func:`_python_sample`): s[:J_SBUF], the plan cache and the memo table's first key (the
+# only live entries a step overwrites; it appends to the since-buffer and the table otherwise)
+J_ENTRY = J_CACHE + 17
+N_ENTRY = J_SBUF + 17 + 3
+# the plan cache as the step left it at a sample it gave to Python (not restored): the Python
+# planner reads its w2 bias where the key matches (SolnicController._pulse_bias)
+J_LAST = J_ENTRY + N_ENTRY
+N_JOINT_STATE = J_LAST + 17
+# params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants, and the
+# key of the controller that does a Python sample inside the loop (0: hand it back instead)
+(J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX, J_OWNER) = range(9, 18)
+N_JOINT_PARAMS = 18
 
 
 @njit(cache=True)
@@ -275,7 +335,49 @@ def _memo_hit(s, ks, kc, dtu):
 
 
 @njit(cache=True)
+def _save_entry(s):
+    e = J_ENTRY
+    for i in range(J_SBUF):
+        s[e + i] = s[i]
+    for i in range(17):
+        s[e + J_SBUF + i] = s[J_CACHE + i]
+    for i in range(3):
+        s[e + J_SBUF + 17 + i] = s[J_MTAB + i]
+
+
+@njit(cache=True)
+def _restore_entry(s):
+    e = J_ENTRY
+    for i in range(J_SBUF):
+        s[i] = s[e + i]
+    for i in range(17):
+        s[J_CACHE + i] = s[e + J_SBUF + i]
+    for i in range(3):
+        s[J_MTAB + i] = s[e + J_SBUF + 17 + i]
+
+
+@njit(cache=True)
 def joint_idle_step(s, p, y, offs, levs):
+    """:func:`_joint_idle` (solnic-modern's idle sample); where that hands the sample back and
+    the controller is registered (``p[J_OWNER]``), the sample from its entry state in Python
+    inside the loop (:func:`_python_sample`, what the runner would do after the hand-back, without
+    leaving the compiled loop)."""
+    owned = p[J_OWNER] != 0.0
+    if owned:
+        _save_entry(s)
+    k = _joint_idle(s, p, y, offs, levs)
+    if k != 0 or not owned:
+        return k
+    for i in range(17):
+        s[J_LAST + i] = s[J_CACHE + i]
+    _restore_entry(s)
+    with objmode(k="intp"):
+        k = _python_sample(p[J_OWNER], y, offs, levs)
+    return k
+
+
+@njit(cache=True)
+def _joint_idle(s, p, y, offs, levs):
     """solnic-modern's sample if it is idle, else 0 (hand back): the joint EKF's predict and
     update (:class:`~controllers.solnic.joint_filter.JointFilter`, its compiled kernels), the
     prediction of the next pulse at this sample's k̂ (:meth:`Predictor.conditional

@@ -1,0 +1,168 @@
+"""solnic's and solnic-modern's Python samples inside the compiled loop (:mod:`controllers.solnic.idle_step`).
+
+Where the idle step (the faithful :func:`~controllers.solnic.idle_step.idle_step` or the joint
+EKF's :func:`~controllers.solnic.idle_step.joint_idle_step`) cannot do a sample (a pulse launch, a cycle's evaluation, a plan the
+cache cannot give) it restores the sample's entry state and calls the controller's Python step
+from the loop (numba ``objmode``) instead of handing the sample back to the runner. The
+reference is the runner's own Python loop (``compiled=False``, which never enters the compiled
+step) and the hand-back path (``python_in_loop = False``): every metric and the summary must be
+equal bit for bit, also where the loop redoes a sample (more noise or more event-log room), where
+the Python step raises, and where it returns a command the loop would reject.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import plant.law_driver as law_driver
+from bench.runner import run_closed_loop
+from bench.scenarios import builtin_scenarios
+from controllers import make_controller
+from controllers.base import ControllerDiverged
+from controllers.solnic.controller import SolnicController
+from plant.drive import DriveCommand
+
+RUNTIME = ("runtime_s", "realtime_factor")
+
+
+def _row(r):
+    return r.status, r.message, {k: v for k, v in r.metrics.items() if k not in RUNTIME}, r.summary
+
+
+def _run(scenario, seed, duration, *, in_loop=True, name="solnic-modern", **kw):
+    sc = builtin_scenarios()[scenario]
+    c = make_controller(name)
+    c.python_in_loop = in_loop
+    calls = []
+    step = c.step
+    c.step = lambda y: calls.append(1) or step(y)            # counts the controller's Python samples
+    r = run_closed_loop(sc.params, c, duration_s=duration, warmup_s=duration / 5, seed=seed, family=sc.family,
+                        model=sc.model, **kw)
+    return r, len(calls), c
+
+
+@pytest.mark.parametrize("name, scenario, seed", [("solnic-modern", "thesis", 1), ("solnic-modern", "delayed", 2),
+                                                  ("solnic-modern", "disturbed", 3), ("solnic", "thesis", 4),
+                                                  ("solnic", "quantized", 5), ("solnic", "disturbed", 6)])
+def test_samples_in_the_loop_are_the_python_rows(name, scenario, seed, monkeypatch):
+    """In the loop, handed back, and the runner's Python loop: the same rows; the loop makes no
+    hand-back at all (one compiled run), the hand-back path one per Python sample."""
+    runs = []
+    orig = law_driver.run_law_chunks
+
+    def counting(*a, **k):
+        runs.append(1)
+        return orig(*a, **k)
+
+    for mod in ("plant.multimode.law_loop", "plant.multimode.disturbed_loop"):
+        monkeypatch.setattr(f"{mod}.run_law_chunks", counting, raising=False)
+    in_loop, n_in, c = _run(scenario, seed, 10.0, name=name)
+    n_runs_in, runs[:] = len(runs), []
+    back, n_back, _ = _run(scenario, seed, 10.0, in_loop=False, name=name)
+    n_runs_back = len(runs)
+    python, _, _ = _run(scenario, seed, 10.0, compiled=False, name=name)
+    assert in_loop.status == "ok" and in_loop.summary["pulses"] > 10
+    assert _row(in_loop) == _row(back) == _row(python)
+    assert n_in == n_back and 0 < n_in < 300                 # the same Python samples, few of them
+    if scenario != "disturbed":                               # (its loop is plant.multimode.disturbed_loop's)
+        assert n_runs_in == 1 and n_runs_back == n_back + 1   # no hand-back in the loop; one per sample before
+    assert c._in_loop is not None and c._replay is None
+
+
+def test_a_sample_the_loop_redoes_is_not_a_second_python_sample(monkeypatch):
+    """A tiny noise margin and a tiny event scratch make the loop undo and redo samples after
+    their step (plant.law_driver.run_law_chunks): the command and state of the first call are
+    reused, so the rows stay the Python loop's."""
+    monkeypatch.setattr(law_driver, "NOISE_MARGIN", 4)
+    init = law_driver.X1Log.__init__
+
+    def small_scratch(self, n):
+        init(self, n)
+        self.scratch = self.scratch[:1]
+
+    monkeypatch.setattr(law_driver.X1Log, "__init__", small_scratch)
+    redo = []
+    orig = SolnicController._sample_in_loop
+
+    def spy(self, y, offs, levs):
+        redo.append(self._in_loop is not None and self._in_loop[0] == self._idle.state[0])
+        return orig(self, y, offs, levs)
+
+    monkeypatch.setattr(SolnicController, "_sample_in_loop", spy)
+    in_loop, n_in, _ = _run("thesis", 4, 8.0, x1_log=True)
+    python, n_py, _ = _run("thesis", 4, 8.0, x1_log=True, compiled=False)
+    assert sum(redo) >= 2                                     # redone samples happened (scratch 1 -> 4 -> 16)
+    assert _row(in_loop) == _row(python)
+    assert n_in == len(redo) - sum(redo)                      # one Python sample per first call only
+    assert (in_loop.samples["x1"] == python.samples["x1"]).all()
+    assert (in_loop.events["t"] == python.events["t"]).all()
+
+
+@pytest.mark.parametrize("name, in_loop, kind", [("solnic-modern", True, "diverged"), ("solnic-modern", True, "error"),
+                                                  ("solnic-modern", False, "error"), ("solnic", True, "error")])
+def test_an_exception_in_the_python_sample_ends_the_run_as_the_python_loop(name, in_loop, kind, monkeypatch):
+    """The fifth launch raises: the same status, message (an error's names the raising line) and
+    summary."""
+    launch = SolnicController._launch
+    n = []
+
+    def failing(self, *a):
+        n.append(1)
+        if len(n) == 5:
+            raise (ControllerDiverged if kind == "diverged" else ZeroDivisionError)("test: the fifth launch")
+        return launch(self, *a)
+
+    monkeypatch.setattr(SolnicController, "_launch", failing)
+    r, _, c = _run("thesis", 0, 6.0, in_loop=in_loop, name=name)
+    n.clear()
+    python, _, _ = _run("thesis", 0, 6.0, compiled=False, name=name)
+    assert r.status == kind and "the fifth launch" in r.message
+    assert ("test_solnic_in_loop.py" in r.message) == (kind == "error")
+    assert _row(r) == _row(python)
+    assert c.summary()["pulses"] == 4
+
+
+def test_a_command_the_loop_rejects_is_handed_back_and_applied_by_the_runner(monkeypatch):
+    """A launch whose pulse runs past the sample period (the plant rejects it): in the loop it is
+    kept, handed back and returned by the runner's step call — the same error as the Python loop."""
+    launch = SolnicController._launch
+    n = []
+
+    def late(self, *a):
+        n.append(1)
+        cmd = launch(self, *a)
+        return DriveCommand(((0.0, 0.0), (0.5, cmd.segments[-2][1])), cmd.drive) if len(n) == 3 else cmd
+
+    monkeypatch.setattr(SolnicController, "_launch", late)
+    r, n_in, c = _run("thesis", 2, 6.0)
+    n.clear()
+    python, _, _ = _run("thesis", 2, 6.0, compiled=False)
+    assert r.status == "error" and _row(r) == _row(python)
+    assert c._replay is None                                  # the kept command was used
+
+
+def test_the_planner_reads_the_steps_bias_of_the_same_plan(monkeypatch):
+    """At a sample the step gives to Python with a pending cycle, the planner's first trigger
+    test needs the w2 bias of the plan the step has just solved for: it is read from the step's
+    array (key-matched), not solved again. Each value read equals ``noise_model.pulse_bias``
+    solved for that prediction (bit for bit), and the rows are the runner's Python loop's."""
+    import controllers.solnic.controller as ctl
+    solves, reads = [], []
+    solve, read = ctl.pulse_bias, SolnicController._pulse_bias
+
+    def checked(self, pred, dtu):
+        got = read(self, pred, dtu)
+        ks = min(self.friction.ks, pred.peak_torque * (1.0 - 1e-6))
+        want = solve(self.params, ks, min(self.friction.kc, ks), dtu, pred.t_breakaway, pred.t_current_zero,
+                     pred.t_nominal, braked=pred.t_off is not None)
+        reads.append(got.hex() == want.hex())
+        return got
+
+    monkeypatch.setattr(ctl, "pulse_bias", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    monkeypatch.setattr(SolnicController, "_pulse_bias", checked)
+    in_loop, _, _ = _run("thesis", 7, 20.0)
+    n_solves = len(solves)
+    python, _, _ = _run("thesis", 7, 20.0, compiled=False)
+    assert len(reads) > 40 and all(reads)
+    assert n_solves == 0 and len(solves) > 20                     # solved only on the Python loop
+    assert _row(in_loop) == _row(python)
