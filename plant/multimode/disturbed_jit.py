@@ -1096,12 +1096,17 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
 WORK_SIZE = 4 * _N + 3
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out,
                work, cursor):
     """:func:`interval_kernel` with the drive's first ``k`` segments of ``offsets``, ``levels``
     and the scratch ``work`` (WORK_SIZE floats) and ``cursor`` (one int64) of a compiled caller
-    (nothing copied or allocated per interval)."""
+    (nothing copied or allocated per interval).
+
+    Compiled without numba's reference counting: it allocates nothing, and with it each call
+    increfed and decrefed its thirteen array arguments (26 atomic operations per sample). A
+    sub-step :func:`_fast_segment` does not take goes to :func:`_slow`, compiled with reference
+    counting (numba would otherwise pass the flag on to its callees, which allocate)."""
     dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
@@ -1131,12 +1136,8 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
         while S[_T] < t_seg_end:
             r = _fast_segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad,
                               hold)
-            if r == -1:
-                stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
-                                e, lad)
-            elif r == 2:
-                stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
-                             hold, r == 2)
+            if r == -1 or r == 2:
+                stop = _slow(r, t_seg_end, bridge, ov, recs, rds, FB, IB, z, ev, out, work, cursor)
             else:
                 stop = r == 1
             if stop or S[_STATUS] != _OK:
@@ -1152,6 +1153,27 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
         S[_T] = t0 + duration
     out[0], out[1], out[2], out[3], out[4], out[5], out[6] = Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5], Y[YU], Y[YD]
     return cursor[0]
+
+
+@njit(cache=True, _nrt=True)
+def _slow(r, t_seg_end, bridge, ov, recs, rds, FB, IB, z, ev, out, work, cursor):
+    """The sub-step :func:`_fast_segment` left (``r`` = −1: the general :func:`_segment`; 2: the
+    bisection and finish of a drawn crossing, :func:`_tail`), with reference counting on
+    (``_nrt=True`` explicitly: it must not inherit :func:`interval_k`'s flag). True when the
+    interval must stop."""
+    dp = FB[:_DP_LEN]
+    noisy = ov[_O_NOISE] != 0.0
+    sig_d2 = dp[_SD2] if noisy else 0.0
+    S = out[7:]
+    Y = work[:_N]
+    Yb = work[_N:2 * _N]
+    Yc = work[2 * _N:3 * _N]
+    e = work[3 * _N:4 * _N]
+    if r == -1:
+        lad = FB[_SIZE_F - _LAD_LEN:]
+        return _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad)
+    hold = work[4 * _N:4 * _N + 3]
+    return _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, True)
 
 
 # --- Python side -------------------------------------------------------------------------------
