@@ -149,8 +149,11 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
 
 # --- mode 2 -----------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
+    """A stuck load to the breakaway, the flyback end or t_end; True when the interval must stop.
+    Allocation-free, compiled without reference counting (each of its thirteen array arguments
+    cost an atomic incref/decref pair per call)."""
     ks = max(p.stiction + X[A5], 0.0)
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
@@ -225,8 +228,10 @@ def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
     return peak
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn):
+    """A moving load to the velocity zero, the flyback end or t_end (it allocates: reference
+    counting on explicitly, not inherited from :func:`interval_k`)."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     X[AKC] = p.coulomb if p.coulomb + X[A5] >= 0.0 else -X[A5]
@@ -402,20 +407,27 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, q, V, Vi, lam, o, TP, TL, BT,
                     z, zpos, ev, out):
     """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance()."""
+    return interval_k(x, mode, flyback, t0, duration, offsets, levels, offsets.shape[0], bridge, prm, q, V, Vi, lam, o,
+                      TP, TL, BT, z, zpos, ev, out, np.empty(1, dtype=np.int64), np.empty(NX), np.empty(NX),
+                      np.empty((5, NCORE), dtype=np.complex128), np.empty((3, NCORE)))
+
+
+@njit(cache=True, _nrt=False)
+def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, zpos,
+               ev, out, cursor, X, Xn, C, F):
+    """:func:`interval_kernel` on the drive's first ``k`` segments, with a compiled caller's
+    scratch (``cursor`` one int64, X and Xn NX floats, C 5 × NCORE complex and F 3 × NCORE, as
+    :func:`propagate_w` and :func:`_torque_exit_w` use them): the same operations, compiled
+    without reference counting (its fifteen array arguments and five allocations cost ~40 atomic
+    operations per sample). :func:`_moving` keeps reference counting (it allocates)."""
     p = prm[0]
     S = out[N_X:]
-    cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
-    X = np.empty(NX)
-    Xn = np.empty(NX)
-    C = np.empty((5, NCORE), dtype=np.complex128)     # scratch of propagate_w and _torque_exit_w
-    F = np.empty((3, NCORE))
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[PHI], X[WM] = (x[0], x[1], x[2], x[3], x[4], p.coulomb,
                                                                          x[5], x[6], x[7])
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    k = offsets.shape[0]
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
         if not _apply_level(X, S, levels[seg], bridge, p):
