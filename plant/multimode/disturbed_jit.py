@@ -36,7 +36,7 @@ from numba.extending import get_cython_function_address, intrinsic
 
 from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
-from plant.multimode.segments import hermite_peak, torque_integrals
+from plant.multimode.segments import hermite_peak, torque_crossing_time, torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
@@ -500,6 +500,44 @@ def _torque(S, x3, u, h, bridge, dp):
     S[_DUR] += h
 
 
+@njit(cache=True, inline="always")
+def _decay_memo(w, tau3, lad):
+    """exp(−w/τ3) and torque_integrals' f1 = e1(w/τ3)·τ3, f2 = e1(2w/τ3)·τ3/2 for the width w, the
+    same expressions on the same doubles, kept for the last width in ``lad``'s memo (a sub-step's
+    width repeats: the ladder's rungs); returns (decay, f1, f2)."""
+    o = _MEMO
+    if lad[o] != w:
+        b3 = 1.0 / tau3
+        lad[o + 1] = math.exp(-w / tau3)
+        lad[o + 2] = e1(b3 * w) * tau3
+        lad[o + 3] = e1(2 * b3 * w) * tau3 / 2.0
+        lad[o] = w
+    return lad[o + 1], lad[o + 2], lad[o + 3]
+
+
+@njit(cache=True, inline="always")
+def _torque_f(S, x3, u, h, bridge, dp, f1, f2):
+    """:func:`_torque` with torque_integrals' f1 and f2 given (:func:`_decay_memo`): the
+    integrals' own operations in their order (tests/test_disturbed_jit.py checks the bits)."""
+    if h <= 0.0:
+        return
+    tau3 = dp[_TAU3]
+    b3 = 1.0 / tau3
+    g = x3 - u
+    integral = u * h + g * f1
+    square = u * u * h + 2 * u * g * f1 + g * g * f2
+    t0 = torque_crossing_time(x3, u, 0.0, tau3)
+    if t0 < h:
+        first = u * t0 + g * e1(b3 * t0) * tau3
+        absolute = abs(first) + abs(integral - first)
+    else:
+        absolute = abs(integral)
+    S[_IABS] += absolute
+    S[_ISQ] += square
+    S[_CHG] += (u / dp[_UMAX]) * integral if bridge else absolute
+    S[_DUR] += h
+
+
 @njit(cache=True)
 def _apply_level(Y, S, level, bridge, dp):
     umax = dp[_UMAX]
@@ -534,6 +572,21 @@ def _cross_prob(va, vb, w, sig2):
     if x < _EXP_ZERO:
         return 0.0
     return math.exp(x)
+
+
+@njit(cache=True, inline="always")
+def _cross_prob_far(va, vb, w, sig2):
+    """:func:`_cross_prob` where only a value of exactly 1.0 matters (a sub-step on a far rung
+    crosses only when the probability is ≥ 1): that value whenever it can be 1.0, else the
+    stand-in 0.0 without calling exp — when the exponent is below −1, exp of it is below 1."""
+    if vb <= 0.0 or va <= 0.0:
+        return 1.0
+    if sig2 <= 0.0 or not w > 0.0:
+        return 0.0
+    x = -2.0 * va * vb / (sig2 * w)
+    if x < -1.0:
+        return 0.0
+    return _cross_prob(va, vb, w, sig2)
 
 
 _EXP_ZERO = -746.0      # exp(x) == 0.0 for every double x < −745.1332191019412 (tests/test_disturbed_jit.py)
@@ -855,10 +908,16 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
             Yb[Y2] -= dirn * mm
             Yb[Y1] -= dirn * mm * w / 2.0
     else:
+        # on a far rung only a probability of exactly 1 decides (below, no uniform is drawn
+        # then): _cross_prob_far gives the same decision, the same barrier (up ≥ dn) when it crosses
         if mode == 2:
             ga, gb = Y[Y3] + Y[YD], Yb[Y3] + Yb[YD]
-            up = _cross_prob(ks - ga, ks - gb, w, sig2)
-            dn = _cross_prob(ks + ga, ks + gb, w, sig2)
+            if far:
+                up = _cross_prob_far(ks - ga, ks - gb, w, sig2)
+                dn = _cross_prob_far(ks + ga, ks + gb, w, sig2)
+            else:
+                up = _cross_prob(ks - ga, ks - gb, w, sig2)
+                dn = _cross_prob(ks + ga, ks + gb, w, sig2)
             sgn = -1.0 if up >= dn else 1.0
             e[Y3] = e[YD] = sgn
             prob = 1.0 - (1.0 - up) * (1.0 - dn)
@@ -866,7 +925,10 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
             v = 0 if sgn < 0.0 else 1
         else:
             e[Y2] = dirn
-            prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+            if far:
+                prob = _cross_prob_far(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+            else:
+                prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
         # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
         if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True
@@ -874,24 +936,25 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
 
 
 @njit(cache=True, inline="always")
-def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad):
     """The sub-step's tail from Y to Yb over w: peak, then :func:`_finish_rest`."""
     if mode != 2:
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
 @njit(cache=True, inline="always")
-def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad):
     """Integrals, x3's closed form, the event (the peak is the caller's: a moving one needs
     the Hermite peak of :func:`_substep_peak`)."""
     x3, u = Y[Y3], Y[YU]
-    _torque(S, x3, u, w, bridge, dp)
+    decay, f1, f2 = _decay_memo(w, dp[_TAU3], lad)
+    _torque_f(S, x3, u, w, bridge, dp, f1, f2)
     for i in range(_N):
         Y[i] = Yb[i]
-    Y[Y3] = u + (x3 - u) * math.exp(-w / dp[_TAU3])
+    Y[Y3] = u + (x3 - u) * decay
     S[_T] += w
     if crossed:
         if mode == 2:
@@ -934,7 +997,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
             return True
-    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
 @njit(cache=True)
@@ -980,7 +1043,7 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
         S[_PEAK] = _substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
+    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad) else 0
 
 
 @njit(cache=True)
@@ -995,7 +1058,7 @@ def _substep_peak(Xa, Xb, h, peak):
 
 
 @njit(cache=True)
-def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed):
+def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed, lad):
     """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing (``crossed``): the
     bisection and :func:`_finish`, with the mode, direction, room and flyback end recomputed from
     the unchanged Y and S."""
@@ -1011,13 +1074,14 @@ def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, 
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
             return True
-    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
 # numba's argument typing per call); _views cuts them into the named tables.
 _DP_LEN = 15
-_LAD_LEN = 1 + 2 * LADDER     # the step ladder's table (_ladder_table), last in FB
+_MEMO = 1 + 2 * LADDER        # the last width's decay and integrals (_decay_memo), after the ladder's
+_LAD_LEN = _MEMO + 4          # the step ladder's table (_ladder_table) and the memo, last in FB
 _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
              ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
              ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128), ("LAD", _LAD_LEN))
@@ -1169,11 +1233,11 @@ def _slow(r, t_seg_end, bridge, ov, recs, rds, FB, IB, z, ev, out, work, cursor)
     Yb = work[_N:2 * _N]
     Yc = work[2 * _N:3 * _N]
     e = work[3 * _N:4 * _N]
+    lad = FB[_SIZE_F - _LAD_LEN:]
     if r == -1:
-        lad = FB[_SIZE_F - _LAD_LEN:]
         return _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad)
     hold = work[4 * _N:4 * _N + 3]
-    return _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, True)
+    return _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, True, lad)
 
 
 # --- Python side -------------------------------------------------------------------------------
@@ -1239,6 +1303,7 @@ def _tables_for(params) -> tuple:
             if name in ("TK", "BK"):
                 FB[o:o + n] = -1.0              # empty slots
             o += n
+        FB[_SIZE_F - _LAD_LEN + _MEMO] = np.nan     # no width memoized (NaN equals no width)
         IB = np.zeros(_SIZE_I, np.int64)
         IB[:2] = _ADDR
         o = 2
