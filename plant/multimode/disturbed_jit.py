@@ -664,17 +664,44 @@ def _edot(e, x):
     return acc
 
 
-@njit(cache=True)
-def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+@njit(cache=True, _nrt=True)
+def _bridge_miss(mode, w, recs, rds, FB, IB):
+    """:func:`_bridge` on the table views (a bridge-cache miss: the views are cut only here);
+    reference counting on explicitly (it allocates), not inherited from its callers."""
+    C = _views(recs, rds, FB, IB)
+    return _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
+                   C[13], C[14], C[15], C[19])
+
+
+@njit(cache=True, _nrt=True)
+def _conditional_miss(k, v, e, recs, rds, FB, IB):
+    """:func:`_conditional` on the table views (a conditional-law miss), reference counting on."""
+    C = _views(recs, rds, FB, IB)
+    _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+
+
+@njit(cache=True, _nrt=True)
+def _factor_add(FB, o, nf, z, cursor, Ym, base):
+    """Ym = base + Fᵀᵀ·ζ (nf unit normals) for the transposed factor Fᵀ = FB[o:o + 8·nf] (nf × 8):
+    numpy's column-ordered product through BLAS, as ``np.dot(FT.T, ζ)``; ``base`` is Ym itself
+    (Ym += …) or the bridge mean. Reference counting on (np.dot allocates)."""
+    FT = FB[o:o + _N * nf].reshape((nf, _N))
+    add = np.dot(FT.T, _normals(z, cursor, nf))
+    for i in range(_N):
+        Ym[i] = base[i] + add[i]
+
+
+@njit(cache=True, _nrt=False)
+def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R):
     """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
 
     The cached bridge law and conditional law are read from the flat tables by offset, their
     builders called (with the table views, :func:`_views`) only on a miss; Φ·Y and G·(…) are
     :func:`_gemv_flat` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
     :func:`_edot`: per level no allocation and no reference count but the noise factor's
-    column-ordered product."""
+    column-ordered product (:func:`_factor_add`). Compiled without reference counting (R: the
+    caller's 6 × 8 scratch); a miss goes to :func:`_bridge_miss` or :func:`_conditional_miss`."""
     t0 = 0.0
-    R = np.empty((6, _N))
     Ya, Yb, Ym, mean, diff, tmp = R[0], R[1], R[2], R[3], R[4], R[5]
     for i in range(_N):
         Ya[i] = Ya0[i]
@@ -682,9 +709,7 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
     while w > tol:
         k = _slot(mode, w, _NB_BITS)
         if not (FB[_OFF_BK + 2 * k] == mode and FB[_OFF_BK + 2 * k + 1] == w):
-            C = _views(recs, rds, FB, IB)
-            k = _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
-                        C[13], C[14], C[15], C[19])
+            k = _bridge_miss(mode, w, recs, rds, FB, IB)
         _gemv_flat(FB, _OFF_BPW + 64 * k, _N, Ya, 0, tmp)
         for i in range(_N):
             diff[i] = Yb[i] - tmp[i]
@@ -694,8 +719,7 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
             mean[i] = mean[i] + tmp[i]
         kv = 2 * k + v
         if IB[_OFF_BCN + kv] == -2:
-            C = _views(recs, rds, FB, IB)
-            _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+            _conditional_miss(k, v, e, recs, rds, FB, IB)
         var = FB[_OFF_BCV + kv]
         mu = _edot(e, mean) + c0
         a = _edot(e, Ya) + c0
@@ -715,20 +739,12 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
             for i in range(_N):
                 Ym[i] = mean[i] + FB[_OFF_BCK + _N * kv + i] * dc
             nf = IB[_OFF_BCN + kv]
-            if nf > 0:
-                o = _OFF_BCF + 64 * kv
-                FT = FB[o:o + _N * nf].reshape((nf, _N))
-                add = np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
-                for i in range(_N):
-                    Ym[i] += add[i]
+            if nf > 0:                                  # a column-ordered product, as numpy's
+                _factor_add(FB, _OFF_BCF + 64 * kv, nf, z, cursor, Ym, Ym)
         else:
             nb = IB[_OFF_BNB + k]
             if nb:
-                o = _OFF_BBF + 64 * k
-                BT = FB[o:o + _N * nb].reshape((nb, _N))
-                add = np.dot(BT.T, _normals(z, cursor, nb))
-                for i in range(_N):
-                    Ym[i] = mean[i] + add[i]
+                _factor_add(FB, _OFF_BBF + 64 * k, nb, z, cursor, Ym, mean)
             else:
                 for i in range(_N):
                     Ym[i] = mean[i] + 0.0
@@ -745,7 +761,8 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
                 Ya[i] = Ym[i]
             t0 = t0 + half
         w = half
-    out[:] = Yb
+    for i in range(_N):
+        out[i] = Yb[i]
     return t0 + w
 
 
@@ -815,14 +832,14 @@ def _gemv_flat(F, off, m, x, xoff, out):
         out[i] = y
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _trans_miss(mode, w, recs, rds, FB, IB):
     """_trans on the table views (a cache miss: the views are cut only here)."""
     C = _views(recs, rds, FB, IB)
     return _trans(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
     """Yb[rows] += factor · (m unit normals) for transition slot k (m = TM[k] ≠ 0)."""
     if m > 0 and (m <= 5 or m == 8):
@@ -970,8 +987,8 @@ def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp
     return False
 
 
-@njit(cache=True, inline="always")
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
+@njit(cache=True, _nrt=False)
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad, R):
     """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
     The general path (cache misses, every noise factor, the bisection); :func:`_fast_segment`
     takes the common sub-steps."""
@@ -992,7 +1009,7 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         return True
     crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
     if crossed:
-        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc, R)
         for i in range(_N):
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
@@ -1000,10 +1017,10 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
     return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
-@njit(cache=True)
-def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+@njit(cache=True, _nrt=False)
+def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R):
     """_bisect (kept as the sub-step's entry to it)."""
-    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out)
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R)
 
 
 @njit(cache=True, _nrt=False)
@@ -1057,8 +1074,8 @@ def _substep_peak(Xa, Xb, h, peak):
     return pk
 
 
-@njit(cache=True)
-def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed, lad):
+@njit(cache=True, _nrt=False)
+def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed, lad, R):
     """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing (``crossed``): the
     bisection and :func:`_finish`, with the mode, direction, room and flyback end recomputed from
     the unchanged Y and S."""
@@ -1069,7 +1086,7 @@ def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, 
     sig2 = sig_d2 if mode == 2 else (dp[_SIG2MOV] if noisy else 0.0)
     w, v, c0 = hold[0], int(hold[1]), hold[2]
     if crossed:
-        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc, R)
         for i in range(_N):
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
@@ -1157,7 +1174,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
                       z, zpos, ev, out, np.empty(WORK_SIZE), np.empty(1, np.int64))
 
 
-WORK_SIZE = 4 * _N + 3
+WORK_SIZE = 10 * _N + 3
 
 
 @njit(cache=True, _nrt=False)
@@ -1168,9 +1185,12 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
     (nothing copied or allocated per interval).
 
     Compiled without numba's reference counting: it allocates nothing, and with it each call
-    increfed and decrefed its thirteen array arguments (26 atomic operations per sample). A
-    sub-step :func:`_fast_segment` does not take goes to :func:`_slow`, compiled with reference
-    counting (numba would otherwise pass the flag on to its callees, which allocate)."""
+    increfed and decrefed its thirteen array arguments (26 atomic operations per sample), and
+    so did each layer of the rarer paths (:func:`_segment`, :func:`_tail`, :func:`_bisect`). These
+    run without it too; only what allocates — a cache miss (:func:`_trans_miss`,
+    :func:`_bridge_miss`, :func:`_conditional_miss`), an eigen-factor (:func:`_noise_add`), a
+    column-ordered factor product (:func:`_factor_add`) — is compiled with reference counting, set
+    explicitly (numba otherwise passes the caller's flag on to its callees)."""
     dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
@@ -1187,6 +1207,7 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
     Yc = work[2 * _N:3 * _N]
     e = work[3 * _N:4 * _N]                         # set by each sub-step before use
     hold = work[4 * _N:4 * _N + 3]
+    R = work[4 * _N + 3:WORK_SIZE].reshape((6, _N))     # the bisection's rows
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
     stop = False
@@ -1200,8 +1221,12 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
         while S[_T] < t_seg_end:
             r = _fast_segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB, IB, Yb, Yc, e, lad,
                               hold)
-            if r == -1 or r == 2:
-                stop = _slow(r, t_seg_end, bridge, ov, recs, rds, FB, IB, z, ev, out, work, cursor)
+            if r == -1:
+                stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
+                                e, lad, R)
+            elif r == 2:
+                stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
+                             hold, True, lad, R)
             else:
                 stop = r == 1
             if stop or S[_STATUS] != _OK:
@@ -1217,27 +1242,6 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
         S[_T] = t0 + duration
     out[0], out[1], out[2], out[3], out[4], out[5], out[6] = Y[Y1], Y[Y2], Y[Y3], Y[Y4], Y[Y5], Y[YU], Y[YD]
     return cursor[0]
-
-
-@njit(cache=True, _nrt=True)
-def _slow(r, t_seg_end, bridge, ov, recs, rds, FB, IB, z, ev, out, work, cursor):
-    """The sub-step :func:`_fast_segment` left (``r`` = −1: the general :func:`_segment`; 2: the
-    bisection and finish of a drawn crossing, :func:`_tail`), with reference counting on
-    (``_nrt=True`` explicitly: it must not inherit :func:`interval_k`'s flag). True when the
-    interval must stop."""
-    dp = FB[:_DP_LEN]
-    noisy = ov[_O_NOISE] != 0.0
-    sig_d2 = dp[_SD2] if noisy else 0.0
-    S = out[7:]
-    Y = work[:_N]
-    Yb = work[_N:2 * _N]
-    Yc = work[2 * _N:3 * _N]
-    e = work[3 * _N:4 * _N]
-    lad = FB[_SIZE_F - _LAD_LEN:]
-    if r == -1:
-        return _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad)
-    hold = work[4 * _N:4 * _N + 3]
-    return _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, True, lad)
 
 
 # --- Python side -------------------------------------------------------------------------------
