@@ -668,16 +668,45 @@ def _edot(e, x):
 def _bridge_miss(mode, w, recs, rds, FB, IB):
     """:func:`_bridge` on the table views (a bridge-cache miss: the views are cut only here);
     reference counting on explicitly (it allocates), not inherited from its callers."""
-    C = _views(recs, rds, FB, IB)
-    return _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
-                   C[13], C[14], C[15], C[19])
+    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    nb = _NB
+    BK = FB[_OFF_BK:_OFF_BK + nb * 2].reshape((nb, 2))
+    BPH = FB[_OFF_BPH:_OFF_BPH + nb * 64].reshape((nb, _N, _N))
+    BPW = FB[_OFF_BPW:_OFF_BPW + nb * 64].reshape((nb, _N, _N))
+    BG = FB[_OFF_BG:_OFF_BG + nb * 64].reshape((nb, _N, _N))
+    BBF = FB[_OFF_BBF:_OFF_BBF + nb * 64].reshape((nb, 64))
+    BNB = IB[_OFF_BNB:_OFF_BNB + nb]
+    BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
+    return _bridge(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
+
+
+@njit(cache=True, inline="always")
+def _trans_views(FB, IB):
+    """(dp, fa, TK, TPHI, TQ, TB, TROWS, TM): the transition cache's views (a miss cuts only the
+    tables it needs: each view costs a reshape call and an atomic reference-count pair)."""
+    nt = _NT
+    dp = FB[:_DP_LEN]
+    TK = FB[_OFF_TK:_OFF_TK + nt * 2].reshape((nt, 2))
+    TPHI = FB[_OFF_TPHI:_OFF_TPHI + nt * 64].reshape((nt, _N, _N))
+    TQ = FB[_OFF_TQ:_OFF_TQ + nt * 64].reshape((nt, _N, _N))
+    TB = FB[_OFF_TB:_OFF_TB + nt * 64].reshape((nt, 64))
+    fa = IB[:2]
+    TROWS = IB[_OFF_TROWS:_OFF_TROWS + nt * 8].reshape((nt, _N))
+    TM = IB[_OFF_TM:_OFF_TM + nt]
+    return dp, fa, TK, TPHI, TQ, TB, TROWS, TM
 
 
 @njit(cache=True, _nrt=True)
 def _conditional_miss(k, v, e, recs, rds, FB, IB):
     """:func:`_conditional` on the table views (a conditional-law miss), reference counting on."""
-    C = _views(recs, rds, FB, IB)
-    _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+    nb = _NB
+    BBF = FB[_OFF_BBF:_OFF_BBF + nb * 64].reshape((nb, 64))
+    BCV = FB[_OFF_BCV:_OFF_BCV + nb * 2].reshape((nb, 2))
+    BCK = FB[_OFF_BCK:_OFF_BCK + nb * 16].reshape((nb, 2, _N))
+    BCF = FB[_OFF_BCF:_OFF_BCF + nb * 128].reshape((nb, 2, 64))
+    BNB = IB[_OFF_BNB:_OFF_BNB + nb]
+    BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
+    _conditional(k, v, e, IB[:2], BBF, BNB, BCV, BCK, BCF, BCN)
 
 
 @njit(cache=True, _nrt=True)
@@ -696,7 +725,7 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
     """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
 
     The cached bridge law and conditional law are read from the flat tables by offset, their
-    builders called (with the table views, :func:`_views`) only on a miss; Φ·Y and G·(…) are
+    builders called (with the table views they need) only on a miss; Φ·Y and G·(…) are
     :func:`_gemv_flat` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
     :func:`_edot`: per level no allocation and no reference count but the noise factor's
     column-ordered product (:func:`_factor_add`). Compiled without reference counting (R: the
@@ -835,8 +864,8 @@ def _gemv_flat(F, off, m, x, xoff, out):
 @njit(cache=True, _nrt=True)
 def _trans_miss(mode, w, recs, rds, FB, IB):
     """_trans on the table views (a cache miss: the views are cut only here)."""
-    C = _views(recs, rds, FB, IB)
-    return _trans(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9])
+    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    return _trans(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
 
 
 @njit(cache=True, _nrt=True)
@@ -1095,7 +1124,7 @@ def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, 
 
 
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
-# numba's argument typing per call); _views cuts them into the named tables.
+# numba's argument typing per call); the miss handlers cut them into the named tables.
 _DP_LEN = 15
 _MEMO = 1 + 2 * LADDER        # the last width's decay and integrals (_decay_memo), after the ladder's
 _LAD_LEN = _MEMO + 4          # the step ladder's table (_ladder_table) and the memo, last in FB
@@ -1116,54 +1145,11 @@ def _offsets(layout):
 
 
 _OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
-_OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
+_OFF_TK, _OFF_TPHI, _OFF_TQ, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TQ"], _OFF_F["TB"]
 _OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
 _OFF_BK, _OFF_BPH, _OFF_BPW, _OFF_BG = _OFF_F["BK"], _OFF_F["BPH"], _OFF_F["BPW"], _OFF_F["BG"]
 _OFF_BBF, _OFF_BCV, _OFF_BCK, _OFF_BCF = _OFF_F["BBF"], _OFF_F["BCV"], _OFF_F["BCK"], _OFF_F["BCF"]
 _OFF_BNB, _OFF_BCN = _OFF_I["BNB"], _OFF_I["BCN"]
-
-
-@njit(cache=True)
-def _views(recs, rds, FB, IB):
-    """The kernel's constants and cache tables as views of the flat buffers (see kernel_inputs)."""
-    nt, nb = _NT, _NB
-    o = 0
-    dp = FB[o:o + _DP_LEN]
-    o += _DP_LEN
-    TK = FB[o:o + nt * 2].reshape((nt, 2))
-    o += nt * 2
-    TPHI = FB[o:o + nt * 64].reshape((nt, _N, _N))
-    o += nt * 64
-    TQ = FB[o:o + nt * 64].reshape((nt, _N, _N))
-    o += nt * 64
-    TB = FB[o:o + nt * 64].reshape((nt, 64))
-    o += nt * 64
-    BK = FB[o:o + nb * 2].reshape((nb, 2))
-    o += nb * 2
-    BPH = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BPW = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BG = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BBF = FB[o:o + nb * 64].reshape((nb, 64))
-    o += nb * 64
-    BCV = FB[o:o + nb * 2].reshape((nb, 2))
-    o += nb * 2
-    BCK = FB[o:o + nb * 16].reshape((nb, 2, _N))
-    o += nb * 16
-    BCF = FB[o:o + nb * 128].reshape((nb, 2, 64))
-    i = 0
-    fa = IB[i:i + 2]
-    i += 2
-    TROWS = IB[i:i + nt * 8].reshape((nt, _N))
-    i += nt * 8
-    TM = IB[i:i + nt]
-    i += nt
-    BNB = IB[i:i + nb]
-    i += nb
-    BCN = IB[i:i + nb * 2].reshape((nb, 2))
-    return (recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN)
 
 
 @njit(cache=True)
