@@ -180,7 +180,7 @@ def test_interval_k_reads_the_first_k_segments_and_is_interval_kernel_bit_for_bi
     k segments of longer arrays whose tail is NaN) against ``interval_kernel`` on exact slices:
     the same state, work sheet, events and noise position on a noisy train of bridge pulses and
     linear levels that sticks, breaks loose and reverses."""
-    from plant.two_mass.interval import _event_scratch, interval_k, interval_kernel, plan
+    from plant.two_mass.interval import MOVE_SCRATCH, _event_scratch, interval_k, interval_kernel, plan
     from plant.two_mass.modes import NCORE
     from plant.two_mass.motion import NX
     p = _compliant()
@@ -192,7 +192,7 @@ def test_interval_k_reads_the_first_k_segments_and_is_interval_kernel_bit_for_bi
     x = np.zeros(8)
     t, mode, fb, pos = 0.0, 2, False, 0
     scratch = (np.full(1, -5, np.int64), np.full(NX, np.nan), np.full(NX, np.nan),
-               np.full((5, NCORE), np.nan + 0j), np.full((3, NCORE), np.nan))
+               np.full((5, NCORE), np.nan + 0j), np.full((3, NCORE), np.nan), np.full(MOVE_SCRATCH, np.nan))
     events = 0
     for n in range(120):
         bridge = n % 2 == 0
