@@ -312,3 +312,68 @@ def test_the_crossing_probability_skips_exp_only_where_exp_is_zero():
         fast = disturbed_jit._cross_prob(va, vb, w, sig2)
         assert fast == disturbed._cross_prob(float(va), float(vb), float(w), float(sig2))
         assert fast == math.exp(-2.0 * va * vb / (sig2 * w))
+
+
+def test_a_far_rungs_crossing_stand_in_decides_as_the_crossing_probability():
+    """On a far rung a sub-step crosses only when the probability is ≥ 1 (no uniform is drawn).
+    _cross_prob_far returns _cross_prob's value whenever that can be 1.0 and a stand-in 0.0
+    (without exp) only where the exponent is below −1: the decision prob ≥ 1 of one barrier and of
+    a stuck shaft's two (1 − (1 − up)(1 − dn)), and the barrier chosen (up ≥ dn), are the same on
+    random and edge inputs (end values ≤ 0, tiny, an exponent within ulps of 0, zero variance)."""
+    import math
+    rng = np.random.default_rng(11)
+    far, exact = disturbed_jit._cross_prob_far, disturbed_jit._cross_prob
+    edge = [0.0, -0.0, -1e-300, 5e-324, 1e-300, 1e-160, 1.0, 1e300, math.inf, -3.0]
+    cases = [(a, b, 1e-3, 1e-6) for a in edge for b in edge] + [(1.0, 1.0, 0.0, 1.0), (1.0, 1.0, 1.0, 0.0)]
+    for _ in range(30000):
+        va, vb = rng.choice([-1.0, 1.0], 2) * np.exp(rng.uniform(-40, 5, 2))
+        cases.append((va, vb, np.exp(rng.uniform(-25, 0)), np.exp(rng.uniform(-30, 5))))
+    stand_ins = 0
+    for va, vb, w, sig2 in cases:
+        f, x = far(va, vb, w, sig2), exact(va, vb, w, sig2)
+        assert (f >= 1.0) == (x >= 1.0) and (f == x or (f == 0.0 and x < 1.0))
+        stand_ins += f != x
+    assert stand_ins > 500                              # the stand-in is really taken
+    for (a, b, w, s2), (c, d, _, _) in zip(cases[::2], cases[1::2]):
+        up, dn, upf, dnf = exact(a, b, w, s2), exact(c, d, w, s2), far(a, b, w, s2), far(c, d, w, s2)
+        crossed = 1.0 - (1.0 - up) * (1.0 - dn) >= 1.0
+        assert crossed == (1.0 - (1.0 - upf) * (1.0 - dnf) >= 1.0)
+        if crossed:
+            assert (up >= dn) == (upf >= dnf)
+
+
+def test_the_memoized_decay_and_torque_integrals_are_the_plain_ones_bit_for_bit():
+    """_decay_memo (the last width's exp(−w/τ3) and torque_integrals' f1, f2) with _torque_f give
+    the bits of exp and of plant.multimode.segments.torque_integrals, on memo hits and misses
+    (widths repeated and alternated, x3 crossing zero or not, bridge and linear charge)."""
+    import math
+    from numba import njit
+    from plant.multimode.segments import torque_integrals
+
+    @njit
+    def memo_step(x3, u, h, bridge, dp, lad, S):
+        decay, f1, f2 = disturbed_jit._decay_memo(h, dp[disturbed_jit._TAU3], lad)
+        disturbed_jit._torque_f(S, x3, u, h, bridge, dp, f1, f2)
+        return decay
+
+    dp = disturbed_jit._constants(_SCEN.params).copy()
+    tau3, umax = dp[disturbed_jit._TAU3], dp[disturbed_jit._UMAX]
+    lad = np.zeros(disturbed_jit._LAD_LEN)
+    lad[disturbed_jit._MEMO] = np.nan
+    rng = np.random.default_rng(12)
+    widths = list(np.exp(rng.uniform(-14, -3, 6))) + [0.0]
+    for i in range(6000):
+        h = widths[(i // 3) % len(widths)] if i % 4 else widths[rng.integers(len(widths))]
+        x3, u = rng.normal(0, 10, 2)
+        if i % 5 == 0:
+            u = -x3 * rng.uniform(0.1, 3.0)                # x3 crosses zero inside the width
+        bridge = bool(i % 2)
+        S = np.zeros(disturbed_jit.SHEET_SIZE)
+        assert memo_step(x3, u, h, bridge, dp, lad, S) == math.exp(-h / tau3)
+        integral, absolute, square = torque_integrals(x3, u, h, tau3)
+        want = np.zeros(disturbed_jit.SHEET_SIZE)
+        if h > 0:
+            want[disturbed_jit._IABS], want[disturbed_jit._ISQ] = absolute, square
+            want[disturbed_jit._CHG] = (u / umax) * integral if bridge else absolute
+            want[disturbed_jit._DUR] = h
+        assert S.tobytes() == want.tobytes(), i

@@ -173,3 +173,48 @@ def test_g_fast_gives_the_bits_of_g_values():
         no_size = _g_fast(ca, cb, lam, moduli(lam), n, t, False)
         assert [float(v).hex() for v in no_size[:3]] == [float(v).hex() for v in plain[:3]] and no_size[3] == 0.0
     assert checked_zero_b > 1000
+
+
+def test_interval_k_reads_the_first_k_segments_and_is_interval_kernel_bit_for_bit():
+    """``interval.interval_k`` (no reference counting, the caller's dirty scratch, the drive's first
+    k segments of longer arrays whose tail is NaN) against ``interval_kernel`` on exact slices:
+    the same state, work sheet, events and noise position on a noisy train of bridge pulses and
+    linear levels that sticks, breaks loose and reverses."""
+    from plant.two_mass.interval import MOVE_SCRATCH, _event_scratch, interval_k, interval_kernel, plan
+    from plant.two_mass.modes import NCORE
+    from plant.two_mass.motion import NX
+    p = _compliant()
+    q, V, Vi, lam, o, TP, TL, BT = plan(p, SimOptions())
+    prm = p.kernel_record()
+    z = np.random.default_rng(np.random.SeedSequence(7)).standard_normal(1_000_000)
+    rng = np.random.default_rng(3)
+    tau = p.sample_period
+    x = np.zeros(8)
+    t, mode, fb, pos = 0.0, 2, False, 0
+    scratch = (np.full(1, -5, np.int64), np.full(NX, np.nan), np.full(NX, np.nan),
+               np.full((5, NCORE), np.nan + 0j), np.full((3, NCORE), np.nan), np.full(MOVE_SCRATCH, np.nan))
+    events = 0
+    for n in range(120):
+        bridge = n % 2 == 0
+        if bridge:
+            lv = p.u_max * rng.choice([-1.0, 1.0])
+            w = rng.uniform(0.1, 0.6) * tau
+            offs, levs = np.array([0.0, w]), np.array([lv, 0.0])
+        else:
+            offs, levs = np.array([0.0]), np.array([p.u_max * rng.uniform(-0.6, 0.6)])
+        k = offs.shape[0]
+        pad_o = np.concatenate([offs, np.full(3, np.nan)])
+        pad_l = np.concatenate([levs, np.full(3, np.nan)])
+        ev1, ev2 = _event_scratch().copy(), _event_scratch().copy()
+        out1, out2 = np.empty(8 + 15), np.empty(8 + 15)
+        p1 = interval_kernel(x, mode, fb, t, tau, offs, levs, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, pos, ev1,
+                             out1)
+        p2 = interval_k(x, mode, fb, t, tau, pad_o, pad_l, k, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, pos, ev2,
+                        out2, *scratch)
+        nrec = int(out1[8 + 14])
+        assert p1 == p2 and out1.tobytes() == out2.tobytes() and ev1[:nrec].tobytes() == ev2[:nrec].tobytes(), n
+        assert out1[8 + 13] == 0.0, n                  # status ok
+        events += int(out1[8 + 9])
+        x = out1[:8].copy()
+        t, mode, fb, pos = out1[8], int(out1[9]), out1[10] != 0.0, p1
+    assert events > 20 and pos > 1000                   # pulses break loose and stick; noise was drawn

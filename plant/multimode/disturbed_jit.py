@@ -36,7 +36,7 @@ from numba.extending import get_cython_function_address, intrinsic
 
 from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
-from plant.multimode.segments import hermite_peak, torque_integrals
+from plant.multimode.segments import hermite_peak, torque_crossing_time, torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
@@ -500,6 +500,44 @@ def _torque(S, x3, u, h, bridge, dp):
     S[_DUR] += h
 
 
+@njit(cache=True, inline="always")
+def _decay_memo(w, tau3, lad):
+    """exp(−w/τ3) and torque_integrals' f1 = e1(w/τ3)·τ3, f2 = e1(2w/τ3)·τ3/2 for the width w, the
+    same expressions on the same doubles, kept for the last width in ``lad``'s memo (a sub-step's
+    width repeats: the ladder's rungs); returns (decay, f1, f2)."""
+    o = _MEMO
+    if lad[o] != w:
+        b3 = 1.0 / tau3
+        lad[o + 1] = math.exp(-w / tau3)
+        lad[o + 2] = e1(b3 * w) * tau3
+        lad[o + 3] = e1(2 * b3 * w) * tau3 / 2.0
+        lad[o] = w
+    return lad[o + 1], lad[o + 2], lad[o + 3]
+
+
+@njit(cache=True, inline="always")
+def _torque_f(S, x3, u, h, bridge, dp, f1, f2):
+    """:func:`_torque` with torque_integrals' f1 and f2 given (:func:`_decay_memo`): the
+    integrals' own operations in their order (tests/test_disturbed_jit.py checks the bits)."""
+    if h <= 0.0:
+        return
+    tau3 = dp[_TAU3]
+    b3 = 1.0 / tau3
+    g = x3 - u
+    integral = u * h + g * f1
+    square = u * u * h + 2 * u * g * f1 + g * g * f2
+    t0 = torque_crossing_time(x3, u, 0.0, tau3)
+    if t0 < h:
+        first = u * t0 + g * e1(b3 * t0) * tau3
+        absolute = abs(first) + abs(integral - first)
+    else:
+        absolute = abs(integral)
+    S[_IABS] += absolute
+    S[_ISQ] += square
+    S[_CHG] += (u / dp[_UMAX]) * integral if bridge else absolute
+    S[_DUR] += h
+
+
 @njit(cache=True)
 def _apply_level(Y, S, level, bridge, dp):
     umax = dp[_UMAX]
@@ -534,6 +572,21 @@ def _cross_prob(va, vb, w, sig2):
     if x < _EXP_ZERO:
         return 0.0
     return math.exp(x)
+
+
+@njit(cache=True, inline="always")
+def _cross_prob_far(va, vb, w, sig2):
+    """:func:`_cross_prob` where only a value of exactly 1.0 matters (a sub-step on a far rung
+    crosses only when the probability is ≥ 1): that value whenever it can be 1.0, else the
+    stand-in 0.0 without calling exp — when the exponent is below −1, exp of it is below 1."""
+    if vb <= 0.0 or va <= 0.0:
+        return 1.0
+    if sig2 <= 0.0 or not w > 0.0:
+        return 0.0
+    x = -2.0 * va * vb / (sig2 * w)
+    if x < -1.0:
+        return 0.0
+    return _cross_prob(va, vb, w, sig2)
 
 
 _EXP_ZERO = -746.0      # exp(x) == 0.0 for every double x < −745.1332191019412 (tests/test_disturbed_jit.py)
@@ -611,17 +664,73 @@ def _edot(e, x):
     return acc
 
 
-@njit(cache=True)
-def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+@njit(cache=True, _nrt=True)
+def _bridge_miss(mode, w, recs, rds, FB, IB):
+    """:func:`_bridge` on the table views (a bridge-cache miss: the views are cut only here);
+    reference counting on explicitly (it allocates), not inherited from its callers."""
+    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    nb = _NB
+    BK = FB[_OFF_BK:_OFF_BK + nb * 2].reshape((nb, 2))
+    BPH = FB[_OFF_BPH:_OFF_BPH + nb * 64].reshape((nb, _N, _N))
+    BPW = FB[_OFF_BPW:_OFF_BPW + nb * 64].reshape((nb, _N, _N))
+    BG = FB[_OFF_BG:_OFF_BG + nb * 64].reshape((nb, _N, _N))
+    BBF = FB[_OFF_BBF:_OFF_BBF + nb * 64].reshape((nb, 64))
+    BNB = IB[_OFF_BNB:_OFF_BNB + nb]
+    BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
+    return _bridge(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
+
+
+@njit(cache=True, inline="always")
+def _trans_views(FB, IB):
+    """(dp, fa, TK, TPHI, TQ, TB, TROWS, TM): the transition cache's views (a miss cuts only the
+    tables it needs: each view costs a reshape call and an atomic reference-count pair)."""
+    nt = _NT
+    dp = FB[:_DP_LEN]
+    TK = FB[_OFF_TK:_OFF_TK + nt * 2].reshape((nt, 2))
+    TPHI = FB[_OFF_TPHI:_OFF_TPHI + nt * 64].reshape((nt, _N, _N))
+    TQ = FB[_OFF_TQ:_OFF_TQ + nt * 64].reshape((nt, _N, _N))
+    TB = FB[_OFF_TB:_OFF_TB + nt * 64].reshape((nt, 64))
+    fa = IB[:2]
+    TROWS = IB[_OFF_TROWS:_OFF_TROWS + nt * 8].reshape((nt, _N))
+    TM = IB[_OFF_TM:_OFF_TM + nt]
+    return dp, fa, TK, TPHI, TQ, TB, TROWS, TM
+
+
+@njit(cache=True, _nrt=True)
+def _conditional_miss(k, v, e, recs, rds, FB, IB):
+    """:func:`_conditional` on the table views (a conditional-law miss), reference counting on."""
+    nb = _NB
+    BBF = FB[_OFF_BBF:_OFF_BBF + nb * 64].reshape((nb, 64))
+    BCV = FB[_OFF_BCV:_OFF_BCV + nb * 2].reshape((nb, 2))
+    BCK = FB[_OFF_BCK:_OFF_BCK + nb * 16].reshape((nb, 2, _N))
+    BCF = FB[_OFF_BCF:_OFF_BCF + nb * 128].reshape((nb, 2, 64))
+    BNB = IB[_OFF_BNB:_OFF_BNB + nb]
+    BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
+    _conditional(k, v, e, IB[:2], BBF, BNB, BCV, BCK, BCF, BCN)
+
+
+@njit(cache=True, _nrt=True)
+def _factor_add(FB, o, nf, z, cursor, Ym, base):
+    """Ym = base + Fᵀᵀ·ζ (nf unit normals) for the transposed factor Fᵀ = FB[o:o + 8·nf] (nf × 8):
+    numpy's column-ordered product through BLAS, as ``np.dot(FT.T, ζ)``; ``base`` is Ym itself
+    (Ym += …) or the bridge mean. Reference counting on (np.dot allocates)."""
+    FT = FB[o:o + _N * nf].reshape((nf, _N))
+    add = np.dot(FT.T, _normals(z, cursor, nf))
+    for i in range(_N):
+        Ym[i] = base[i] + add[i]
+
+
+@njit(cache=True, _nrt=False)
+def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R):
     """disturbed._bisect: the offset of the first crossing; the state there into ``out``.
 
     The cached bridge law and conditional law are read from the flat tables by offset, their
-    builders called (with the table views, :func:`_views`) only on a miss; Φ·Y and G·(…) are
+    builders called (with the table views they need) only on a miss; Φ·Y and G·(…) are
     :func:`_gemv_flat` (numpy's dgemv order, checked bit for bit) into scratch rows, e·Y is
     :func:`_edot`: per level no allocation and no reference count but the noise factor's
-    column-ordered product."""
+    column-ordered product (:func:`_factor_add`). Compiled without reference counting (R: the
+    caller's 6 × 8 scratch); a miss goes to :func:`_bridge_miss` or :func:`_conditional_miss`."""
     t0 = 0.0
-    R = np.empty((6, _N))
     Ya, Yb, Ym, mean, diff, tmp = R[0], R[1], R[2], R[3], R[4], R[5]
     for i in range(_N):
         Ya[i] = Ya0[i]
@@ -629,9 +738,7 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
     while w > tol:
         k = _slot(mode, w, _NB_BITS)
         if not (FB[_OFF_BK + 2 * k] == mode and FB[_OFF_BK + 2 * k + 1] == w):
-            C = _views(recs, rds, FB, IB)
-            k = _bridge(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9], C[10], C[11], C[12],
-                        C[13], C[14], C[15], C[19])
+            k = _bridge_miss(mode, w, recs, rds, FB, IB)
         _gemv_flat(FB, _OFF_BPW + 64 * k, _N, Ya, 0, tmp)
         for i in range(_N):
             diff[i] = Yb[i] - tmp[i]
@@ -641,8 +748,7 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
             mean[i] = mean[i] + tmp[i]
         kv = 2 * k + v
         if IB[_OFF_BCN + kv] == -2:
-            C = _views(recs, rds, FB, IB)
-            _conditional(k, v, e, C[3], C[14], C[15], C[16], C[17], C[18], C[19])
+            _conditional_miss(k, v, e, recs, rds, FB, IB)
         var = FB[_OFF_BCV + kv]
         mu = _edot(e, mean) + c0
         a = _edot(e, Ya) + c0
@@ -662,20 +768,12 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
             for i in range(_N):
                 Ym[i] = mean[i] + FB[_OFF_BCK + _N * kv + i] * dc
             nf = IB[_OFF_BCN + kv]
-            if nf > 0:
-                o = _OFF_BCF + 64 * kv
-                FT = FB[o:o + _N * nf].reshape((nf, _N))
-                add = np.dot(FT.T, _normals(z, cursor, nf))     # a column-ordered product, as numpy's
-                for i in range(_N):
-                    Ym[i] += add[i]
+            if nf > 0:                                  # a column-ordered product, as numpy's
+                _factor_add(FB, _OFF_BCF + 64 * kv, nf, z, cursor, Ym, Ym)
         else:
             nb = IB[_OFF_BNB + k]
             if nb:
-                o = _OFF_BBF + 64 * k
-                BT = FB[o:o + _N * nb].reshape((nb, _N))
-                add = np.dot(BT.T, _normals(z, cursor, nb))
-                for i in range(_N):
-                    Ym[i] = mean[i] + add[i]
+                _factor_add(FB, _OFF_BBF + 64 * k, nb, z, cursor, Ym, mean)
             else:
                 for i in range(_N):
                     Ym[i] = mean[i] + 0.0
@@ -692,7 +790,8 @@ def _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, r
                 Ya[i] = Ym[i]
             t0 = t0 + half
         w = half
-    out[:] = Yb
+    for i in range(_N):
+        out[i] = Yb[i]
     return t0 + w
 
 
@@ -762,14 +861,14 @@ def _gemv_flat(F, off, m, x, xoff, out):
         out[i] = y
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _trans_miss(mode, w, recs, rds, FB, IB):
     """_trans on the table views (a cache miss: the views are cut only here)."""
-    C = _views(recs, rds, FB, IB)
-    return _trans(mode, w, C[0], C[1], C[2], C[3], C[4], C[5], C[6], C[7], C[8], C[9])
+    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    return _trans(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
     """Yb[rows] += factor · (m unit normals) for transition slot k (m = TM[k] ≠ 0)."""
     if m > 0 and (m <= 5 or m == 8):
@@ -855,10 +954,16 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
             Yb[Y2] -= dirn * mm
             Yb[Y1] -= dirn * mm * w / 2.0
     else:
+        # on a far rung only a probability of exactly 1 decides (below, no uniform is drawn
+        # then): _cross_prob_far gives the same decision, the same barrier (up ≥ dn) when it crosses
         if mode == 2:
             ga, gb = Y[Y3] + Y[YD], Yb[Y3] + Yb[YD]
-            up = _cross_prob(ks - ga, ks - gb, w, sig2)
-            dn = _cross_prob(ks + ga, ks + gb, w, sig2)
+            if far:
+                up = _cross_prob_far(ks - ga, ks - gb, w, sig2)
+                dn = _cross_prob_far(ks + ga, ks + gb, w, sig2)
+            else:
+                up = _cross_prob(ks - ga, ks - gb, w, sig2)
+                dn = _cross_prob(ks + ga, ks + gb, w, sig2)
             sgn = -1.0 if up >= dn else 1.0
             e[Y3] = e[YD] = sgn
             prob = 1.0 - (1.0 - up) * (1.0 - dn)
@@ -866,7 +971,10 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
             v = 0 if sgn < 0.0 else 1
         else:
             e[Y2] = dirn
-            prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+            if far:
+                prob = _cross_prob_far(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+            else:
+                prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
         # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
         if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True
@@ -874,24 +982,25 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
 
 
 @njit(cache=True, inline="always")
-def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+def _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad):
     """The sub-step's tail from Y to Yb over w: peak, then :func:`_finish_rest`."""
     if mode != 2:
         S[_PEAK] = substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
 @njit(cache=True, inline="always")
-def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev):
+def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad):
     """Integrals, x3's closed form, the event (the peak is the caller's: a moving one needs
     the Hermite peak of :func:`_substep_peak`)."""
     x3, u = Y[Y3], Y[YU]
-    _torque(S, x3, u, w, bridge, dp)
+    decay, f1, f2 = _decay_memo(w, dp[_TAU3], lad)
+    _torque_f(S, x3, u, w, bridge, dp, f1, f2)
     for i in range(_N):
         Y[i] = Yb[i]
-    Y[Y3] = u + (x3 - u) * math.exp(-w / dp[_TAU3])
+    Y[Y3] = u + (x3 - u) * decay
     S[_T] += w
     if crossed:
         if mode == 2:
@@ -907,8 +1016,8 @@ def _finish_rest(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp
     return False
 
 
-@njit(cache=True, inline="always")
-def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad):
+@njit(cache=True, _nrt=False)
+def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, lad, R):
     """disturbed._segment: one sub-step (or to the next event); True when the interval must stop.
     The general path (cache misses, every noise factor, the bisection); :func:`_fast_segment`
     takes the common sub-steps."""
@@ -929,18 +1038,18 @@ def _segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rd
         return True
     crossed, v, c0 = _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor)
     if crossed:
-        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc, R)
         for i in range(_N):
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
             return True
-    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
-@njit(cache=True)
-def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out):
+@njit(cache=True, _nrt=False)
+def _bisect_flat(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R):
     """_bisect (kept as the sub-step's entry to it)."""
-    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out)
+    return _bisect(mode, e, v, c0, Ya0, Yb0, w, tol, sig2, noisy, z, cursor, S, recs, rds, FB, IB, out, R)
 
 
 @njit(cache=True, _nrt=False)
@@ -980,7 +1089,7 @@ def _fast_segment(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, FB,
         S[_PEAK] = _substep_peak(Y, Yb, w, S[_PEAK])
     else:
         S[_PEAK] = max(S[_PEAK], abs(Y[Y1]), abs(Yb[Y1]))
-    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev) else 0
+    return 1 if _finish_rest(Y, S, Yb, w, False, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad) else 0
 
 
 @njit(cache=True)
@@ -994,8 +1103,8 @@ def _substep_peak(Xa, Xb, h, peak):
     return pk
 
 
-@njit(cache=True)
-def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed):
+@njit(cache=True, _nrt=False)
+def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e, hold, crossed, lad, R):
     """The rest of a sub-step :func:`_fast_segment` left at a drawn crossing (``crossed``): the
     bisection and :func:`_finish`, with the mode, direction, room and flyback end recomputed from
     the unchanged Y and S."""
@@ -1006,18 +1115,19 @@ def _tail(Y, S, t_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, 
     sig2 = sig_d2 if mode == 2 else (dp[_SIG2MOV] if noisy else 0.0)
     w, v, c0 = hold[0], int(hold[1]), hold[2]
     if crossed:
-        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc)
+        w = _bisect_flat(mode, e, v, c0, Y, Yb, w, ov[_O_TOL], sig2, noisy, z, cursor, S, recs, rds, FB, IB, Yc, R)
         for i in range(_N):
             Yb[i] = Yc[i]
         if S[_STATUS] != _OK:
             return True
-    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev)
+    return _finish(Y, S, Yb, w, crossed, mode, dirn, room, h_fb, t_end, bridge, dp, ov, ev, lad)
 
 
 # The caches and constants travel as two flat arrays (a tuple of twenty arrays cost ~25 µs of
-# numba's argument typing per call); _views cuts them into the named tables.
+# numba's argument typing per call); the miss handlers cut them into the named tables.
 _DP_LEN = 15
-_LAD_LEN = 1 + 2 * LADDER     # the step ladder's table (_ladder_table), last in FB
+_MEMO = 1 + 2 * LADDER        # the last width's decay and integrals (_decay_memo), after the ladder's
+_LAD_LEN = _MEMO + 4          # the step ladder's table (_ladder_table) and the memo, last in FB
 _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
              ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
              ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128), ("LAD", _LAD_LEN))
@@ -1035,54 +1145,11 @@ def _offsets(layout):
 
 
 _OFF_F, _OFF_I = _offsets(_LAYOUT_F), _offsets(_LAYOUT_I)
-_OFF_TK, _OFF_TPHI, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TB"]
+_OFF_TK, _OFF_TPHI, _OFF_TQ, _OFF_TB = _OFF_F["TK"], _OFF_F["TPHI"], _OFF_F["TQ"], _OFF_F["TB"]
 _OFF_TROWS, _OFF_TM = _OFF_I["TROWS"], _OFF_I["TM"]
 _OFF_BK, _OFF_BPH, _OFF_BPW, _OFF_BG = _OFF_F["BK"], _OFF_F["BPH"], _OFF_F["BPW"], _OFF_F["BG"]
 _OFF_BBF, _OFF_BCV, _OFF_BCK, _OFF_BCF = _OFF_F["BBF"], _OFF_F["BCV"], _OFF_F["BCK"], _OFF_F["BCF"]
 _OFF_BNB, _OFF_BCN = _OFF_I["BNB"], _OFF_I["BCN"]
-
-
-@njit(cache=True)
-def _views(recs, rds, FB, IB):
-    """The kernel's constants and cache tables as views of the flat buffers (see kernel_inputs)."""
-    nt, nb = _NT, _NB
-    o = 0
-    dp = FB[o:o + _DP_LEN]
-    o += _DP_LEN
-    TK = FB[o:o + nt * 2].reshape((nt, 2))
-    o += nt * 2
-    TPHI = FB[o:o + nt * 64].reshape((nt, _N, _N))
-    o += nt * 64
-    TQ = FB[o:o + nt * 64].reshape((nt, _N, _N))
-    o += nt * 64
-    TB = FB[o:o + nt * 64].reshape((nt, 64))
-    o += nt * 64
-    BK = FB[o:o + nb * 2].reshape((nb, 2))
-    o += nb * 2
-    BPH = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BPW = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BG = FB[o:o + nb * 64].reshape((nb, _N, _N))
-    o += nb * 64
-    BBF = FB[o:o + nb * 64].reshape((nb, 64))
-    o += nb * 64
-    BCV = FB[o:o + nb * 2].reshape((nb, 2))
-    o += nb * 2
-    BCK = FB[o:o + nb * 16].reshape((nb, 2, _N))
-    o += nb * 16
-    BCF = FB[o:o + nb * 128].reshape((nb, 2, 64))
-    i = 0
-    fa = IB[i:i + 2]
-    i += 2
-    TROWS = IB[i:i + nt * 8].reshape((nt, _N))
-    i += nt * 8
-    TM = IB[i:i + nt]
-    i += nt
-    BNB = IB[i:i + nb]
-    i += nb
-    BCN = IB[i:i + nb * 2].reshape((nb, 2))
-    return (recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCV, BCK, BCF, BCN)
 
 
 @njit(cache=True)
@@ -1093,15 +1160,23 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, ov,
                       z, zpos, ev, out, np.empty(WORK_SIZE), np.empty(1, np.int64))
 
 
-WORK_SIZE = 4 * _N + 3
+WORK_SIZE = 10 * _N + 3
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, recs, rds, FB, IB, z, zpos, ev, out,
                work, cursor):
     """:func:`interval_kernel` with the drive's first ``k`` segments of ``offsets``, ``levels``
     and the scratch ``work`` (WORK_SIZE floats) and ``cursor`` (one int64) of a compiled caller
-    (nothing copied or allocated per interval)."""
+    (nothing copied or allocated per interval).
+
+    Compiled without numba's reference counting: it allocates nothing, and with it each call
+    increfed and decrefed its thirteen array arguments (26 atomic operations per sample), and
+    so did each layer of the rarer paths (:func:`_segment`, :func:`_tail`, :func:`_bisect`). These
+    run without it too; only what allocates — a cache miss (:func:`_trans_miss`,
+    :func:`_bridge_miss`, :func:`_conditional_miss`), an eigen-factor (:func:`_noise_add`), a
+    column-ordered factor product (:func:`_factor_add`) — is compiled with reference counting, set
+    explicitly (numba otherwise passes the caller's flag on to its callees)."""
     dp = FB[:_DP_LEN]
     noisy = ov[_O_NOISE] != 0.0
     sig_d2 = dp[_SD2] if noisy else 0.0
@@ -1118,6 +1193,7 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
     Yc = work[2 * _N:3 * _N]
     e = work[3 * _N:4 * _N]                         # set by each sub-step before use
     hold = work[4 * _N:4 * _N + 3]
+    R = work[4 * _N + 3:WORK_SIZE].reshape((6, _N))     # the bisection's rows
     lad = FB[_SIZE_F - _LAD_LEN:]
     _ladder_table(lad, ov[_O_SUB], dp[_TAU3])
     stop = False
@@ -1133,10 +1209,10 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, ov, r
                               hold)
             if r == -1:
                 stop = _segment(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc,
-                                e, lad)
+                                e, lad, R)
             elif r == 2:
                 stop = _tail(Y, S, t_seg_end, bridge, noisy, sig_d2, ov, z, cursor, ev, dp, recs, rds, FB, IB, Yb, Yc, e,
-                             hold, r == 2)
+                             hold, True, lad, R)
             else:
                 stop = r == 1
             if stop or S[_STATUS] != _OK:
@@ -1217,6 +1293,7 @@ def _tables_for(params) -> tuple:
             if name in ("TK", "BK"):
                 FB[o:o + n] = -1.0              # empty slots
             o += n
+        FB[_SIZE_F - _LAD_LEN + _MEMO] = np.nan     # no width memoized (NaN equals no width)
         IB = np.zeros(_SIZE_I, np.int64)
         IB[:2] = _ADDR
         o = 2

@@ -124,13 +124,15 @@ def bridge_tables(p, q, V, Vi, lam, sub: float, levels: int) -> np.ndarray:
     return BT
 
 
-@njit(cache=True)
-def _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor):
-    """Draw the midpoint Xm given a crossing inside [Xa, Xb]; True if the first one is left."""
+@njit(cache=True, _nrt=False)
+def _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor, sc):
+    """Draw the midpoint Xm given a crossing inside [Xa, Xb]; True if the first one is left.
+    ``sc``: the caller's scratch (NX + NNB + 5 floats); allocation-free, compiled without
+    reference counting (each call counted its eight array arguments and three allocations)."""
     Ph = law[_PH:_PW].reshape((NX, NX))
     Pw = law[_PW:_G].reshape((NX, NX))
     G = law[_G:_SD].reshape((NNB, NNB))
-    Fb = np.empty(NX)
+    Fb = sc[:NX]
     for i in range(NX):
         a1 = 0.0
         a2 = 0.0
@@ -139,7 +141,7 @@ def _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor):
             a2 += Pw[i, j] * Xa[j]
         Xm[i] = a1
         Fb[i] = a2
-    dlt = np.empty(NNB)
+    dlt = sc[NX:NX + NNB]
     for k in range(NNB):
         dlt[k] = Xb[NB[k]] - Fb[NB[k]]
     for i in range(NNB):
@@ -160,7 +162,7 @@ def _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor):
     p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     Xm[A2] = x2m
     dv = x2m - mean2
-    zeta = np.empty(5)
+    zeta = sc[NX + NNB:NX + NNB + 5]
     for i in range(5):
         zeta[i] = normal(z, cursor)
     others = (0, 2, 3, 4, 5)
@@ -184,16 +186,17 @@ def bisect(mode, Xa0, Xb0, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, ta
     Xb = Xb0.copy()
     Xm = np.empty(NX)
     law = np.empty(LAW_SIZE)
+    sc = np.empty(NX + NNB + 5)                     # _level's scratch
     ta = 0.0
     w = h
     levels = 0
     while w > tol:
         half = w / 2
         if levels < table.shape[0]:
-            left = _level(table[levels], Xa, Xb, Xm, half, sig_v2, z, cursor)
+            left = _level(table[levels], Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
         else:
             bridge_law(mode, w, p, q, V, Vi, lam, law)
-            left = _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor)
+            left = _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
         if left:
             Xb[:] = Xm
         else:

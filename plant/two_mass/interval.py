@@ -149,8 +149,11 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
 
 # --- mode 2 -----------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
+    """A stuck load to the breakaway, the flyback end or t_end; True when the interval must stop.
+    Allocation-free, compiled without reference counting (each of its thirteen array arguments
+    cost an atomic incref/decref pair per call)."""
     ks = max(p.stiction + X[A5], 0.0)
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
@@ -225,8 +228,37 @@ def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
     return peak
 
 
-@njit(cache=True)
-def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn):
+@njit(cache=True, _nrt=True)
+def _quiet_segment(X, S, mode, s, h, bridge, p, q, V, Vi, lam, noise_on, z, cursor, Xn, x3, u):
+    """:func:`_moving`'s segment when x2 carries no white noise: the first root of the mean
+    velocity, the peak, the closed form (and the segment's exact noise). Returns −1 when no root
+    was found, 1 at a velocity zero, else 0. It allocates: reference counting on, explicitly."""
+    tau = _velocity_root(X, mode, 0, s, h, p, q, V, Vi, lam)
+    if tau < 0.0:
+        return -1
+    stopped = tau <= h
+    advanced = tau if stopped else h
+    _torque_metrics(S, x3, u, advanced, bridge, p)
+    S[_PEAK] = _x1_peak(X, mode, advanced, p, q, V, Vi, lam, max(S[_PEAK], abs(X[A1])), Xn)
+    propagate(X, mode, advanced, p, q, V, Vi, lam, Xn)
+    X[:] = Xn
+    if noise_on:
+        _add_noise(X, mode, advanced, p, q, V, Vi, lam, z, cursor)
+    S[_PEAK] = max(S[_PEAK], abs(X[A1]))
+    S[_T] += advanced
+    if stopped:
+        X[A2] = 0.0
+    return 1 if stopped else 0
+
+
+MOVE_SCRATCH = 2 * NX + NX * NX + 2 * NNB * NNB + NNB      # _moving's W: Xb, Xc, P, Q, L, ζ
+
+
+@njit(cache=True, _nrt=False)
+def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W):
+    """A moving load to the velocity zero, the flyback end or t_end. Compiled without reference
+    counting, the noisy sub-steps' scratch in W (MOVE_SCRATCH floats); the noise-free segment
+    (:func:`_quiet_segment`) and what allocates in the noisy one keep reference counting."""
     mode = int(S[_MODE])
     s = 1.0 if mode == 3 else -1.0
     X[AKC] = p.coulomb if p.coulomb + X[A5] >= 0.0 else -X[A5]
@@ -237,8 +269,11 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
     x3, u = X[A3], X[AU]
     if noise_on and p.sigma2_sq > 0.0:
         budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-        advanced, stopped, peak, n, chattered = _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z,
-                                                               cursor, S[_PEAK], budget)
+        o1, o2, o3, o4 = NX, 2 * NX, 2 * NX + NX * NX, 2 * NX + NX * NX + NNB * NNB
+        o5 = o4 + NNB * NNB
+        advanced, stopped, peak, n, chattered = _noisy_segment(
+            X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, S[_PEAK], budget, W[:o1], W[o1:o2],
+            W[o2:o3].reshape((NX, NX)), W[o3:o4].reshape((NNB, NNB)), W[o4:o5].reshape((NNB, NNB)), W[o5:o5 + NNB])
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -247,22 +282,11 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
             S[_STATUS] = _CHATTER
             return True
     else:
-        tau = _velocity_root(X, mode, 0, s, h, p, q, V, Vi, lam)
-        if tau < 0.0:
+        r = _quiet_segment(X, S, mode, s, h, bridge, p, q, V, Vi, lam, noise_on, z, cursor, Xn, x3, u)
+        if r < 0:
             S[_STATUS] = _NO_ROOT
             return True
-        stopped = tau <= h
-        advanced = tau if stopped else h
-        _torque_metrics(S, x3, u, advanced, bridge, p)
-        S[_PEAK] = _x1_peak(X, mode, advanced, p, q, V, Vi, lam, max(S[_PEAK], abs(X[A1])), Xn)
-        propagate(X, mode, advanced, p, q, V, Vi, lam, Xn)
-        X[:] = Xn
-        if noise_on:
-            _add_noise(X, mode, advanced, p, q, V, Vi, lam, z, cursor)
-        S[_PEAK] = max(S[_PEAK], abs(X[A1]))
-        S[_T] += advanced
-        if stopped:
-            X[A2] = 0.0
+        stopped = r == 1
     if stopped:
         kind = _velocity_zero(X, S, p, q)
         return _event(S, X, kind, o, ev)
@@ -324,22 +348,34 @@ def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
         out[NB[i]] += acc
 
 
-@njit(cache=True)
-def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps):
+@njit(cache=True, _nrt=True)
+def _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb):
+    """A sub-step of its own width: Φ(h), Q(h) and the factor built afresh, then the Gaussian step
+    (they allocate: reference counting on, explicitly)."""
+    transition(mode, step, p, q, V, Vi, lam, P)
+    process_noise(mode, step, p, q, V, Vi, lam, Q)
+    psd_factor(Q, L)
+    _gauss_step(X, P, L, z, cursor, Xb)
+
+
+@njit(cache=True, _nrt=True)
+def _bisect_rc(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table):
+    """:func:`plant.two_mass.bridge.bisect` with reference counting on (it allocates)."""
+    return bisect(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table)
+
+
+@njit(cache=True, _nrt=False)
+def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, Xb, Xc, P, Q, L, zeta):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
     ``substep`` (``reflect_substep`` while s·T > ks), the bridge crossing test and bisection.
+    Xb, Xc (NX), P (NX × NX), Q, L (NNB × NNB) and ζ (NNB): the caller's scratch; compiled without
+    reference counting (:func:`_fresh_step` and :func:`_bisect_rc` keep it).
 
     Returns (advanced, stopped, peak, sub-steps, chattered).
     """
     s = 1.0 if mode == 3 else -1.0
     m = 0 if mode == 1 else 1
     sig_v2 = p.alpha * p.alpha * p.sigma2_sq
-    Xb = np.empty(NX)
-    Xc = np.empty(NX)
-    P = np.empty((NX, NX))
-    Q = np.empty((NNB, NNB))
-    L = np.empty((NNB, NNB))
-    zeta = np.empty(NNB)
     t = 0.0
     n = 0
     while h - t > 0.0:
@@ -351,10 +387,7 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
         fresh = rem <= 1.5 * sub and rem != sub
         if fresh:
             step = rem
-            transition(mode, step, p, q, V, Vi, lam, P)
-            process_noise(mode, step, p, q, V, Vi, lam, Q)
-            psd_factor(Q, L)
-            _gauss_step(X, P, L, z, cursor, Xb)
+            _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb)
         else:
             step = sub
             _gauss_step_t(X, TP, TL, m, j, z, cursor, Xb, zeta)
@@ -382,11 +415,12 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 Xb[PHI] -= s * (-low) * step / 2.0
         else:
             if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
-                tc, lv = bisect(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
-                                BT[m] if not fresh else BT[m, :0])
+                tc, lv = _bisect_rc(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
+                                    BT[m] if not fresh else BT[m, :0])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
-                X[:] = Xc
+                for i in range(NX):
+                    X[i] = Xc[i]
                 X[A2] = 0.0
                 return t + tc, True, peak, n, False
         peak = substep_peak(X, Xb, step, peak)
@@ -402,20 +436,27 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
 def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, q, V, Vi, lam, o, TP, TL, BT,
                     z, zpos, ev, out):
     """Advance over [t0, t0 + duration) under the command (offsets, levels); see advance()."""
+    return interval_k(x, mode, flyback, t0, duration, offsets, levels, offsets.shape[0], bridge, prm, q, V, Vi, lam, o,
+                      TP, TL, BT, z, zpos, ev, out, np.empty(1, dtype=np.int64), np.empty(NX), np.empty(NX),
+                      np.empty((5, NCORE), dtype=np.complex128), np.empty((3, NCORE)), np.empty(MOVE_SCRATCH))
+
+
+@njit(cache=True, _nrt=False)
+def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, zpos,
+               ev, out, cursor, X, Xn, C, F, W):
+    """:func:`interval_kernel` on the drive's first ``k`` segments, with a compiled caller's
+    scratch (``cursor`` one int64, X and Xn NX floats, C 5 × NCORE complex and F 3 × NCORE, as
+    :func:`propagate_w` and :func:`_torque_exit_w` use them, W MOVE_SCRATCH floats for
+    :func:`_moving`): the same operations, compiled without reference counting (its fifteen array
+    arguments and five allocations cost ~40 atomic operations per sample)."""
     p = prm[0]
     S = out[N_X:]
-    cursor = np.empty(1, dtype=np.int64)
     cursor[0] = zpos
-    X = np.empty(NX)
-    Xn = np.empty(NX)
-    C = np.empty((5, NCORE), dtype=np.complex128)     # scratch of propagate_w and _torque_exit_w
-    F = np.empty((3, NCORE))
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[PHI], X[WM] = (x[0], x[1], x[2], x[3], x[4], p.coulomb,
                                                                          x[5], x[6], x[7])
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    k = offsets.shape[0]
     for seg in range(k):
         t_seg_end = t0 + (offsets[seg + 1] if seg + 1 < k else duration)
         if not _apply_level(X, S, levels[seg], bridge, p):
@@ -428,7 +469,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn)
+                stop = _moving(X, S, t_seg_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev, Xn, W)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):

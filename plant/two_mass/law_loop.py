@@ -29,7 +29,9 @@ from plant.state import PlantState, SimOptions, Status
 from plant.two_mass.interval import N_X as N_STATE
 from plant.two_mass.interval import (_FB, _IABS, _ISQ, _CHG, _DUR, _MODE, _NBRK, _NEV, _NO_EVENTS,
                                      _NSUB, _OK, _PEAK, _SHEET, _STATUS, _T, _message, _O_NOISE, _STATUS_OF,
-                                     interval_kernel, plan)
+                                     MOVE_SCRATCH, interval_k, plan)
+from plant.two_mass.modes import NCORE
+from plant.two_mass.motion import NX
 from plant.two_mass.params import TwoMassParams
 
 NO_EVENTS = _NO_EVENTS
@@ -61,6 +63,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
     n_max = int(2.0 * freq * tau) + 4 if amp != 0.0 else 1
     offs = np.empty(n_max)
     levs = np.empty(n_max)
+    cursor, X, Xn = np.empty(1, dtype=np.int64), np.empty(NX), np.empty(NX)   # interval_k's scratch
+    Cw, Fw, W = np.empty((5, NCORE), dtype=np.complex128), np.empty((3, NCORE)), np.empty(MOVE_SCRATCH)
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
@@ -70,8 +74,8 @@ def _chunk(n0, n1, n_warm, sensor, x, x_view, bridge, sheet, A, B, C, D, cx, u_m
         v = compensator_step(A, B, C, D, cx, cxn, y)
         level = min(max(-v, -u_max), u_max)
         k = square_wave_segments(n * tau, tau, level, amp, freq, phase, u_max, offs, levs)
-        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs[:k].copy(),
-                              levs[:k].copy(), bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, zpos, ev, out)
+        pos = interval_k(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs, levs, k, bridge, prm, q, V, Vi,
+                         lam, o, TP, TL, BT, z, zpos, ev, out, cursor, X, Xn, Cw, Fw, W)
         S = out[N_STATE:]
         if n >= n_warm:
             x1_window[n - n_warm] = x1
@@ -122,6 +126,8 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
     """
     n_s = s.shape[0]
     logging = xs.shape[0] > 0
+    cursor, X, Xn = np.empty(1, dtype=np.int64), np.empty(NX), np.empty(NX)   # interval_k's scratch
+    Cw, Fw, W = np.empty((5, NCORE), dtype=np.complex128), np.empty((3, NCORE)), np.empty(MOVE_SCRATCH)
     prog[0], prog[1] = n0, zpos
     for n in range(n0, n1):
         if z.shape[0] > 0 and z.shape[0] - zpos < margin:
@@ -143,12 +149,12 @@ def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, 
         if delay != 0.0:
             n_now, n_carry = delay_segments(offs, levs, k, pend_o, pend_l, n_pend, delay, tau, now_o, now_l,
                                             carry_o, carry_l)
-            seg_o, seg_l = now_o[:n_now].copy(), now_l[:n_now].copy()
+            pos = interval_k(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, now_o, now_l, n_now, bridge, prm,
+                             q, V, Vi, lam, o, TP, TL, BT, z, zpos, ev, out, cursor, X, Xn, Cw, Fw, W)
         else:
             n_carry = 0
-            seg_o, seg_l = offs[:k].copy(), levs[:k].copy()
-        pos = interval_kernel(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, seg_o, seg_l, bridge, prm, q, V,
-                              Vi, lam, o, TP, TL, BT, z, zpos, ev, out)
+            pos = interval_k(x_view, int(sheet[1]), sheet[2] != 0.0, sheet[0], tau, offs, levs, k, bridge, prm, q, V,
+                             Vi, lam, o, TP, TL, BT, z, zpos, ev, out, cursor, X, Xn, Cw, Fw, W)
         S = out[N_STATE:]
         if logging:                         # ... and the interval's plant events (t, x1)
             log_events(xe, prog, ev, int(S[_LOG_NREC]))
