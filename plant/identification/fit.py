@@ -10,10 +10,15 @@ Estimator: weighted least squares on y (scipy.optimize.least_squares, trust-regi
 parameters in logarithms: k̄c, k̄s − k̄c, J, τ3, and the family's extras). The process noise
 (w2, while the shaft moves) makes the residuals of a long slide larger and correlated, so the
 weights are per move, 1/s_m² with s_m² the move's mean squared residual of a first unweighted
-fit (floored at σ̂1²), and the **uncertainty is the cluster-robust Gauss–Newton covariance**
-(a sandwich over moves): Cov = A⁻¹·B·A⁻¹·G/(G−1), A = JᵀJ, B = Σ_m (J_mᵀ r_m)(J_mᵀ r_m)ᵀ of the
-weighted residuals r and Jacobian J at the optimum, G moves; mapped to the physical parameters
-by the delta method. 95 % intervals are ± t(0.975, G − p)·sd.
+fit (floored at σ̂1²). **Uncertainty: a parametric bootstrap** (:func:`fit_log`): logs simulated
+from the fit (Table 2-1 process noise, x5 drawn, σ̂1), each refitted by the final pass warm-started
+at the estimate (:func:`_refit`); the 95 % interval is bias-corrected, (estimate − mean deviation)
+± t(0.975, B−1)·sd·√(1+1/B). Without it (``bootstrap=0``, or the CPU budget hit early) the
+**cluster-robust Gauss–Newton covariance** (a sandwich over moves): Cov = A⁻¹·B·A⁻¹·G/(G−1),
+A = JᵀJ, B = Σ_m (J_mᵀ r_m)(J_mᵀ r_m)ᵀ of the weighted residuals r and Jacobian J at the optimum,
+G moves; mapped to the physical parameters by the delta method; 95 % intervals ± t(0.975, G − p)·sd.
+It is optimistic (docs/axis.md): x5 drifts while the shaft moves and carries over to the next
+move, so the residuals are correlated beyond a move.
 
 σ1 (measurement noise) is the pooled standard deviation of y within the rests (the shaft is
 stuck there), ± σ̂1/√(2·dof). The friction noise σ2² and the correlated friction x5 are not
@@ -375,8 +380,10 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         The values of every field not fitted (default: the family's defaults, Table 2-1);
         ``u_max`` and ``sample_period`` are taken from the log.
     bootstrap : int
-        Parametric-bootstrap replicates for the uncertainties (0: the cluster-robust
-        Gauss–Newton covariance alone, which is optimistic — see the module docstring).
+        Parametric-bootstrap replicates for the uncertainties, each a simulated log refitted by
+        the final pass from the estimate (:func:`_refit`); intervals bias-corrected (0: the
+        cluster-robust Gauss–Newton covariance alone, which is optimistic — see the module
+        docstring).
     seed : int
         Root of the bootstrap's ``SeedSequence``.
     budget_s : float
@@ -417,7 +424,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
     devs = []
     if bootstrap and not hit:
         # parametric bootstrap: logs simulated from the fit (Table 2-1 process noise, x5 drawn),
-        # refitted; the spread of (estimate − that log's effective truth) is the uncertainty
+        # refitted from the estimate; (estimate − that log's effective truth) gives bias and spread
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
             if time.process_time() > deadline:
