@@ -426,11 +426,13 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         # parametric bootstrap: logs simulated from the fit (Table 2-1 process noise, x5 drawn),
         # refitted from the estimate; (estimate − that log's effective truth) gives bias and spread
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
+        at_bound = (z <= model.box[0] + 1e-6) | (z >= model.box[1] - 1e-6)
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
             if time.process_time() > deadline:
                 break
             blog, truth = simulate_log(plan, family, fitted, int(child.generate_state(1)[0]))
             zb = _refit(_Model(blog, family, base), z, model.scale, model.box)
+            at_bound |= (zb <= model.box[0] + 1e-6) | (zb >= model.box[1] - 1e-6)
             vb, _ = _physical(zb)
             tb = values.copy()
             tb[0], tb[1] = truth["coulomb"], truth["stiction"]
@@ -467,6 +469,16 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
     sd = {n: float(x) for n, x in zip(names, sd_v)}
     centre = {n: float(x) for n, x in zip(names, values - bias_v)}
     interval = {n: (centre[n] - quant * sd[n], centre[n] + quant * sd[n]) for n in names}
+    if len(devs) >= 5 and at_bound.any():
+        # an extra at its bound (factor 30 from its start) in the estimate or in a replicate: the
+        # replicates' spread is censored there, so the interval is the whole bounded range
+        # (it reaches down to start/30: marked not identified unless the estimate is near the top)
+        lo_v, hi_v = np.exp(model.box[0]), np.exp(model.box[1])
+        for i in np.flatnonzero(at_bound):
+            interval[names[i]] = (float(lo_v[i]), float(hi_v[i]))
+            sd[names[i]] = math.inf
+        method += f"; at the fit's bound, interval = the bounded range: {', '.join(names[i] for i in np.flatnonzero(at_bound))}"
+
     est["measurement_noise_std"] = sigma1
     sd["measurement_noise_std"] = sigma1 / math.sqrt(2 * dof)
     interval["measurement_noise_std"] = (sigma1 - 1.96 * sd["measurement_noise_std"],
