@@ -84,7 +84,9 @@ def test_lugre_coverage_on_held_out_truth():
     of the cases (the must-show of issue 25). Each log costs about 300 CPU s (the point fit ~30 s
     and the 10-replicate bootstrap; the default 300-s budget may cut the bootstrap, stated in
     ``fit.method``). Measured so far (docs/axis.md, "Coverage of the lugre fit"): cases 0 and 1
-    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail."""
+    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail.
+    (Measured with the bootstrap before issue 25's fourth session; the fresh-seed study is
+    :func:`test_fresh_lugre_coverage_all_fields`.)"""
     inside = []
     for case in range(10):
         res, cpu = coverage_case("lugre", case)

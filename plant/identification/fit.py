@@ -427,17 +427,25 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         # refitted from the estimate; (estimate − that log's effective truth) gives bias and spread
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
         at_bound = (z <= model.box[0] + 1e-6) | (z >= model.box[1] - 1e-6)
+        failed = 0
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
             if time.process_time() > deadline:
                 break
-            blog, truth = simulate_log(plan, family, fitted, int(child.generate_state(1)[0]))
+            try:
+                blog, truth = simulate_log(plan, family, fitted, int(child.generate_state(1)[0]))
+            except RuntimeError:     # the fitted plant left ``ok`` on this noise (wandered past 1 rad)
+                failed += 1
+                continue
             zb = _refit(_Model(blog, family, base), z, model.scale, model.box)
             at_bound |= (zb <= model.box[0] + 1e-6) | (zb >= model.box[1] - 1e-6)
             vb, _ = _physical(zb)
             tb = values.copy()
             tb[0], tb[1] = truth["coulomb"], truth["stiction"]
             devs.append(vb - tb)
-        if len(devs) < bootstrap:
+        if failed:
+            notes.append(f"{failed} of {bootstrap} simulated replicate logs left ok (diverged past 1 rad): left out"
+                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
+        if len(devs) + failed < bootstrap:
             notes.append(f"CPU budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
                          + ("" if len(devs) >= 5 else "; the cluster-robust covariance (optimistic) instead"))
     if len(devs) >= 5:
