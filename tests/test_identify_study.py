@@ -161,8 +161,8 @@ def test_fresh_two_mass_coverage_all_fields():
 def test_fresh_lugre_coverage_all_fields():
     """10 random lugre axes at the fresh seed 7207 (draws from ``default_rng([7207, 2])``): every
     fitted field (k̄c, k̄s, J, τ3, v_s, σ0) inside its stated 95 % interval in ≥ 90 % of the 60 cases.
-    Measured (2026-11-27, loaded machine): only cases 0, 3, 4 ran to the end, 18 of 18 inside, with
-    wide intervals (σ0, v_s marked not identified on all three); 149–156 CPU s per log. Case 1 was
+    Measured (2026-11-27, loaded machine): only cases 0, 3, 4, 5 ran to the end, 24 of 24 inside,
+    with wide intervals (σ0, v_s marked not identified on all four); 149–166 CPU s per log. Case 1 was
     stopped after > 300 CPU s; case 2 crashed on a diverged replicate log (fixed since, not re-run).
     Coverage over 10 logs is not shown. docs/axis.md, "Fourth session"."""
     inside = _fresh_coverage("lugre", range(10))
