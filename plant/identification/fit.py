@@ -427,7 +427,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         # refitted from the estimate; (estimate − that log's effective truth) gives bias and spread
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
         at_bound = (z <= model.box[0] + 1e-6) | (z >= model.box[1] - 1e-6)
-        failed = 0
+        failed = stuck = 0
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
             if time.process_time() > deadline:
                 break
@@ -437,6 +437,9 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
                 failed += 1
                 continue
             zb = _refit(_Model(blog, family, base), z, model.scale, model.box)
+            if np.array_equal(zb, z):     # the refit never left the estimate (no descent: a failed
+                stuck += 1                # prediction there, seed 7207 lugre case 2): its zero
+                continue                  # deviation would shrink the interval to nothing
             at_bound |= (zb <= model.box[0] + 1e-6) | (zb >= model.box[1] - 1e-6)
             vb, _ = _physical(zb)
             tb = values.copy()
@@ -445,7 +448,10 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         if failed:
             notes.append(f"{failed} of {bootstrap} simulated replicate logs left ok (diverged past 1 rad): left out"
                          + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
-        if len(devs) + failed < bootstrap:
+        if stuck:
+            notes.append(f"{stuck} of {bootstrap} replicate refits never left the estimate: left out"
+                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
+        if len(devs) + failed + stuck < bootstrap:
             notes.append(f"CPU budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
                          + ("" if len(devs) >= 5 else "; the cluster-robust covariance (optimistic) instead"))
     if len(devs) >= 5:
