@@ -84,7 +84,9 @@ def test_lugre_coverage_on_held_out_truth():
     of the cases (the must-show of issue 25). Each log costs about 300 CPU s (the point fit ~30 s
     and the 10-replicate bootstrap; the default 300-s budget may cut the bootstrap, stated in
     ``fit.method``). Measured so far (docs/axis.md, "Coverage of the lugre fit"): cases 0 and 1
-    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail."""
+    only, 6 of 12 inside (50 %), 301 CPU s each — not run to the end; it is expected to fail.
+    (Measured with the bootstrap before issue 25's fourth session; the fresh-seed study is
+    :func:`test_fresh_lugre_coverage_all_fields`.)"""
     inside = []
     for case in range(10):
         res, cpu = coverage_case("lugre", case)
@@ -111,3 +113,59 @@ def test_auto_picks_the_generating_family():
             picked[family, case] = choice.family
             print(family, case, choice.family, f"cpu {cpu:.1f}")
     assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+
+
+FRESH_SEED = 7207   # the coverage study of issue 25's fourth session (dev seed 5150; never used while writing)
+
+
+def _fresh_coverage(family: str, cases) -> dict[str, list[bool]]:
+    """Per fitted field, inside its stated 95 % interval on each of ``cases`` (:func:`coverage_case`
+    at :data:`FRESH_SEED`, 10-replicate bootstrap); relative errors and CPU printed."""
+    inside: dict[str, list[bool]] = {}
+    for case in cases:
+        res, cpu = coverage_case(family, case, seed=FRESH_SEED, bootstrap=10)
+        print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
+        for k, (v, _, (lo, hi), _) in res.items():
+            inside.setdefault(k, []).append(lo <= v <= hi)
+    print({k: f"{sum(v)}/{len(v)}" for k, v in inside.items()})
+    return inside
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 4 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_fresh_stribeck_coverage_all_fields():
+    """10 random stribeck axes at the fresh seed 7207 (draws from ``default_rng([7207, 1])``): every
+    fitted field (k̄c, k̄s, J, τ3, v_s, b) inside its stated 95 % interval in ≥ 90 % of the 60 cases.
+    Measured (2026-11-27, loaded machine): 54 of 60 (90.0 %) — k̄c 9/10, k̄s 10/10, J 10/10,
+    τ3 8/10, v_s 8/10, b 9/10; but v_s reached its fit bound in 6 logs and then has the bounded
+    range as its interval (marked not identified in 9 of 10; median |error| 92 %); the core alone
+    37 of 40. CPU per log 19–92 s (median 26 s). docs/axis.md, "Fourth session"."""
+    inside = _fresh_coverage("stribeck", range(10))
+    assert np.mean([x for v in inside.values() for x in v]) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 5 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_fresh_two_mass_coverage_all_fields():
+    """10 random two-mass axes at the fresh seed 7207 (draws from ``default_rng([7207, 3])``): every
+    fitted field (k̄c, k̄s, J, τ3, k_sh) inside its stated 95 % interval in ≥ 90 % of the 50 cases.
+    Measured (2026-11-27, loaded machine): 43 of 50 (86 %), a miss — k̄c 10/10, k̄s 7/10 (misses
+    −8 %, +14 %, −33 %), J 10/10, τ3 7/10, k_sh 9/10 (marked not identified in 6 of 10; median
+    |error| 87 %). CPU per log 7–274 s (median 10 s). docs/axis.md, "Fourth session"."""
+    inside = _fresh_coverage("two-mass", range(10))
+    assert np.mean([x for v in inside.values() for x in v]) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 15 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_fresh_lugre_coverage_all_fields():
+    """10 random lugre axes at the fresh seed 7207 (draws from ``default_rng([7207, 2])``): every
+    fitted field (k̄c, k̄s, J, τ3, v_s, σ0) inside its stated 95 % interval in ≥ 90 % of the 60 cases.
+    Measured (2026-11-27, loaded machine): only cases 0, 3, 4, 5 ran to the end, 24 of 24 inside,
+    with wide intervals (σ0, v_s marked not identified on all four); 149–166 CPU s per log. Case 1 was
+    stopped after > 300 CPU s; case 2 crashed on a diverged replicate log and, re-run after the fix,
+    had 2 of 6 inside (k̄s +46 %; J, τ3, v_s zero-width intervals from refits that never moved, now
+    left out): 26 of 30 on five logs, a miss.
+    Coverage over 10 logs is not shown. docs/axis.md, "Fourth session"."""
+    inside = _fresh_coverage("lugre", range(10))
+    assert np.mean([x for v in inside.values() for x in v]) >= 0.90
