@@ -107,7 +107,8 @@ def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
 
 def choice_lines(choice: FamilyChoice) -> list[str]:
     """One line per family: held-out score, paired excess over the best ± its standard error."""
-    return [f"{f}: held-out score {choice.score[f]:.3f} ln rad², excess over {choice.best} "
+    unit = "ln rad²" if choice.criterion == "output-error" else "−2 ln p per move"
+    return [f"{f}: held-out score {choice.score[f]:.3f} {unit}, excess over {choice.best} "
             f"{choice.excess[f]:+.3f} ± {choice.excess_se[f]:.3f}" + ("  (chosen)" if f == choice.family else "")
             for f in sorted(choice.score, key=choice.score.get)]
 
