@@ -97,3 +97,36 @@ def test_feature_fit_recovers_a_stribeck_axis_from_a_perturbed_start():
     got = np.exp(z)
     want = np.exp(truth)
     assert np.allclose(got[:4], want[:4], rtol=0.01), (got, want)
+
+
+def test_sign_test_rule_is_not_blinded_by_one_catastrophic_move():
+    """The predictive rule's separability is the paired sign test over moves: a family worse on
+    80 of 120 moves is separably worse (80 − 40 > 2·√120) even when one move it predicts stuck
+    slid (score +1e6), which makes the mean ± SE test useless (+8e3 ± 8e3: 'not separable');
+    a family tied with the best on every move (a move neither moves) stays; a failed move
+    (NaN) counts as worse."""
+    from plant.identification.fit import _rule, _sign_counts
+
+    rng = np.random.default_rng(1)
+    best = rng.normal(-40.0, 3.0, 120)
+    worse = best + np.where(np.arange(120) < 80, 0.5, -0.5)
+    worse[0] += 1e6
+    d = worse - best
+    assert d.mean() <= 2 * d.std(ddof=1) / math.sqrt(120)     # the mean ± SE test keeps it
+    w, b = _sign_counts(worse, best)
+    assert (w, b) == (80, 40) and w - b > 2 * math.sqrt(w + b)
+    tied = best.copy()
+    assert _sign_counts(tied, best) == (0, 0)
+    nan = best.copy()
+    nan[3] = np.nan
+    assert _sign_counts(nan, best) == (1, 0)
+    fams = ("multimode", "lugre")
+    score = {"multimode": float(worse.mean()), "lugre": float(best.mean())}
+    counts = {"multimode": (w, b), "lugre": (0, 0)}
+    pick = _rule(fams, score, {f: float(x - y) for f, (x, y) in counts.items()},
+                 {f: math.sqrt(x + y) for f, (x, y) in counts.items()})
+    assert pick == "lugre"
+    counts["multimode"] = (65, 55)                              # 10 < 2·√120: not separable, simpler wins
+    pick = _rule(fams, score, {f: float(x - y) for f, (x, y) in counts.items()},
+                 {f: math.sqrt(x + y) for f, (x, y) in counts.items()})
+    assert pick == "multimode"

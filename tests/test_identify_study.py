@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -57,6 +58,39 @@ def auto_case(family: str, case: int, seed: int = AUTO_SEED):
     t0 = time.process_time()
     _, choice = choose_family(log, bootstrap=0)
     return choice, time.process_time() - t0
+
+
+def separation_case(family: str, case: int, seed: int = 4242, replicates: int = 40) -> dict[str, float]:
+    """How far the generating law is from the best multimode fit, against the friction noise
+    (docs/axis.md, "what the log can tell"): the noise-free log of the ``case``-th axis of
+    ``default_rng([seed, f])``, multimode fitted to it (``bootstrap=0``), and per kind of move
+    (ramp, hold, pulse) the sum over moves of the Mahalanobis distance² between the two noise-free
+    y, the covariance that of ``replicates`` noisy logs of the generating family (x5 off; low
+    rank, plus σ1²·I). Seed 4242 was the dev seed of the fourth session."""
+    from plant.identification.fit import moves
+    from tests.identify_draws import draw
+
+    plan = design_experiment()
+    segs = moves(plan.with_y(np.zeros(plan.n)))
+    rng = np.random.default_rng([seed, list(FAMILY_FREE).index(family)])
+    for _ in range(case + 1):
+        p = draw(family, rng)
+    log0, _ = simulate_log(plan, family, p, None)
+    fit = fit_log(log0, "multimode", bootstrap=0)
+    quiet = p.replace(correlated_friction_std=0.0)
+    Y = np.array([simulate_log(plan, family, quiet, 1000 + k)[0].y for k in range(replicates)])
+    s1 = p.measurement_noise_std
+    out = {"ramp": 0.0, "hold": 0.0, "pulse": 0.0}
+    for s, e in segs:
+        cmds = plan.commands[s:e]
+        on = sum(1 for c in cmds if any(v != 0.0 for _, v in c.segments))
+        kind = "pulse" if on <= 5 else ("ramp" if cmds[1].segments != cmds[0].segments else "hold")
+        idx = np.arange(s + 1, e)
+        d = log0.y[idx] - fit.y_model[idx]
+        A = (Y[:, idx] - Y[:, idx].mean(axis=0)) / math.sqrt(replicates - 1)
+        Ad = A @ d       # (s1² I + Aᵀ A)⁻¹ by Woodbury
+        out[kind] += float(d @ d - Ad @ np.linalg.solve(np.eye(replicates) * s1 ** 2 + A @ A.T, Ad)) / s1 ** 2
+    return out
 
 
 @pytest.mark.slow
