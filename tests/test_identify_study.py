@@ -3,7 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 6161, 2 logs per family (test_auto_picks_the_generating_family) and
+* the auto pick: seed 6262, 2 logs per family (test_auto_picks_the_generating_family; seed 6161 was the
+  third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
 
@@ -20,7 +21,7 @@ from plant.identification import design_experiment, fit_log, simulate_log
 from plant.identification.families import FAMILY_FREE
 
 CORE = ("coulomb", "stiction", "inertia", "motor_time_constant")
-AUTO_SEED = 6161   # the auto study of issue 25's third session (never run while writing the fit or the rule)
+AUTO_SEED = 6262   # the auto study of issue 25's fourth session (never run while writing the criterion or the rule)
 
 
 def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10):
@@ -130,14 +131,16 @@ def test_lugre_coverage_on_held_out_truth():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.xfail(strict=True, reason="measured 3 of 8 (2026-11-27): multimode 2/2, lugre 1/2 (other: two-mass), "
-                   "stribeck 0/2 (two-mass, lugre), two-mass 0/2 (multimode, multimode); the must-show is ≥ 90 %")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, predictive criterion, sign-test rule) on 6 of the 8 "
+                   "logs: 3 of 6 — multimode 2/2, two-mass 1/1, stribeck 0/2 (multimode, multimode), lugre 0/1 "
+                   "(multimode); at most 5 of 8, below the must-show of ≥ 90 % (docs/axis.md)")
 def test_auto_picks_the_generating_family():
-    """``--family auto`` on 2 fresh logs per family (seed 6161, cases 0–1, :func:`auto_case`; the
-    rule and the folds were fixed before these logs ran): the generating family picked in ≥ 90 %
-    of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has the
-    confusion matrix and the CPU per log). Measured: 3 of 8, CPU 29–87 s per log (median 36 s),
-    loaded machine; the generating family within 2 SE of the best on 6 of 8."""
+    """``--family auto`` on 2 fresh logs per family (seed 6262, cases 0–1, :func:`auto_case`; the
+    criterion and the rule were fixed before these logs ran): the generating family picked in
+    ≥ 90 % of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has
+    the confusion matrix and the CPU per log). Measured on 6 of the 8 (the other two did not run
+    in the session's time): 3 of 6, CPU 33–98 s per log, loaded machine. The third session's
+    output-error rule: 3 of 8 on seed 6161."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):

@@ -895,8 +895,10 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     its own friction noise — mean and covariance of 24 noisy simulations from rest, plus
     σ1²/window — scored by −2 ln p of the measured features (:func:`_predictive_scores`). The fold
     fit maximises the same Gaussian likelihood on the training moves (:func:`_feature_fit`,
-    synthetic likelihood; multimode starts at its output-error fit, a richer family at the best
-    point of a grid around multimode's core). Under Table 2-1 friction noise a pulse's net motion
+    synthetic likelihood; multimode starts at its output-error fit and is refitted from the
+    richer fits' k̄c, k̄s, J, τ3 too, a richer family at the best point of a grid around
+    multimode's core). A family is separably worse than the best by the paired sign test over
+    moves (:func:`_sign_counts`). Under Table 2-1 friction noise a pulse's net motion
     has a CV near 0.8: the output-error fit and score of a noise-free model (``"output-error"``,
     the rule until the third session) treat that spread as model error, and on dev logs (seed
     4242) they put a wrong τ3 and k̄s ahead of the truth, while the predictive score put the truth
