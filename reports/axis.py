@@ -106,9 +106,15 @@ def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
 
 
 def choice_lines(choice: FamilyChoice) -> list[str]:
-    """One line per family: held-out score, paired excess over the best ± its standard error."""
-    return [f"{f}: held-out score {choice.score[f]:.3f} ln rad², excess over {choice.best} "
-            f"{choice.excess[f]:+.3f} ± {choice.excess_se[f]:.3f}" + ("  (chosen)" if f == choice.family else "")
+    """One line per family: held-out score, paired excess over the best ± its standard error, and
+    (predictive criterion) the moves it predicts worse and better than the best (the sign test)."""
+    unit = "ln rad²" if choice.criterion == "output-error" else "−2 ln p per move"
+
+    def signs(f):
+        w, b = choice.signs.get(f, (None, None))
+        return "" if w is None else f", worse on {w} moves, better on {b}"
+    return [f"{f}: held-out score {choice.score[f]:.3f} {unit}, excess over {choice.best} "
+            f"{choice.excess[f]:+.3f} ± {choice.excess_se[f]:.3f}{signs(f)}" + ("  (chosen)" if f == choice.family else "")
             for f in sorted(choice.score, key=choice.score.get)]
 
 
@@ -144,8 +150,9 @@ def fit_page(fit: AxisFit, log, log_name: str, choice: FamilyChoice | None) -> s
 def identify_command(
     log_path: Path = typer.Argument(..., metavar="LOG", help="The recorded log (CSV or Parquet, SPEC §11)."),
     family: str = typer.Option(None, "--family", show_default=False,
-                               help=f"{'|'.join(FAMILY_FREE)}|auto (auto: held-out prediction error over moves, "
-                                    "the simpler family when not separable); default: Acker's exact plant."),
+                               help=f"{'|'.join(FAMILY_FREE)}|auto (auto: held-out predictive density of each move under "
+                                    "the family's own friction noise, the simpler family when not separable by a "
+                                    "sign test over moves); default: Acker's exact plant."),
     out: Path = typer.Option(Path("axis.toml"), "--out", help="Matrix file with the scenario 'axis'."),
     html: Path = typer.Option(None, "--html", help="Fit page (default: OUT with .html)."),
     bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),

@@ -1,0 +1,132 @@
+"""The held-out criterion of ``--family auto`` (issue 25, fourth session): the predictive density
+of a move's features under a family with its own friction noise, and the feature fit.
+
+Independent truth: scipy's multivariate normal and t densities; the noise-free plant (a move
+simulated with the friction noise off has the noise-free features and no spread); a full
+simulated log (``simulate_log``, the plant's own noisy path) for the spread of a pulse.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+
+from plant.identification import ExperimentOptions, design_experiment, simulate_log
+from plant.identification.fit import (_FeatureModel, _Model, _feature_fit, _folds, _predictive_features,
+                                      _score_features, _sigma1, _windows, moves)
+from plant.protocol import get_family
+
+
+def test_score_is_the_gaussian_and_t_log_density():
+    """−2 ln p of the measured features: scipy's multivariate normal (mean and covariance of the
+    simulated features plus σ1²/|window|) and multivariate t with ν degrees of freedom."""
+    rng = np.random.default_rng(5)
+    F = rng.normal(size=(24, 3)) @ np.array([[1.0, 0.3, 0.0], [0.0, 0.5, 0.2], [0.0, 0.0, 0.1]]) * 1e-4
+    f = F.mean(axis=0) + np.array([1e-4, -2e-5, 3e-5])
+    n = np.array([7, 5, 10])
+    s1 = 5e-6
+    cov = np.cov(F, rowvar=False) + np.diag(s1 ** 2 / n)
+    want = -2 * stats.multivariate_normal(F.mean(axis=0), cov).logpdf(f)
+    assert math.isclose(_score_features([(f, F, n)], s1)[0], want, rel_tol=1e-10)
+    want_t = -2 * stats.multivariate_t(F.mean(axis=0), cov, df=4).logpdf(f)
+    assert math.isclose(_score_features([(f, F, n)], s1, nu=4)[0], want_t, rel_tol=1e-10)
+
+
+def test_features_without_friction_noise_are_the_noise_free_response():
+    """With the friction noise off every replicate is the noise-free move: the simulated features
+    are the window means of the noise-free prediction, with no spread."""
+    plan = design_experiment(ExperimentOptions(repeats=1, holds=0))
+    p = get_family("multimode").Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, friction_noise_psd=0.0,
+                                                 correlated_friction_std=0.0)
+    log, _ = simulate_log(plan, "multimode", p, 3)
+    base = p.replace(u_max=max(float(log.u_max), p.u_max), sample_period=log.sample_period)
+    z = np.log([1.2, 0.6, 0.6, p.motor_time_constant])
+    test = list(range(0, len(moves(log)), 3))
+    feats = _predictive_features(log, "multimode", base, z, test, seed=1, replicates=4)
+    model = _Model(log, "multimode", base, only=test)
+    pred = model.predict(z)
+    start = 0
+    for (f, F, n), idx, wins in zip(feats, model.index, _windows(model)):
+        rows = pred[start:start + idx.size]
+        start += idx.size
+        assert np.array_equal(F, np.tile([rows[w].mean() for w in wins], (4, 1)))
+        assert np.array_equal(f, [log.y[idx][w].mean() for w in wins]) and list(n) == [w.size for w in wins]
+
+
+def test_pulse_spread_matches_the_plants_own_noisy_log():
+    """The predicted spread of a pulse's final rest angle (24 replicates from rest) against 40
+    full noisy logs of one pulse (``simulate_log``, Table 2-1 friction noise, x5 off): the
+    standard deviations agree within the sampling error of two sds (ratio in [0.6, 1.6])."""
+    from plant.drive import DriveCommand, DriveType
+
+    fam = get_family("multimode")
+    p = fam.Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, correlated_friction_std=0.0,
+                             measurement_noise_std=0.0)
+    rest = [DriveCommand.hold(0.0, DriveType.LINEAR)] * 40
+    pulse = [DriveCommand(((0.0, 20.0), (0.004, 0.0)), DriveType.LINEAR)]
+    cmds = tuple(rest + pulse + rest)
+    from plant.identification.log import AxisLog
+    plan = AxisLog("linear", 0.01, 20.0, cmds, None)
+    finals = [simulate_log(plan, "multimode", p, 100 + k)[0].y[-1] for k in range(40)]
+    log = plan.with_y(np.zeros(plan.n))
+    base = p.replace(u_max=20.0, sample_period=0.01)
+    z = np.log([1.2, 0.6, 0.6, p.motor_time_constant])
+    (f, F, n), = _predictive_features(log, "multimode", base, z, [0], seed=7, replicates=24)
+    ratio = F[:, -1].std(ddof=1) / np.std(finals, ddof=1)
+    assert np.std(finals) > 1e-5 and 0.6 <= ratio <= 1.6, ratio
+    assert abs(F[:, -1].mean() - np.mean(finals)) < 3 * np.std(finals) / math.sqrt(10)
+
+
+def test_feature_fit_recovers_a_stribeck_axis_from_a_perturbed_start():
+    """On a noise-free stribeck log (σ1 = 1e-9), the feature fit started 20 % off (k̄c, J, τ3,
+    v_s) lands within 1 % of the truth on k̄c, k̄s, J, τ3."""
+    plan = design_experiment(ExperimentOptions(repeats=1))
+    fam = get_family("stribeck")
+    p = fam.Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, stribeck_velocity=0.02, viscous=1.0,
+                             friction_noise_psd=0.0, correlated_friction_std=0.0, measurement_noise_std=1e-9)
+    log, _ = simulate_log(plan, "stribeck", p, 9)
+    base = p.replace(u_max=max(float(log.u_max), p.u_max), sample_period=log.sample_period)
+    train = list(np.flatnonzero(_folds(log) == 0))
+    s1 = _sigma1(log, moves(log))[0]
+    fm = _FeatureModel(log, "stribeck", base, train)
+    truth = np.log([1.2, 0.6, 0.6, p.motor_time_constant, 0.02, 1.0])
+    start = truth + np.log([1.2, 1.0, 0.8, 1.2, 1.2, 1.0])
+    z, _ = _feature_fit(fm, [start], fm.frame(start, s1, 0), s1, 0, budget_s=60.0)
+    got = np.exp(z)
+    want = np.exp(truth)
+    assert np.allclose(got[:4], want[:4], rtol=0.01), (got, want)
+
+
+def test_sign_test_rule_is_not_blinded_by_one_catastrophic_move():
+    """The predictive rule's separability is the paired sign test over moves: a family worse on
+    80 of 120 moves is separably worse (80 − 40 > 2·√120) even when one move it predicts stuck
+    slid (score +1e6), which makes the mean ± SE test useless (+8e3 ± 8e3: 'not separable');
+    a family tied with the best on every move (a move neither moves) stays; a failed move
+    (NaN) counts as worse."""
+    from plant.identification.fit import _rule, _sign_counts
+
+    rng = np.random.default_rng(1)
+    best = rng.normal(-40.0, 3.0, 120)
+    worse = best + np.where(np.arange(120) < 80, 0.5, -0.5)
+    worse[0] += 1e6
+    d = worse - best
+    assert d.mean() <= 2 * d.std(ddof=1) / math.sqrt(120)     # the mean ± SE test keeps it
+    w, b = _sign_counts(worse, best)
+    assert (w, b) == (80, 40) and w - b > 2 * math.sqrt(w + b)
+    tied = best.copy()
+    assert _sign_counts(tied, best) == (0, 0)
+    nan = best.copy()
+    nan[3] = np.nan
+    assert _sign_counts(nan, best) == (1, 0)
+    fams = ("multimode", "lugre")
+    score = {"multimode": float(worse.mean()), "lugre": float(best.mean())}
+    counts = {"multimode": (w, b), "lugre": (0, 0)}
+    pick = _rule(fams, score, {f: float(x - y) for f, (x, y) in counts.items()},
+                 {f: math.sqrt(x + y) for f, (x, y) in counts.items()})
+    assert pick == "lugre"
+    counts["multimode"] = (65, 55)                              # 10 < 2·√120: not separable, simpler wins
+    pick = _rule(fams, score, {f: float(x - y) for f, (x, y) in counts.items()},
+                 {f: math.sqrt(x + y) for f, (x, y) in counts.items()})
+    assert pick == "multimode"
