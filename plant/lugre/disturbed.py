@@ -67,7 +67,18 @@ def _mode_event(run, old, new):
 def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream | None,
             options: SimOptions = SimOptions(), *, duration: float | None = None,
             record: bool = False) -> IntervalResult:
-    """One interval of the disturbed LuGre plant; the contract of plant.lugre.interval.advance."""
+    """One interval of the disturbed LuGre plant; the contract of plant.lugre.interval.advance
+    (status ``error`` where g(v) = 0, :func:`plant.lugre.interval.undefined_message`)."""
+    try:
+        return _advance(state, command, params, noise, options, duration=duration, record=record)
+    except ZeroDivisionError:
+        return IntervalResult(state, Status.ERROR, compiled.undefined_message(state, params), abs(float(state.x[0])),
+                              0.0, 0.0, 0.0, 0.0, 0, 0, 0, 0, None)
+
+
+def _advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream | None,
+             options: SimOptions = SimOptions(), *, duration: float | None = None,
+             record: bool = False) -> IntervalResult:
     h = params.sample_period if duration is None else float(duration)
     if not (h > 0 and math.isfinite(h)):
         raise ValueError(f"duration must be a finite positive number of seconds, got {duration!r}")

@@ -43,7 +43,7 @@ from plant.multimode.stuck import stuck_propagate
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
 
-__all__ = ["advance", "interval_status", "interval_kernel", "N_STATE", "VELOCITY_THRESHOLD"]
+__all__ = ["advance", "interval_status", "LawUndefined", "undefined_message", "interval_kernel", "N_STATE", "VELOCITY_THRESHOLD"]
 
 N_STATE = 8
 VELOCITY_THRESHOLD = 1e-6     # rad/s: |x2| below it counts as stuck (mode 2) in traces and counts
@@ -274,6 +274,9 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
             z, pos = noise.grow(pos)
         except _RecordFull:
             ev = _SCRATCH.events = np.empty((4 * ev.shape[0], len(EVENT_FIELDS)))
+        except ZeroDivisionError:
+            return IntervalResult(state, Status.ERROR, undefined_message(state, params), abs(float(x[X1])),
+                                  0.0, 0.0, 0.0, 0.0, 0, 0, 0, 0, None)
     if noisy:
         noise.consumed(pos_after)
     x_out = out[:N_STATE].copy()
@@ -291,6 +294,20 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
         events["kind"] = events["kind"].astype(np.int8)
     return IntervalResult(new, status, message, peak, iabs, isq, chg, dur, int(nev), int(nbrk), int(nstk),
                           int(nsub), events)
+
+
+class LawUndefined(ArithmeticError):
+    """The LuGre law has no value: g(v) = 0 (see :func:`undefined_message`)."""
+
+
+def undefined_message(state: PlantState, params) -> str:
+    """Why an interval from ``state`` stopped on g(v) = 0: the friction levels k̄c·m + x5 and
+    k̄s·m + x5 are clamped at 0 (SPEC §2; x5 far below −k̄c, or k̄c·m + x5 ≤ 0 while the shaft
+    slides so fast that exp(−(v/v_s)²) underflows), where ż = v − σ0·|v|·z/g(v) (1995, eq. (2))
+    is undefined: the bristles would have to follow a zero friction level infinitely fast."""
+    return (f"LuGre law undefined in the interval from t={state.t:.6f} s: g(v) = 0, the effective friction "
+            f"level clamped at 0 (k̄c = {params.coulomb:.4g}, x5 = {float(state.x[4]):.4g} ozf·in, "
+            f"x2 = {float(state.x[1]):.3g} rad/s)")
 
 
 def interval_status(code: int, state: PlantState, options: SimOptions) -> tuple[Status, str]:
