@@ -166,3 +166,23 @@ def test_the_planner_reads_the_steps_bias_of_the_same_plan(monkeypatch):
     assert len(reads) > 40 and all(reads)
     assert n_solves == 0 and len(solves) > 20                     # solved only on the Python loop
     assert _row(in_loop) == _row(python)
+
+
+def test_a_command_only_the_plants_test_rejects_is_not_a_second_python_sample():
+    """The model's u_max 1 % above the plant's: the controller's mirror of the loop's command test
+    accepts its pulses, the loop (the plant's u_max) rejects the first and hands it back; the
+    runner's step call returns that command, not a second Python sample — the same row, the same
+    summary and the same number of Python samples as the hand-back path."""
+    sc = builtin_scenarios()["thesis"]
+    model = (sc.model or sc.params).replace(u_max=1.01 * sc.params.u_max)
+    rows = []
+    for in_loop in (True, False):
+        c = make_controller("solnic-modern")
+        c.python_in_loop = in_loop
+        calls = []
+        step = c._step
+        c._step = lambda y: calls.append(1) or step(y)          # the controller's Python samples
+        r = run_closed_loop(sc.params, c, duration_s=6.0, warmup_s=1.0, seed=2, family=sc.family, model=model)
+        rows.append((_row(r), len(calls)))
+    assert rows[0][0][0] == "error" and "level" in rows[0][0][1]
+    assert rows[0] == rows[1]

@@ -410,7 +410,7 @@ class SolnicController(Controller):
         n = s[_idle.N]
         done = self._in_loop
         if done is not None and done[0] == n:             # the loop redoes sample n
-            _, k, o, v, after = done
+            _, k, o, v, after, _ = done
             s[:] = after
             offs[:k], levs[:k] = o, v
             return k
@@ -434,7 +434,7 @@ class SolnicController(Controller):
             self._replay = (command, s.copy())
             return 0
         offs[:k], levs[:k] = o, v
-        self._in_loop = (n, k, o.copy(), v.copy(), s.copy())
+        self._in_loop = (n, k, o.copy(), v.copy(), s.copy(), command)
         return k
 
     # ------------------------------------------------------------------ per sample
@@ -450,6 +450,14 @@ class SolnicController(Controller):
                 raise outcome
             self._idle.state[:] = after
             return outcome
+        done = self._in_loop
+        if done is not None and done[0] == self._idle.state[_idle.N]:
+            # done in the loop, but the loop's own test (the plant's u_max and τs, which the
+            # mirror above cannot know: the model's may differ) rejected its command and handed
+            # it back: the same command and state, not a second Python sample
+            self._in_loop = None
+            self._idle.state[:] = done[4]
+            return done[5]
         self._import_idle()
         command = self._step(y)
         self._export_idle()

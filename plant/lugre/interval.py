@@ -43,7 +43,7 @@ from plant.multimode.stuck import stuck_propagate
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
 
-__all__ = ["advance", "interval_status", "LawUndefined", "undefined_message", "interval_kernel", "N_STATE", "VELOCITY_THRESHOLD"]
+__all__ = ["advance", "interval_status", "undefined_message", "interval_kernel", "N_STATE", "VELOCITY_THRESHOLD"]
 
 N_STATE = 8
 VELOCITY_THRESHOLD = 1e-6     # rad/s: |x2| below it counts as stuck (mode 2) in traces and counts
@@ -294,10 +294,6 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
         events["kind"] = events["kind"].astype(np.int8)
     return IntervalResult(new, status, message, peak, iabs, isq, chg, dur, int(nev), int(nbrk), int(nstk),
                           int(nsub), events)
-
-
-class LawUndefined(ArithmeticError):
-    """The LuGre law has no value: g(v) = 0 (see :func:`undefined_message`)."""
 
 
 def undefined_message(state: PlantState, params) -> str:

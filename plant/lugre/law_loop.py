@@ -16,7 +16,7 @@ from numba import njit
 
 from plant.law_driver import HAND_BACK, NEED_NOISE, NEED_ROOM, LawRun, run_chunks, run_law_chunks
 from plant.law_step import check_command, delay_segments, log_events, quantize
-from plant.lugre.interval import _NREC as _LOG_NREC, LawUndefined, _RecordFull, undefined_message
+from plant.lugre.interval import _NREC as _LOG_NREC, _RecordFull
 from plant.linear_drive import compensator_step, square_wave_segments
 from plant.lugre import integrate
 from plant.lugre.interval import (N_STATE, NO_EVENTS, SHEET_ABS, SHEET_BREAKAWAYS, SHEET_CHARGE, SHEET_DURATION,
@@ -86,12 +86,9 @@ def run_law(law, params, options: SimOptions, state: PlantState, sensor: np.ndar
     if not noisy:
         o[0] = 0.0
     tol = integrate.NOISY_TOLERANCES if noisy else integrate.TOLERANCES
-    try:
-        return run_chunks(_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor,
-                          n_warm, noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
-                          status_ok=STATUS_OK, interval_status=interval_status)
-    except ZeroDivisionError:
-        raise LawUndefined(undefined_message(state, params)) from None
+    return run_chunks(_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor,
+                      n_warm, noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
+                      status_ok=STATUS_OK, interval_status=interval_status)
 
 def _law_chunk(step, s, p, s_back, bridge, u_max, quant, delay, pend_o, pend_l, offs, levs, now_o, now_l, carry_o,
                carry_l, n0, n1, n_warm, sensor, x, x_view, sheet, tau, prm, L, o, tol, z, zpos,
@@ -170,9 +167,6 @@ def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor
     if not noisy:
         o[0] = 0.0
     tol = integrate.NOISY_TOLERANCES if noisy else integrate.TOLERANCES
-    try:
-        return run_law_chunks(_law_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor, n_warm,
-                              noise, noisy, deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS,
-                              status_ok=STATUS_OK, interval_status=interval_status, record_full=_RecordFull, **resume)
-    except ZeroDivisionError:
-        raise LawUndefined(undefined_message(state, params)) from None
+    return run_law_chunks(_law_chunk, (params.law_vector(), o, tol), law, params, options, state, sensor, n_warm, noise, noisy,
+                          deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
+                          interval_status=interval_status, record_full=_RecordFull, **resume)
