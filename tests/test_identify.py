@@ -416,3 +416,33 @@ def test_bootstrap_leaves_out_a_replicate_log_that_diverged(monkeypatch):
     assert "5 of 10 simulated replicate logs left ok" in fit.method
     assert "parametric bootstrap (5 logs" in fit.method
     assert all(np.isfinite(fit.interval[k]).all() for k in CORE)
+
+
+def test_a_parameter_no_refit_moves_gets_no_zero_width_interval(monkeypatch):
+    """Replicate refits that leave one parameter exactly at the estimate (a zero derivative along
+    it) must not give it a zero-width interval, nor make every replicate that moved it "wild"
+    (robust sd 0): its sd falls back to the cluster-robust one, said in ``fit.method``; the other
+    parameters keep their bootstrap intervals."""
+    import plant.identification.fit as fitmod
+
+    plan = design_experiment(ExperimentOptions(repeats=1, holds=1))
+    log, _ = simulate_log(plan, "multimode", get_family("multimode").Params(), 4242)
+    refit, calls = fitmod._refit, []
+
+    def frozen(model, z, scale, box):
+        calls.append(1)
+        zb = refit(model, z, scale, box)
+        zb[3] = z[3] if len(calls) % 4 else z[3] + 1e-3    # τ3 left where it was by 3 of 4 refits
+        return zb
+    monkeypatch.setattr(fitmod, "_refit", frozen)
+    fit = fit_log(log, "multimode", bootstrap=8)
+    lo, hi = fit.interval["motor_time_constant"]
+    assert hi > lo and "parametric bootstrap (8 logs" in fit.method
+    assert "(0 replicate(s) beyond 10 sd left out)" in fit.method
+    lo, hi = fit.interval["inertia"]
+    assert hi - lo > 0
+    calls.clear()
+    monkeypatch.setattr(fitmod, "_refit", lambda model, z, scale, box: np.append(refit(model, z, scale, box)[:3], z[3:]))
+    fit = fit_log(log, "multimode", bootstrap=8)      # no refit moves τ3: the cluster-robust sd for it
+    lo, hi = fit.interval["motor_time_constant"]
+    assert hi > lo and "motor_time_constant: no replicate refit moved it" in fit.method

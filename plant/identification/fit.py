@@ -447,7 +447,12 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
                     raise                           # only, not NotImplementedError or RecursionError
                 failed += 1
                 continue
-            zb = _refit(_Model(blog, family, base), z, model.scale, model.box)
+            bmodel = _Model(blog, family, base)
+            bmodel.deadline = deadline      # the budget holds inside a refit too (a lugre refit is ~30·p² predicts)
+            try:
+                zb = _refit(bmodel, z, model.scale, model.box)
+            except _OutOfTime:
+                break
             if np.array_equal(zb, z):     # the refit never left the estimate (no descent: a failed
                 stuck += 1                # prediction there, seed 7207 lugre case 2): its zero
                 continue                  # deviation would shrink the interval to nothing
@@ -470,7 +475,9 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         # a replicate whose refit lands far in another minimum (beyond 10 robust sd, 1.4826·MAD)
         # must not decide the interval; the others' standard deviation does (heavy tails count)
         med = np.median(devs, axis=0)
-        mad = np.maximum(1.4826 * np.median(np.abs(devs - med), axis=0), 1e-300)
+        mad = 1.4826 * np.median(np.abs(devs - med), axis=0)
+        mad = np.where(mad > 0.0, mad, np.inf)    # a parameter most refits left exactly where it was
+                                                  # (no descent along it) cannot call a replicate wild
         keep = np.all(np.abs(devs - med) <= 10 * mad, axis=1)
         wild = int(np.sum(~keep))
         n_keep = int(keep.sum())
@@ -484,6 +491,12 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
                   f"Table 2-1 process noise, x5 and σ1; each refitted from the estimate with the fit's weights): "
                   f"interval = "
                   f"estimate − mean deviation ± t·sd·√(1+1/B) ({wild} replicate(s) beyond 10 sd left out)")
+        flat = [i for i in range(p) if not sd_v[i] > 0.0]
+        if flat:    # no replicate moved it: a zero-width interval would claim certainty the refits never tested
+            cr = np.sqrt(np.maximum(np.diag(D @ _sandwich(model, r, jac) @ D.T), 0.0))
+            sd_v[flat], bias_v[flat] = cr[flat], 0.0
+            method += (f"; {', '.join(names[i] for i in flat)}: no replicate refit moved it, so the "
+                       f"cluster-robust sd (optimistic) instead")
     else:
         cov = D @ _sandwich(model, r, jac) @ D.T
         sd_v = np.sqrt(np.maximum(np.diag(cov), 0.0))
