@@ -6,13 +6,15 @@
 * ``motion.transition`` / ``motion.process_noise`` (e^(λt), φ1, φ2 shared across columns and
   noise sources) against the same matrix and Gauss–Legendre sum built here from
   ``motion.propagate`` column by column;
-* ``modes._g_fast`` against ``modes.g_values`` on random modal sums;
+* ``modes._g_fast`` against the plain modal sum (and numpy's closed form) on random modal sums;
 * ``interval._torque_exit_w`` (allocation-free, no reference counting) against
   ``interval._torque_exit``, and its root against brentq on the closed form.
 Bit-for-bit equality of whole compliant cells with main 77118a2 was checked once (docs/plant.md).
 """
 
 from __future__ import annotations
+
+import cmath
 
 import numpy as np
 import pytest
@@ -141,13 +143,28 @@ def test_torque_exit_scratch_form_equals_the_plain_one_and_brentq():
     assert hits >= 5
 
 
-def test_g_fast_gives_the_bits_of_g_values():
+def test_g_fast_gives_the_bits_of_the_plain_sum():
     """``modes._g_fast`` (|λ| given, Σ|terms| only on request, the b-term skipped where b = 0)
-    against ``modes.g_values`` on random modal sums: g, g', M2 and Σ|terms| bit for bit (float.hex,
-    so signed zeros count), over λ with light and heavy damping, t = 0 included, b = ±0 included."""
+    against the plain modal sum on random modal sums: g, g', M2 and Σ|terms| bit for bit
+    (float.hex, so signed zeros count), over λ with light and heavy damping, t = 0 included,
+    b = ±0 included; the plain g and g' against numpy's closed form to 1e-9 of Σ|terms|."""
     from numba import njit
 
-    from plant.two_mass.modes import _g_fast, g_values
+    from plant.two_mass.modes import _g_fast, phi1
+
+    @njit
+    def g_values(ca, cb, lam, n, t):   # the plain sum (the kernel's form before the fast path)
+        g = g1 = m2 = size = 0.0
+        for i in range(n):
+            l = lam[i]
+            e = cmath.exp(l * t)
+            term = ca[i] * e + cb[i] * (t * phi1(l * t))
+            g += term.real
+            size += abs(term)
+            d = e * (l * ca[i] + cb[i])
+            g1 += d.real
+            m2 += abs(l) * abs(d)
+        return g, g1, m2, size
 
     @njit
     def moduli(lam):            # |λ_i| as the kernel takes them (numba's abs, not numpy's hypot)
@@ -168,6 +185,12 @@ def test_g_fast_gives_the_bits_of_g_values():
         checked_zero_b += int(zero.sum())
         t = 0.0 if case % 7 == 0 else float(rng.uniform(0.0, 5e-3))
         plain = g_values(ca, cb, lam, n, t)
+        lt = lam * t       # the definition in numpy: t·φ1(λt) = (e^(λt) − 1)/λ, g' = Σ (λa + b)·e^(λt)
+        tphi = np.where(lt == 0, t, np.expm1(lt) / np.where(lam == 0, 1, lam))
+        ref_g = float(np.sum(ca * np.exp(lt) + cb * tphi).real)
+        ref_g1 = float(np.sum((lam * ca + cb) * np.exp(lt)).real)
+        scale = plain[3] + float(np.sum(np.abs((lam * ca + cb) * np.exp(lt))))
+        assert abs(plain[0] - ref_g) <= 1e-9 * scale and abs(plain[1] - ref_g1) <= 1e-9 * scale, case
         fast = _g_fast(ca, cb, lam, moduli(lam), n, t, True)
         assert [float(v).hex() for v in fast] == [float(v).hex() for v in plain], (case, fast, plain)
         no_size = _g_fast(ca, cb, lam, moduli(lam), n, t, False)

@@ -36,7 +36,7 @@ from numba.extending import get_cython_function_address, intrinsic
 
 from plant.expfun import e1, e2, e4
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
-from plant.multimode.segments import hermite_peak, torque_crossing_time, torque_integrals
+from plant.multimode.segments import hermite_peak, torque_integrals, torque_integrals_given
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
 from plant.randomness import NoiseExhausted, normal, uniform, uniform_below
 from plant.state import EventKind
@@ -494,6 +494,11 @@ def _torque(S, x3, u, h, bridge, dp):
     if h <= 0.0:
         return
     integral, absolute, square = torque_integrals(x3, u, h, dp[_TAU3])
+    _add_torque(S, integral, absolute, square, u, h, bridge, dp)
+
+
+@njit(cache=True, inline="always")
+def _add_torque(S, integral, absolute, square, u, h, bridge, dp):
     S[_IABS] += absolute
     S[_ISQ] += square
     S[_CHG] += (u / dp[_UMAX]) * integral if bridge else absolute
@@ -517,25 +522,12 @@ def _decay_memo(w, tau3, lad):
 
 @njit(cache=True, inline="always")
 def _torque_f(S, x3, u, h, bridge, dp, f1, f2):
-    """:func:`_torque` with torque_integrals' f1 and f2 given (:func:`_decay_memo`): the
-    integrals' own operations in their order (tests/test_disturbed_jit.py checks the bits)."""
+    """:func:`_torque` with torque_integrals' f1 and f2 given (:func:`_decay_memo`):
+    :func:`~plant.multimode.segments.torque_integrals_given`, the integrals' own operations."""
     if h <= 0.0:
         return
-    tau3 = dp[_TAU3]
-    b3 = 1.0 / tau3
-    g = x3 - u
-    integral = u * h + g * f1
-    square = u * u * h + 2 * u * g * f1 + g * g * f2
-    t0 = torque_crossing_time(x3, u, 0.0, tau3)
-    if t0 < h:
-        first = u * t0 + g * e1(b3 * t0) * tau3
-        absolute = abs(first) + abs(integral - first)
-    else:
-        absolute = abs(integral)
-    S[_IABS] += absolute
-    S[_ISQ] += square
-    S[_CHG] += (u / dp[_UMAX]) * integral if bridge else absolute
-    S[_DUR] += h
+    integral, absolute, square = torque_integrals_given(x3, u, h, dp[_TAU3], f1, f2)
+    _add_torque(S, integral, absolute, square, u, h, bridge, dp)
 
 
 @njit(cache=True)

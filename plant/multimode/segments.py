@@ -14,7 +14,7 @@ from numba import njit
 
 from plant.expfun import e1
 
-__all__ = ["torque_crossing_time", "torque_integrals", "hermite_peak"]
+__all__ = ["torque_crossing_time", "torque_integrals", "torque_integrals_given", "hermite_peak"]
 
 
 @njit(cache=True, _nrt=False)
@@ -42,9 +42,16 @@ def torque_integrals(x3, u, h, tau3):
     if h <= 0:
         return 0.0, 0.0, 0.0
     b3 = 1.0 / tau3
+    return torque_integrals_given(x3, u, h, tau3, e1(b3 * h) * tau3,     # ∫ e^(−β3τ)
+                                  e1(2 * b3 * h) * tau3 / 2.0)          # ∫ e^(−2β3τ)
+
+
+@njit(cache=True, _nrt=False)
+def torque_integrals_given(x3, u, h, tau3, f1, f2):
+    """:func:`torque_integrals` (h > 0) with its f1 = e1(h/τ3)·τ3 and f2 = e1(2h/τ3)·τ3/2 given
+    (a caller that keeps them for a repeated width)."""
+    b3 = 1.0 / tau3
     g = x3 - u
-    f1 = e1(b3 * h) * tau3                      # ∫ e^(−β3τ)
-    f2 = e1(2 * b3 * h) * tau3 / 2.0            # ∫ e^(−2β3τ)
     integral = u * h + g * f1
     square = u * u * h + 2 * u * g * f1 + g * g * f2
     t0 = torque_crossing_time(x3, u, 0.0, tau3)

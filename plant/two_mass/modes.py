@@ -144,29 +144,12 @@ def phi2(x):
     return (cmath.exp(x) - 1.0 - x) / (x * x)
 
 
-@njit(cache=True)
-def g_values(ca, cb, lam, n, t):
-    """g(t), g'(t), the bound M2(t) ≥ sup_{s≥0} |g''(t + s)| (module docstring), Σ|terms|."""
-    g = 0.0
-    g1 = 0.0
-    m2 = 0.0
-    size = 0.0
-    for i in range(n):
-        l = lam[i]
-        e = cmath.exp(l * t)
-        term = ca[i] * e + cb[i] * (t * phi1(l * t))
-        g += term.real
-        size += abs(term)
-        d = e * (l * ca[i] + cb[i])
-        g1 += d.real
-        m2 += abs(l) * abs(d)
-    return g, g1, m2, size
-
-
 @njit(cache=True, _nrt=False)
 def _g_fast(ca, cb, lam, al, n, t, want_size):
-    """:func:`g_values` with |λ_i| given (``al``), Σ|terms| only when ``want_size`` (else 0) and
-    the b-term skipped where b_i = 0: the same bits (a skipped product is a signed zero)."""
+    """g(t) = Σ Re(a_i·e^(λ_i·t) + b_i·t·φ1(λ_i·t)), g'(t), the bound M2(t) ≥ sup_{s≥0} |g''(t + s)|
+    (module docstring) and Σ|terms|, with |λ_i| given (``al``), Σ|terms| only when ``want_size``
+    (else 0) and the b-term skipped where b_i = 0: the same bits as the plain sum (a skipped
+    product is a signed zero; tests/test_two_mass_fast.py)."""
     g = 0.0
     g1 = 0.0
     m2 = 0.0
