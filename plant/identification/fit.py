@@ -595,8 +595,12 @@ _GRID = {"stribeck_velocity": (1e-3, 4e-3, 1.6e-2, 4e-2), "viscous": (0.05, 0.5,
 # Simpler first: parameter count (stribeck and lugre both six: the order of the fold fits only).
 _SIMPLER = ("multimode", "two-mass", "stribeck", "lugre")
 _SEPARABLE_SE = 2.0    # a family is separably worse when its mean excess exceeds 2 standard errors
-RULE = ("held-out predictive density, 2-fold over moves (each kind of move, the same commands up to direction, "
-        "split evenly: its occurrences go to folds 0, 1, 1, 0, 0, 1, …): each family is fitted on one "
+_FOLDS = (", 2-fold over moves (each kind of move, the same commands up to direction, split evenly: its "
+          "occurrences go to folds 0, 1, 1, 0, 0, 1, …)")
+_PARSIMONY = ("the one with the fewest fitted parameters (multimode 4 < two-mass 5 < stribeck = lugre 6), and among "
+              "equally many the lower score; a family whose fold fit failed to predict (infinite score) is never "
+              "chosen over a finite one")
+RULE = ("held-out predictive density" + _FOLDS + ": each family is fitted on one "
         "half of the moves (Gaussian synthetic likelihood of each move's features: window means of y, "
         "their mean and covariance from noisy simulations with the family's friction noise) and predicts the "
         "other; score = mean over moves of −2 ln p(the move's features) under the family with its noise "
@@ -604,17 +608,11 @@ RULE = ("held-out predictive density, 2-fold over moves (each kind of move, the 
         "a family is separably worse than the best when the paired sign test over moves says so: it predicts "
         f"n_w moves worse and n_b better, and n_w − n_b > {_SEPARABLE_SE:g}·√(n_w + n_b) (the scores' tails are "
         "too heavy for a standard error: one move predicted stuck that slid costs 10⁶); "
-        "among the families not separably worse than the best, the one with the fewest "
-        "fitted parameters (multimode 4 < two-mass 5 < stribeck = lugre 6), and among equally many the lower score; "
-        "a family whose fold fit failed to predict (infinite score) is never chosen over a finite one")
-
-
-_RULE_OE = RULE.split("held-out predictive density")[1].split("): each family")[0]
-_RULE_OE = ("held-out prediction error" + _RULE_OE + "): each family is fitted on one half of the moves (output "
+        "among the families not separably worse than the best, " + _PARSIMONY)
+_RULE_OE = ("held-out prediction error" + _FOLDS + ": each family is fitted on one half of the moves (output "
             "error, weighted least squares) and predicts the other; score = mean over moves of ln(mean squared "
             "prediction error); among the families whose paired excess over the best score is within "
-            f"{_SEPARABLE_SE:g} standard errors over moves (not separable from the best), the one with the fewest "
-            + RULE.split("the one with the fewest ")[1])
+            f"{_SEPARABLE_SE:g} standard errors over moves (not separable from the best), " + _PARSIMONY)
 
 
 def _elastic_stiffness(model: _Model) -> float | None:
