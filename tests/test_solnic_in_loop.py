@@ -138,7 +138,7 @@ def test_a_command_the_loop_rejects_is_handed_back_and_applied_by_the_runner(mon
     n.clear()
     python, _, _ = _run("thesis", 2, 6.0, compiled=False)
     assert r.status == "error" and _row(r) == _row(python)
-    assert c._replay is None                                  # the kept command was used
+    assert c._replay is None and c._in_loop is None           # the kept command was used
 
 
 def test_the_planner_reads_the_steps_bias_of_the_same_plan(monkeypatch):

@@ -252,7 +252,7 @@ class SolnicController(Controller):
             p[_idle.J_U:_idle.J_UMAX + 1] = U, t3, a, fd, s2, cap, min_ratio, f.u_max
             p[_idle.J_OWNER] = owner
         self._in_loop: tuple | None = None
-        self._replay: tuple | None = None
+        self._replay: BaseException | None = None
         self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 4)
         self._plan_key: tuple[float, float, float] | None = None
         self._memo_seen = (0, 0)
@@ -399,12 +399,13 @@ class SolnicController(Controller):
         (:func:`~controllers.solnic.idle_step._python_sample`): :meth:`step` on the state array
         as the step found it, the command into (offs, levs); returns its segment count.
 
-        Returns 0 (the loop hands the sample back to the runner, which calls :meth:`step`) with
-        the outcome kept for that call (``_replay``) where the command does not fit the loop's
-        test (:func:`plant.law_step.check_command`, mirrored) or :meth:`step` raised: the runner
-        then applies or raises exactly what the hand-back would have. A sample the loop redoes
-        (its interval needed more noise or log room, :func:`plant.law_driver.run_law_chunks`)
-        gets the same command and state again, not a second Python sample.
+        The sample's outcome is kept for the runner's :meth:`step` call where the loop hands the
+        sample back after all: an exception (``_replay``, raised again there), or a command the
+        loop cannot take (more segments than it holds, or one its test,
+        :func:`plant.law_step.check_command` with the plant's τs and u_max, rejects: returned
+        there with the state after it, ``_in_loop``). A sample the loop redoes (its interval
+        needed more noise or log room, :func:`plant.law_driver.run_law_chunks`) gets the same
+        command and state again, not a second Python sample.
         """
         s = self._idle.state
         n = s[_idle.N]
@@ -417,24 +418,14 @@ class SolnicController(Controller):
         try:
             command = self.step(y)
         except BaseException as exc:
-            self._replay = (exc, None)
+            self._replay = exc
             return 0
         o, v = command.arrays()
         k = o.shape[0]
-        u = self.params.u_max
-        ok = command.drive is DriveType.BRIDGE and k <= offs.shape[0] and o[0] == 0.0
-        prev = -1.0
-        for oi, vi in zip(o.tolist(), v.tolist()) if ok else ():
-            if (not (oi > prev and oi - oi == 0.0 and vi - vi == 0.0) or not oi < self.params.sample_period
-                    or (vi != 0.0 and abs(abs(vi) - u) > 1e-9 * u)):
-                ok = False
-                break
-            prev = oi
-        if not ok:
-            self._replay = (command, s.copy())
-            return 0
-        offs[:k], levs[:k] = o, v
         self._in_loop = (n, k, o.copy(), v.copy(), s.copy(), command)
+        if k > offs.shape[0] or command.drive is not DriveType.BRIDGE:
+            return 0                                      # handed back: step returns it
+        offs[:k], levs[:k] = o, v
         return k
 
     # ------------------------------------------------------------------ per sample
@@ -443,18 +434,13 @@ class SolnicController(Controller):
             raise RuntimeError("SolnicController.step called before reset")
         if self._idle is None:
             return self._step(y)
-        if self._replay is not None:                  # a sample done in the loop, handed back
-            outcome, after = self._replay
-            self._replay = None
-            if after is None:
-                raise outcome
-            self._idle.state[:] = after
-            return outcome
+        if self._replay is not None:                  # a sample done in the loop raised: raise it here
+            exc, self._replay = self._replay, None
+            raise exc
         done = self._in_loop
         if done is not None and done[0] == self._idle.state[_idle.N]:
-            # done in the loop, but the loop's own test (the plant's u_max and τs, which the
-            # mirror above cannot know: the model's may differ) rejected its command and handed
-            # it back: the same command and state, not a second Python sample
+            # done in the loop, its command handed back (the loop could not take it): the same
+            # command and state, not a second Python sample
             self._in_loop = None
             self._idle.state[:] = done[4]
             return done[5]
