@@ -109,6 +109,35 @@ def test_backward_equation_solver_is_bit_identical_to_the_row_array_reference():
     assert n_reflect > 50      # both phases (reflecting, then absorbing) exercised
 
 
+def test_pipelined_second_moment_is_bit_identical_at_few_steps_and_one_phase():
+    # u2 is solved one time step behind u1 in the same loops (issue 27, modern3): the lag's start
+    # (one step, two implicit Euler steps), a phase with no steps (no reflecting layer, or a stop
+    # before t_ks) and both phases, each compared with the row-array reference by float.hex
+    from controllers.solnic.noise_model import _absorbed_moments
+    from tests.reference_kernels import absorbed_moments
+    p = PlantParams()
+    al, U, tau, s2 = p.alpha, p.u_max, p.motor_time_constant, p.alpha**2 * p.sigma2_sq
+    rng = np.random.default_rng(2728)
+    seen = {"no reflecting phase": 0, "no absorbing phase": 0, "both": 0}
+    for case in range(120):
+        ks = rng.uniform(0.5, 3.5)
+        kc = ks * rng.uniform(0.3, 1.0)
+        dtu = rng.uniform(0.3e-3, 3e-3)
+        x3_off = U * -math.expm1(-dtu / tau)
+        t_ks = dtu + tau * math.log((x3_off + U) / (ks + U)) if x3_off > ks else dtu
+        t_b = rng.uniform(0.0, 0.3e-3) if case % 3 else t_ks + 1e-5          # after t_ks: no reflection
+        t_cz = t_b + rng.uniform(0.5e-3, 4e-3) if case % 3 != 1 else max(t_b + 1e-5, t_ks * rng.uniform(0.3, 1.0))
+        n_abs, n_refl = int(rng.integers(1, 5)), int(rng.integers(1, 5))
+        refl, absorb = min(max(t_ks, t_b), t_cz) > t_b, t_cz > min(max(t_ks, t_b), t_cz)
+        seen["both" if refl and absorb else "no reflecting phase" if absorb else "no absorbing phase"] += 1
+        for n in ((n_abs, n_refl), (48, 16)):
+            args = (al, U, tau, s2, ks, kc, dtu, t_b, t_cz, 64, *n)
+            got, want = _absorbed_moments(*args), absorbed_moments(*args)
+            assert [v.hex() for v in got] == [v.hex() for v in want], args
+            assert _absorbed_moments(*args, False)[0].hex() == want[0].hex(), args
+    assert min(seen.values()) >= 10, seen
+
+
 def test_mean_only_solver_and_bias_are_bit_identical_to_the_full_moments():
     # the idle planner reads only the bias (issue 27): the mean-only solve / _pulse_bias must give
     # exactly the mean of the row-array reference and of _pulse_noise, in every blend regime

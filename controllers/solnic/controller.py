@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from itertools import repeat as _repeat
 from dataclasses import dataclass
 from functools import lru_cache
 from statistics import NormalDist
@@ -348,8 +349,8 @@ class SolnicController(Controller):
         j.P[:] = s[_idle.J_P:_idle.J_P + 25].reshape(5, 5)
         ns = int(s[_idle.J_NS])
         if ns:
-            buf = s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist()
-            j._since.extend(zip(buf[0::2], buf[1::2]))
+            buf = iter(s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist())
+            j._since.extend(zip(buf, buf))              # the (t, y) pairs in order
         s[_idle.J_NS] = 0.0
         since, used, rejected, *post = s[_idle.SINCE:_idle.POST + 5].tolist()
         self._samples_since_launch = int(since)
@@ -363,10 +364,9 @@ class SolnicController(Controller):
             memo.clear()
             pr.memo_clears += 1
             mk0 = 0
-        tail = (1, 1e-6, pr.brake_margin)
-        tab = s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist()
-        for i in range(0, len(tab), 3):
-            memo[(tab[i], tab[i + 1], tab[i + 2], *tail)] = LAZY
+        # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
+        tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
+        memo.update(zip(zip(tab, tab, tab, _repeat(1), _repeat(1e-6), _repeat(pr.brake_margin)), _repeat(LAZY)))
         s[_idle.J_MK0], s[_idle.J_CLEARED], s[_idle.J_RUNS] = mk, 0.0, 0.0
         self._memo_seen = (pr.memo_clears, len(memo))
 

@@ -173,6 +173,8 @@ class FrictionGrid:
         e = pts[:, self._idx] - self.k0[:, None]
         self._log_prior = -0.5 * np.einsum("in,ij,jn->n", e, self.P0inv, e)
         self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._moving: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._kc_valid, self._ks_valid = self.kc[self._idx], self.ks[self._idx]
         self.version = getattr(self, "version", 0) + 1
         logL = np.zeros_like(self._log_prior)
         for ob in self.obs:
@@ -184,7 +186,7 @@ class FrictionGrid:
         logw = self._log_prior + logL
         w = np.exp(logw - np.max(logw))
         self.w = w / np.sum(w)
-        kc, ks = self.kc[self._idx], self.ks[self._idx]
+        kc, ks = self._kc_valid, self._ks_valid
         self._mean = np.array([np.dot(self.w, kc), np.dot(self.w, ks)])
         dk = np.vstack([kc - self._mean[0], ks - self._mean[1]])
         # a cell is the parallelogram of edges axes·(2/n): uniform within it, COV = Σ e e'/12
@@ -212,6 +214,7 @@ class FrictionGrid:
             hit = (dc[i], ts[i], tb[i], spread[i])
             if len(self._tables) > 64:
                 self._tables.clear()
+                self._moving.clear()
             self._tables[key] = hit
         return hit
 
@@ -239,12 +242,27 @@ class FrictionGrid:
         :func:`controllers.solnic.noise_model.pulse_noise` at the point estimate.
         """
         dc, ts, tb, spread = self.table(dt_u)
-        moves = tb >= 0.0
-        s2 = self.params.alpha**2 * self.params.sigma2_sq
-        if s2 > 0 and (var_ratio > 0 or bias_ratio > 0):
-            f = np.where(moves, s2 * np.maximum(ts - tb, 0.0) ** 3 / 3.0, 0.0)
-            return dc + bias_ratio * np.sqrt(f), spread + var_ratio * f, moves, ts
+        moves, f, root_f = self._moving_time(float(dt_u), ts, tb)
+        if f is not None and (var_ratio > 0 or bias_ratio > 0):
+            return dc + bias_ratio * root_f, spread + var_ratio * f, moves, ts
         return dc, spread, moves, ts
+
+    def _moving_time(self, key: float, ts: np.ndarray, tb: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(moves, f = α²σ2²T_m³/3, √f) of the table ``key`` at the valid points (f None
+        without friction noise), kept with the table: they depend on nothing else. Read-only."""
+        hit = self._moving.get(key)
+        if hit is None:
+            moves = tb >= 0.0
+            s2 = self.params.alpha**2 * self.params.sigma2_sq
+            f = root_f = None
+            if s2 > 0:
+                f = np.where(moves, s2 * np.maximum(ts - tb, 0.0) ** 3 / 3.0, 0.0)
+                root_f = np.sqrt(f)
+                f.flags.writeable = root_f.flags.writeable = False
+            moves.flags.writeable = False
+            hit = self._moving[key] = (moves, f, root_f)
+        return hit
 
     def _loglik(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float,
                 bias_ratio: float) -> np.ndarray:
@@ -303,7 +321,7 @@ class FrictionGrid:
         p = float(np.sum(w))
         if not p > 0:
             return Predictive(0.0, math.nan, math.nan, math.nan, math.nan)
-        keep = w > 1e-9 * p                         # negligible points cannot move a quantile much
+        keep = np.flatnonzero(w > 1e-9 * p)         # negligible points cannot move a quantile much
         w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
         (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
         (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))

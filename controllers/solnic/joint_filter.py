@@ -74,7 +74,11 @@ class FrictionView:
     def propagate(self, moving_time: float, sigma5_sq: float) -> None:
         """P_kk += σ5²·T_m·[[1, 1], [1, 1]]: the common x5 drift while moving (5-15)."""
         if moving_time > 0 and sigma5_sq > 0:
-            self._j.P[KC:KS + 1, KC:KS + 1] += sigma5_sq * moving_time
+            P, q = self._j.P, sigma5_sq * moving_time      # the block's four entries, each += q
+            P[KC, KC] += q
+            P[KC, KS] += q
+            P[KS, KC] += q
+            P[KS, KS] += q
 
     n_updates = property(lambda self: self._j.n_motion_updates)
 

@@ -281,12 +281,12 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
 
     The tridiagonal matrix of a time step is constant inside the domain, so it is held as three
     interior scalars and the boundary rows; the Thomas factorisation runs in the same loop as
-    u1's forward elimination (two independent division chains), and the source of u2 is added
-    during u1's back substitution. Every number is computed by the same operations in the same
-    order as the row-array formulation it replaces (tests/test_solnic_noise_model.py compares
-    the two bit for bit). With ``second`` False only u1 is solved (equation (5) reads u1, u1 never
-    reads u2: the same u1 bits, about half the work; E[Δc²] is returned as NaN) — what the idle
-    planner needs, the bias alone."""
+    u1's forward elimination (two independent division chains). Every number is computed by the
+    same operations as the row-array formulation it replaces (tests/test_solnic_noise_model.py
+    compares the two bit for bit). With ``second`` False only u1 is solved (equation (5) reads
+    u1, u1 never reads u2: the same u1 bits, about half the work; E[Δc²] is returned as NaN) —
+    what the idle planner needs, the bias alone; with it u2 is solved one time step behind u1
+    in the same loops (:func:`_both_moments`)."""
     x3_off = U * -math.expm1(-dt_u / tau)
     a = al * kc
     T = t_cz
@@ -304,15 +304,14 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
     n = n_x + 1
     x = np.empty(n)
     u1 = np.empty(n)
-    u2 = np.empty(n if second else 1)
     for i in range(n):
         xi = i * dx
         x[i] = xi
         u1[i] = xi * xi / (2 * a) + s2 * xi / (2 * a * a)
-        if second:
-            u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
+    if second:
+        return _both_moments(al, U, tau, s2, kc, dt_u, x3_off, a, T, t_ks, t_b, X, dx, D, c4, c3, c2, c1,
+                             n_x, n_abs, n_refl, x, u1)
     r1 = np.empty(n)
-    r2 = np.empty(n if second else 1)
     cp = np.empty(n)
     dm = np.empty(n)
     M = 0.0                                       # ∫_t^T μ
@@ -335,19 +334,13 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
             for i in range(1, n_x):
                 r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
-                if second:
-                    r2[i] = u2[i] + e * (ao * u2[i - 1] - D2 * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1[i])
             an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
             lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn      # interior rows
             if reflect:                               # u_x(0) = 0: ghost u[-1] = u[1]
                 r1[0] = u1[0] + e * (D2 * (u1[1] - u1[0]))
-                if second:
-                    r2[0] = u2[0] + e * (D2 * (u2[1] - u2[0]))
                 di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
             else:                                     # absorbed: u(0) = 0
                 r1[0] = 0.0
-                if second:
-                    r2[0] = 0.0
                 di_0, up_0 = 1.0, 0.0
             # x = X: no absorption before T, Gaussian moments (7); its row is (0, 1, 0)
             M += 0.5 * h * (mu_o + mu_n)
@@ -357,14 +350,7 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             EI = X * w + K
             EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
             r1[n_x] = EI + EP1
-            if second:
-                Ez2 = y * y + vz
-                Ez3 = y * (y * y + 3 * vz)
-                Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
-                EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
-                r2[n_x] = (EI * EI + s2 * w**3 / 3.0
-                           + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a))) + EP2)
-            # Thomas: factor while eliminating u1, then u2 with the new u1 in its source
+            # Thomas: factor while eliminating u1
             cp[0] = up_0 / di_0
             dm[0] = di_0
             u1[0] = r1[0] / dm[0]
@@ -377,22 +363,145 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             dm[n_x] = d
             cp[n_x] = 0.0 / d
             u1[n_x] = (r1[n_x] - 0.0 * u1[n_x - 1]) / d
-            src = th * h * 2
             for i in range(n - 2, 0, -1):
                 u1[i] -= cp[i] * u1[i + 1]
-                if second:
-                    r2[i] += src * x[i] * u1[i]
             u1[0] -= cp[0] * u1[1]
             mu_o = mu_n
-            if not second:
-                continue
-            u2[0] = r2[0] / dm[0]
+    return u1[0], math.nan
+
+
+@njit(cache=True)
+def _u2_rhs(r2, u2, u1_old, u1_new, x, n_x, D2, e, ao, bo, src, reflect, top):
+    """The right-hand side of u2's time step: u2 + (1−θ)h(L u2 + 2x·u1_old) + θh·2x·u1_new (the
+    source's implicit half added last, as the row-array formulation does), its boundary rows."""
+    for i in range(1, n_x):
+        r2[i] = u2[i] + e * (ao * u2[i - 1] - D2 * u2[i] + bo * u2[i + 1] + 2 * x[i] * u1_old[i])
+        r2[i] += src * x[i] * u1_new[i]
+    r2[0] = u2[0] + e * (D2 * (u2[1] - u2[0])) if reflect else 0.0
+    r2[n_x] = top
+
+
+@njit(cache=True)
+def _both_moments(al, U, tau, s2, kc, dt_u, x3_off, a, T, t_ks, t_b, X, dx, D, c4, c3, c2, c1,
+                  n_x, n_abs, n_refl, x, u1_end):
+    """(u1, u2) at (0, t_b) for :func:`_absorbed_moments` (its set-up's values in): u1's time
+    steps as in its mean-only loop, and u2's step j inside u1's step j + 1 — its right-hand side
+    first, then its forward elimination in u1's (factoring) loop and its back substitution in
+    u1's. u2's step j reads u1 before and after step j and step j's factorisation, all kept per
+    step; so every number is the same operation on the same operands as solving u2 right after
+    u1 in each step, but the two division chains run side by side."""
+    D2 = 2 * D
+    n = n_x + 1
+    S = n_abs + n_refl
+    u1 = np.empty((S + 1, n))                     # u1[j]: before time step j (u1[0] at t = T)
+    u2 = np.empty(n)
+    for i in range(n):
+        u1[0, i] = u1_end[i]
+        xi = x[i]
+        u2[i] = ((c4 * xi + c3) * xi + c2) * xi * xi + c1 * xi
+    cp = np.empty((S, n))
+    dm = np.empty((S, n))
+    # step j's explicit coefficients, lower diagonal, u2 source factor, boundary, top row of u2
+    st_e, st_ao, st_bo = np.empty(S), np.empty(S), np.empty(S)
+    st_lo, st_src, st_top = np.empty(S), np.empty(S), np.empty(S)
+    st_refl = np.empty(S, np.bool_)
+    r1 = np.empty(n)
+    r2 = np.empty(n)
+    M = 0.0
+    K = 0.0
+    j = 0
+    for phase in range(2):
+        t_hi, t_lo, m = (T, t_ks, n_abs) if phase == 0 else (t_ks, t_b, n_refl)
+        if not t_hi > t_lo:
+            continue
+        h = (t_hi - t_lo) / m
+        reflect = phase == 1
+        mu_o = al * (_x3(t_hi, dt_u, U, tau, x3_off) - kc)
+        for k in range(m):
+            t_o = t_hi - k * h
+            t_n = t_hi - (k + 1) * h
+            mu_n = al * (_x3(t_n, dt_u, U, tau, x3_off) - kc)
+            th = 1.0 if k < 2 else 0.5
+            e = (1.0 - th) * h
+            thh = th * h
+            ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
             for i in range(1, n_x):
-                u2[i] = (r2[i] - lo_i * u2[i - 1]) / dm[i]
-            u2[n_x] = (r2[n_x] - 0.0 * u2[n_x - 1]) / dm[n_x]
-            for i in range(n - 2, -1, -1):
-                u2[i] -= cp[i] * u2[i + 1]
-    return u1[0], (u2[0] if second else math.nan)
+                r1[i] = (u1[j, i] + e * (ao * u1[j, i - 1] - D2 * u1[j, i] + bo * u1[j, i + 1] + x[i])
+                         + thh * x[i])
+            lag = j > 0
+            q = j - 1                                 # u2's step in this one
+            if lag:
+                _u2_rhs(r2, u2, u1[q], u1[j], x, n_x, D2, st_e[q], st_ao[q], st_bo[q], st_src[q],
+                        st_refl[q], st_top[q])
+            an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
+            lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn
+            if reflect:
+                r1[0] = u1[j, 0] + e * (D2 * (u1[j, 1] - u1[j, 0]))
+                di_0, up_0 = 1.0 + 2 * th * h * D, -2 * th * h * D
+            else:
+                r1[0] = 0.0
+                di_0, up_0 = 1.0, 0.0
+            M += 0.5 * h * (mu_o + mu_n)
+            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
+            w = T - t_n
+            y, vz = X + M, s2 * w
+            EI = X * w + K
+            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+            r1[n_x] = EI + EP1
+            Ez2 = y * y + vz
+            Ez3 = y * (y * y + 3 * vz)
+            Ez4 = y**4 + 6 * y * y * vz + 3 * vz * vz
+            EP2 = c4 * Ez4 + c3 * Ez3 + c2 * Ez2 + c1 * y
+            st_top[j] = (EI * EI + s2 * w**3 / 3.0
+                         + 2.0 * (EI * EP1 + 0.5 * s2 * w * w * (y / a + s2 / (2 * a * a))) + EP2)
+            st_e[j], st_ao[j], st_bo[j], st_lo[j], st_src[j], st_refl[j] = e, ao, bo, lo_i, th * h * 2, reflect
+            # forward: factor and eliminate u1's step j; eliminate u2's step j − 1
+            cp[j, 0] = up_0 / di_0
+            dm[j, 0] = di_0
+            u1[j + 1, 0] = r1[0] / dm[j, 0]
+            if lag:
+                lo_q = st_lo[q]
+                u2[0] = r2[0] / dm[q, 0]
+                for i in range(1, n_x):
+                    d = di_i - lo_i * cp[j, i - 1]
+                    dm[j, i] = d
+                    cp[j, i] = up_i / d
+                    u1[j + 1, i] = (r1[i] - lo_i * u1[j + 1, i - 1]) / d
+                    u2[i] = (r2[i] - lo_q * u2[i - 1]) / dm[q, i]
+                u2[n_x] = (r2[n_x] - 0.0 * u2[n_x - 1]) / dm[q, n_x]
+            else:
+                for i in range(1, n_x):
+                    d = di_i - lo_i * cp[j, i - 1]
+                    dm[j, i] = d
+                    cp[j, i] = up_i / d
+                    u1[j + 1, i] = (r1[i] - lo_i * u1[j + 1, i - 1]) / d
+            d = 1.0 - 0.0 * cp[j, n_x - 1]
+            dm[j, n_x] = d
+            cp[j, n_x] = 0.0 / d
+            u1[j + 1, n_x] = (r1[n_x] - 0.0 * u1[j + 1, n_x - 1]) / d
+            # back substitution: u1's step j, u2's step j − 1
+            if lag:
+                for i in range(n - 2, 0, -1):
+                    u1[j + 1, i] -= cp[j, i] * u1[j + 1, i + 1]
+                    u2[i] -= cp[q, i] * u2[i + 1]
+                u2[0] -= cp[q, 0] * u2[1]
+            else:
+                for i in range(n - 2, 0, -1):
+                    u1[j + 1, i] -= cp[j, i] * u1[j + 1, i + 1]
+            u1[j + 1, 0] -= cp[j, 0] * u1[j + 1, 1]
+            mu_o = mu_n
+            j += 1
+    if j > 0:                                         # u2's last step, alone
+        q = j - 1
+        _u2_rhs(r2, u2, u1[q], u1[j], x, n_x, D2, st_e[q], st_ao[q], st_bo[q], st_src[q], st_refl[q], st_top[q])
+        lo_q = st_lo[q]
+        u2[0] = r2[0] / dm[q, 0]
+        for i in range(1, n_x):
+            u2[i] = (r2[i] - lo_q * u2[i - 1]) / dm[q, i]
+        u2[n_x] = (r2[n_x] - 0.0 * u2[n_x - 1]) / dm[q, n_x]
+        for i in range(n - 2, -1, -1):
+            u2[i] -= cp[q, i] * u2[i + 1]
+    return u1[j, 0], u2[0]
 
 
 @njit(cache=True)
