@@ -164,3 +164,30 @@ def test_table_of_the_needed_points_is_the_full_tables():
         dc = pulse_table(p, dtu, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
         g.update(dtu, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2)
     assert skipped > 0 and g.n_regrids > 0
+
+
+def test_noise_moments_kept_with_the_table_follow_the_lattice():
+    """The moving-time terms f = α²σ2²T_m³/3 and √f are kept with each pulse table (issue 27):
+    the moments equal the formula of the module docstring on the current table, bit for bit,
+    for several Δt_u and ratios, before and after re-fitted lattices (which must drop them)."""
+    p = PlantParams()
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    s2 = p.alpha**2 * p.sigma2_sq
+    assert s2 > 0
+    rng = np.random.default_rng(6)
+    versions = set()
+    for round_ in range(4):
+        for dtu, vr, br in ((0.8e-3, 2.5, 0.8), (1.3e-3, 1.3, 0.6), (1.3e-3, 3.7, 1.0), (2.1e-3, 0.0, 0.0)):
+            mean, var, moves, ts = g.noise_moments(dtu, vr, br)
+            dc, ts0, tb, spread = g.table(dtu)
+            f = np.where(tb >= 0.0, s2 * np.maximum(ts0 - tb, 0.0) ** 3 / 3.0, 0.0)
+            want_mean, want_var = (dc + br * np.sqrt(f), spread + vr * f) if (vr > 0 or br > 0) else (dc, spread)
+            assert mean.tobytes() == want_mean.tobytes() and var.tobytes() == want_var.tobytes()
+            assert np.array_equal(moves, tb >= 0.0) and ts is ts0
+            with pytest.raises(ValueError):
+                moves[0] = not moves[0]                  # shared with later calls: read-only
+        versions.add(g.version)
+        dtu = 1.3e-3
+        dc = pulse_table(p, dtu, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+        g.update(dtu, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
+    assert len(versions) > 1 and g.n_regrids > 0

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from itertools import repeat as _repeat
 from dataclasses import dataclass
 from functools import lru_cache
 from statistics import NormalDist
@@ -366,7 +365,8 @@ class SolnicController(Controller):
             mk0 = 0
         # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
         tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
-        memo.update(zip(zip(tab, tab, tab, _repeat(1), _repeat(1e-6), _repeat(pr.brake_margin)), _repeat(LAZY)))
+        rep = itertools.repeat
+        memo.update(zip(zip(tab, tab, tab, rep(1), rep(1e-6), rep(pr.brake_margin)), rep(LAZY)))
         s[_idle.J_MK0], s[_idle.J_CLEARED], s[_idle.J_RUNS] = mk, 0.0, 0.0
         self._memo_seen = (pr.memo_clears, len(memo))
 
