@@ -48,3 +48,18 @@ def test_the_key_holds_every_plant_field_the_module_reads():
     assert read, "the scan found no field"
     for field in read:
         assert set(derived.get(field, {field})) <= set(_CROSSOVER_FIELDS), field
+
+
+def test_the_forkserver_warm_up_leaves_table_2_1s_searches_cached():
+    # bench.warm (imported by the forkserver) resets every controller on Table 2-1, so a cell
+    # process forked from it finds both searches (lag and integral) in the cache
+    import bench.warm
+    from plant.params import PlantParams
+
+    _highest_crossover.cache_clear()
+    bench.warm.warm_designs()
+    misses = _highest_crossover.cache_info().misses
+    assert misses >= 2
+    for integral in (False, True):
+        highest_crossover(PlantParams(), integral=integral)
+    assert _highest_crossover.cache_info().misses == misses
