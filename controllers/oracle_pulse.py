@@ -41,6 +41,7 @@ from numba import njit
 
 from controllers.base import Controller, register
 from controllers.law import CompiledLaw
+from controllers.solnic.idle_step import _addressed   # the step as its C wrapper's address (generic)
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 from controllers.models.acker import max_on_time
@@ -144,6 +145,17 @@ def _oracle_step(s, p, y, offs, levs):
     return 1
 
 
+_ADDRESS: list[Any] = []
+
+
+def _step_address() -> Any:
+    """:func:`_oracle_step` as the address of its C wrapper (made once per process): the loop is
+    entered once per pulse, ~5 µs instead of ~50 µs with a dispatcher (``StepAddress``)."""
+    if not _ADDRESS:
+        _ADDRESS.append(_addressed(_oracle_step))
+    return _ADDRESS[0]
+
+
 @register("oracle-pulse")
 class OraclePulse(Controller):
     """BOUND (privileged): pulses with the true state and the true pulse law; see the module."""
@@ -166,7 +178,7 @@ class OraclePulse(Controller):
         self._last_dtu = 0.0
         p = np.empty(_N_P)
         p[_P_HEAD], p[_P_BAND], p[_P_TS] = _N_P, self.options.band, params.sample_period
-        self._law = CompiledLaw(_oracle_step, np.zeros(1), p, DriveType.BRIDGE, 1, truth=True)
+        self._law = CompiledLaw(_step_address(), np.zeros(1), p, DriveType.BRIDGE, 1, truth=True)
 
     def compiled_law(self) -> CompiledLaw | None:
         """The waiting samples compiled (:func:`_oracle_step`, reading the true state: ``truth``);
