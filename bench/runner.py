@@ -10,7 +10,9 @@ sums (:class:`bench.metrics.WindowTotals`).
 
 Truth and model: the plant runs with the true parameters; the controller's ``reset`` gets the
 model (a :class:`~plant.params.PlantParams`, by default the truth's own fields). Only a
-``privileged`` bound sees the truth, through ``observe_truth(state, plant)`` before each step.
+``privileged`` bound sees the truth, through ``observe_truth(state, plant)`` before each step,
+or, in the compiled loop, through a compiled step that declares ``CompiledLaw.truth`` (refused
+for any other class: the run ends with status ``error``).
 
 A controller that describes its step as a fixed linear law (the ``linear_law`` hook) runs, when
 nothing is recorded and the family offers one for the plant (``PlantFamily.law_loop``: not with
@@ -269,11 +271,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     try:
         controller.reset(model, loop.streams["controller"])
         n, law, claw, cloop, done = 0, None, None, None, False
-        if rec is None and not privileged and compiled:
+        if rec is None and compiled:
             fast, cloop = fam.law_loop(params), fam.compiled_loop(params)
             if log is not None and not fam.compiled_loop_logs:
                 cloop = None                 # a family loop that cannot keep the x1 log: Python
-            law = controller.linear_law() if (fast or cloop) else None
+            law = controller.linear_law() if (fast or cloop) and not privileged else None
             if law is not None and fast and log is None:
                 state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
                                                             loop.plant_noise, deadline)
@@ -287,6 +289,9 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 claw = controller.compiled_law()
                 if claw is None and law is not None:
                     claw = law.compiled(params.sample_period)
+                if claw is not None and getattr(claw, "truth", False) and not privileged:
+                    raise ValueError(f"controller {controller.name!r} is not privileged: its compiled step "
+                                     f"may not read the true state (CompiledLaw.truth)")
         while not done and n < n_samples and status is Status.OK:
             if claw is not None:             # compiled from sample n; a handed-back sample is done below
                 pending = loop.pending

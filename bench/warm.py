@@ -1,4 +1,5 @@
-"""Compile the plant's kernels once in the process that forks the cell processes.
+"""Compile the plant's kernels (and compute the controllers' default designs) once in the process
+that forks the cell processes.
 
 Imported by the forkserver (``bench.isolation.PRELOAD``): a few sample intervals of the closed
 loop, with and without noise, with a held level and with pulses, so that every cell process
@@ -37,7 +38,25 @@ def warm() -> None:
     pulse_response(params, 1.2e-3, seed=0)
 
 
+def warm_designs() -> None:
+    """Reset every registered controller at its default options on Table 2-1: the designs they
+    cache per process (e.g. the linear crossover search, ~0.3 s of python-control per plant and
+    mode, cached on the plant fields it reads) are then in memory in every cell process forked
+    from here, instead of being recomputed in each (issue 27: ~0.8 s per cell process that meets
+    the linear-design controllers; ~1.4 s here, once per run). A cache hit returns what the
+    computation would: no result changes."""
+    from controllers import available_controllers
+
+    params = PlantParams()
+    for cls in available_controllers().values():
+        try:
+            cls().reset(params, np.random.default_rng(0))
+        except Exception:  # noqa: BLE001 — a controller that cannot reset here designs in its cells
+            pass
+
+
 try:
     warm()
+    warm_designs()
 except Exception:  # a warm-up must never stop the cells; they compile on their own then
     pass

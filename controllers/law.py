@@ -105,6 +105,13 @@ class CompiledLaw:
         The power stage of every command.
     max_segments : int
         Room for this many segments in ``offs``/``levs`` (≥ 1).
+    truth : bool
+        The step reads the true plant state (a privileged bound's, never a real controller's:
+        the runner refuses it for a class without ``privileged = True``). The compiled loop
+        then passes ``p`` followed by the true state at the sample instant, ``x`` (the
+        family's state entries) then (t [s], mode, flyback 0/1): the step finds them at
+        ``p[len(params):]``, the sheet as ``p[-3:]``, updated by the loop before every call
+        (:func:`plant.law_driver.run_law_chunks`). Default False: ``p`` is ``params``.
     """
 
     step: Any
@@ -112,6 +119,7 @@ class CompiledLaw:
     params: np.ndarray
     drive: DriveType
     max_segments: int = 1
+    truth: bool = False
 
     def __post_init__(self) -> None:
         for name in ("state", "params"):
@@ -123,6 +131,8 @@ class CompiledLaw:
             raise ValueError(f"CompiledLaw.drive must be a DriveType, got {self.drive!r}")
         if isinstance(self.max_segments, bool) or not isinstance(self.max_segments, int) or self.max_segments < 1:
             raise ValueError(f"CompiledLaw.max_segments must be an integer >= 1, got {self.max_segments!r}")
+        if not isinstance(self.truth, bool):
+            raise ValueError(f"CompiledLaw.truth must be true or false, got {self.truth!r}")
         if STEP_SIGNATURE.args not in getattr(self.step, "signatures", ()):
             try:                          # compiled (or loaded from numba's cache) when first needed
                 self.step.compile(STEP_SIGNATURE)

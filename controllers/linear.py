@@ -372,18 +372,41 @@ def _feasible(params: PlantParams, omega_c: float, lag_ratio: float | None, inte
             and d.noise_drive_rms <= _MAX_NOISE_DRIVE_FRACTION * params.u_max)
 
 
-@functools.lru_cache(maxsize=64)
+# The fields of the plant that highest_crossover's search reads (the loop G(s) = 1/((τ3 s + 1)·J s²)
+# sampled at τs, the Bohacek–Tuteur lag ratio, the drive-noise limit): its cache key.
+_CROSSOVER_FIELDS = ("inertia", "motor_time_constant", "sample_period", "stiction", "coulomb",
+                     "measurement_noise_std", "u_max")
+
+
 def highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
                       integral: bool = False, phase_margin_deg: float = 45.0,
                       lag_corner_fraction: float = 0.1, max_lead_phase_deg: float = 60.0,
                       min_gain_margin_db: float = _MIN_GAIN_MARGIN_DB) -> float:
     """Highest feasible ωc [rad/s], to 0.1 rad/s (see the module docstring for the criteria).
 
+    The search (~0.3 s: some 24 designs with python-control's margins) reads only the fields
+    :data:`_CROSSOVER_FIELDS` of ``params``; it runs on a :class:`PlantParams` with those fields
+    (the rest at their defaults) and is cached on it, so plants that differ elsewhere (friction
+    noise, x4, quantization, another family's own fields) share one search per process — the
+    same numbers, since nothing else enters (tests/test_linear_design.py compares).
+
     Raises
     ------
     ValueError
         If no crossover between 1 rad/s and the Nyquist frequency is feasible.
     """
+    key = PlantParams(**{name: getattr(params, name) for name in _CROSSOVER_FIELDS})
+    return _highest_crossover(key, lag_ratio, integral=integral, phase_margin_deg=phase_margin_deg,
+                              lag_corner_fraction=lag_corner_fraction, max_lead_phase_deg=max_lead_phase_deg,
+                              min_gain_margin_db=min_gain_margin_db)
+
+
+@functools.lru_cache(maxsize=64)
+def _highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
+                       integral: bool = False, phase_margin_deg: float = 45.0,
+                       lag_corner_fraction: float = 0.1, max_lead_phase_deg: float = 60.0,
+                       min_gain_margin_db: float = _MIN_GAIN_MARGIN_DB) -> float:
+    """:func:`highest_crossover` on ``params`` as given (cached on all of it)."""
     args = (lag_ratio, integral, phase_margin_deg, lag_corner_fraction, max_lead_phase_deg,
             min_gain_margin_db)
     nyquist = math.pi / params.sample_period

@@ -223,6 +223,11 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
     (:data:`TOTAL_FIELDS`), writes x1 into ``x1_window`` at index n − ``n_warm`` (the caller's
     array, length ``len(sensor) − n_warm + 1``; the final x1 is the caller's to add) and starts
     from the delay's carry-over ``pending`` (None: nothing commanded yet, the hold of 0).
+
+    A ``law`` with ``truth`` set (a privileged bound's; the runner checks that) gets as ``p`` its
+    ``params`` followed by the plant state and the sheet (t, mode, flyback) the chunk advances in
+    place: the chunk's ``x`` and ``sheet`` are views into that tail, so the step reads the true
+    state at every sample instant without a change to any family's chunk.
     """
     n_samples = sensor.shape[0]
     prm = params.kernel_record()
@@ -243,9 +248,14 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         prog[2] = k
     bridge = law.drive.value == "bridge"
     x = np.array(state.x, dtype=np.float64)
+    sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
+    p = law.params
+    if getattr(law, "truth", False):   # a privileged step reads the truth: x and the sheet live in p's tail
+        m, k = p.shape[0], x.shape[0]
+        p = np.concatenate((p, x, sheet))
+        x, sheet = p[m:m + k], p[m + k:]
     x_view = x.view()
     x_view.flags.writeable = False
-    sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
     out = np.empty(n_state + sheet_size)
     totals = np.zeros(len(TOTAL_FIELDS))
     if sums is not None:
@@ -262,7 +272,7 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         prog[3] = log.n_events
     else:
         xs = xe = _NO_LOG
-    head = (law.step, s, law.params, s_back, bridge, float(params.u_max), float(params.quantization),
+    head = (law.step, s, p, s_back, bridge, float(params.u_max), float(params.quantization),
             float(params.command_delay), pend_o, pend_l, offs, levs, now_o, now_l, carry_o, carry_l)
     fn = _LAST.get(chunk)
     n, code = n0, status_ok
@@ -305,6 +315,8 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
             break
     if noisy:
         noise.consumed(zpos)
+    if x.base is not None:
+        x = x.copy()                  # the truth's view into p: the final state owns its entries
     x.flags.writeable = False
     final = PlantState(float(sheet[0]), x, int(sheet[1]), sheet[2] != 0.0)
     handed_back = code == HAND_BACK
