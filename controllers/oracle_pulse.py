@@ -40,8 +40,7 @@ import numpy as np
 from numba import njit
 
 from controllers.base import Controller, register
-from controllers.law import CompiledLaw
-from controllers.solnic.idle_step import _addressed   # the step as its C wrapper's address (generic)
+from controllers.law import CompiledLaw, step_address
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 from controllers.models.acker import max_on_time
@@ -152,7 +151,7 @@ def _step_address() -> Any:
     """:func:`_oracle_step` as the address of its C wrapper (made once per process): the loop is
     entered once per pulse, ~5 µs instead of ~50 µs with a dispatcher (``StepAddress``)."""
     if not _ADDRESS:
-        _ADDRESS.append(_addressed(_oracle_step))
+        _ADDRESS.append(step_address(_oracle_step))
     return _ADDRESS[0]
 
 

@@ -17,6 +17,7 @@ import pytest
 from bench.runner import run_closed_loop
 from bench.scenarios import builtin_scenarios
 from controllers import make_controller
+from controllers import law
 from controllers.solnic import idle_step as idle
 from controllers.solnic.mode2_filter import Mode2Filter, mode2_transition
 
@@ -170,9 +171,9 @@ def test_a_numba_without_the_wrapper_address_helper_gives_the_same_rows(monkeypa
     """``StepAddress`` rests on numba's semi-internal ``_get_wrapper_address``; without it the
     dispatcher itself is the step (typed at every entry): the rows must not change."""
     addressed, _, _ = _run("solnic", "thesis", 5, 8.0)
-    monkeypatch.setattr(idle, "_get_wrapper_address", None)
+    monkeypatch.setattr(law, "_get_wrapper_address", None)
     monkeypatch.setattr(idle, "_ADDRESS", [])
     plain, n_python, _ = _run("solnic", "thesis", 5, 8.0)
-    assert not isinstance(idle.idle_step_address(), idle.StepAddress)
+    assert not isinstance(idle.idle_step_address(), law.StepAddress)
     assert _row(plain) == _row(addressed)
     assert plain.summary["pulses"] > 5 and n_python <= 3 * plain.summary["pulses"] + 5   # still the compiled loop

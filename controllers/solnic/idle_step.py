@@ -20,7 +20,7 @@ model-run count, which the Python sample would touch at the first idle sample, a
 that import (the prediction is the same pure function of (k̂s, k̂c, Δt_u)), so the summary is
 the Python path's too.
 
-The step reaches the compiled loop as a bare function address (:class:`StepAddress`): a
+The step reaches the compiled loop as a bare function address (:class:`~controllers.law.StepAddress`): a
 numba dispatcher passed as a first-class function is typed and its address looked up again
 at every entry into the loop (~50 µs on the loaded 2-core machine, i.e. per hand-back), the
 address object costs ~5 µs. Called through that address (numba's C wrapper), an exception
@@ -52,17 +52,12 @@ import weakref
 
 from numba import njit, objmode
 
-try:    # numba's wrapper-address helper (semi-internal; numba 0.59-0.68 have it)
-    from numba.experimental.function_type import _get_wrapper_address
-except ImportError:     # pragma: no cover - a numba without it: the dispatcher itself (same rows, slower entry)
-    _get_wrapper_address = None
-
 from controllers.solnic.filter_kernels import joint_predict, joint_update
 from controllers.solnic.noise_model import _GL_X, _GL_W, _coasting_moments, _pulse_bias
 from controllers.solnic.predictor import _conditional_kernel
-from plant.law_step import STEP_SIGNATURE, STEP_TYPE
+from controllers.law import StepAddress, step_address
 
-__all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "StepAddress", "N_STATE", "N_PARAMS"]
+__all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "N_STATE", "N_PARAMS"]
 
 # state s: the sample count, the mode-2 filter, the controller's counters, the cached plan
 (N, X1, X4, P11, P14, P44, FT, HAS_ANCHOR, C0, C1, HAS_MOTION, M0, M1, MMEAN, MVAR, T_MAX, SINCE, USED,
@@ -246,40 +241,13 @@ def _idle(s, p, y, offs, levs):
     return 1
 
 
-class StepAddress:
-    """A compiled step as the address of its C wrapper, typed :data:`plant.law_step.STEP_TYPE`
-    (numba's wrapper-address protocol): what the compiled loop receives instead of the
-    dispatcher (see the module docstring). Calling it from Python calls the dispatcher."""
-
-    _numba_type_ = STEP_TYPE
-
-    def __init__(self, dispatcher) -> None:
-        dispatcher.compile(STEP_SIGNATURE)
-        self.dispatcher = dispatcher
-        self.signatures = [STEP_SIGNATURE.args]
-        self._address = _get_wrapper_address(dispatcher, STEP_SIGNATURE)
-
-    def __wrapper_address__(self) -> int:
-        return self._address
-
-    def __call__(self, s, p, y, offs, levs):
-        return self.dispatcher(s, p, y, offs, levs)
-
-
 _ADDRESS: list[StepAddress] = []
-
-
-def _addressed(dispatcher):
-    """``dispatcher`` as a :class:`StepAddress`, or the dispatcher itself when this numba has no
-    wrapper-address helper (the compiled loop then types it at every entry: same rows, ~50 µs more
-    per hand-back)."""
-    return dispatcher if _get_wrapper_address is None else StepAddress(dispatcher)
 
 
 def idle_step_address() -> StepAddress:
     """:func:`idle_step` as a :class:`StepAddress` (made once per process)."""
     if not _ADDRESS:
-        _ADDRESS.append(_addressed(idle_step))
+        _ADDRESS.append(step_address(idle_step))
     return _ADDRESS[0]
 
 
@@ -482,5 +450,5 @@ _JOINT_ADDRESS: list[StepAddress] = []
 def joint_idle_step_address() -> StepAddress:
     """:func:`joint_idle_step` as a :class:`StepAddress` (made once per process)."""
     if not _JOINT_ADDRESS:
-        _JOINT_ADDRESS.append(_addressed(joint_idle_step))
+        _JOINT_ADDRESS.append(step_address(joint_idle_step))
     return _JOINT_ADDRESS[0]
