@@ -189,3 +189,28 @@ def test_signed_rank_statistic_is_wilcoxons():
     many[0] = best[0] + 1e6
     w3, sd3 = _signed_rank(many, best)
     assert w3 < -2 * sd3
+
+
+def test_feature_fit_with_groups_keeps_the_first_round_end_of_least_cost():
+    """Groups of starts (:func:`_feature_fit`, ``groups``): the first round runs from each group's
+    best start and the end of least cost goes on. On a noise-free stribeck log (σ1 = 1e-9), a
+    group at the nesting point (v_s = 0.1 mrad/s, b = 1e-3; the factor-30 box keeps v_s ≤ 3 mrad/s,
+    so alone it cannot reach the truth's 20 mrad/s) next to a group 20 % off: the result is the
+    truth within 1 % on k̄c, k̄s, J, τ3 (the nesting group first)."""
+    plan = design_experiment(ExperimentOptions(repeats=1))
+    fam = get_family("stribeck")
+    p = fam.Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, stribeck_velocity=0.02, viscous=1.0,
+                             friction_noise_psd=0.0, correlated_friction_std=0.0, measurement_noise_std=1e-9)
+    log, _ = simulate_log(plan, "stribeck", p, 9)
+    base = p.replace(u_max=max(float(log.u_max), p.u_max), sample_period=log.sample_period)
+    train = list(np.flatnonzero(_folds(log) == 0))
+    s1 = _sigma1(log, moves(log))[0]
+    fm = _FeatureModel(log, "stribeck", base, train)
+    truth = np.log([1.2, 0.6, 0.6, p.motor_time_constant, 0.02, 1.0])
+    near = truth + np.log([1.2, 1.0, 0.8, 1.2, 1.2, 1.0])
+    nested = np.concatenate([near[:4], np.log([1e-4, 1e-3])])
+    frame = fm.frame(near, s1, 0)
+    alone, _ = _feature_fit(fm, [nested], frame, s1, 0, budget_s=60.0)
+    assert not np.allclose(np.exp(alone[:4]), np.exp(truth[:4]), rtol=0.01)
+    z, _ = _feature_fit(fm, [], frame, s1, 0, budget_s=60.0, groups=[[nested], [near]])
+    assert np.allclose(np.exp(z[:4]), np.exp(truth[:4]), rtol=0.01), np.exp(z)
