@@ -107,12 +107,17 @@ def fitted_matrix_toml(fit: AxisFit, log_name: str) -> str:
 
 def choice_lines(choice: FamilyChoice) -> list[str]:
     """One line per family: held-out score, paired excess over the best ± its standard error, and
-    (predictive criterion) the moves it predicts worse and better than the best (the sign test)."""
+    (predictive criterion) the moves it predicts worse and better than the best and the rule's
+    signed-rank statistic W against its null sd (separably worse when W > 2 sd)."""
     unit = "ln rad²" if choice.criterion == "output-error" else "−2 ln p per move"
 
     def signs(f):
         w, b = choice.signs.get(f, (None, None))
-        return "" if w is None else f", worse on {w} moves, better on {b}"
+        out = "" if w is None else f", worse on {w} moves, better on {b}"
+        if f in choice.ranks:
+            rank, sd = choice.ranks[f]
+            out += f", signed rank W = {rank:+.0f} (sd {sd:.0f})"
+        return out
     return [f"{f}: held-out score {choice.score[f]:.3f} {unit}, excess over {choice.best} "
             f"{choice.excess[f]:+.3f} ± {choice.excess_se[f]:.3f}{signs(f)}" + ("  (chosen)" if f == choice.family else "")
             for f in sorted(choice.score, key=choice.score.get)]

@@ -279,8 +279,14 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
         assert choice.family == fit.family == family, (family, choice)
         assert set(choice.score) == {"multimode", "stribeck"} and choice.excess[choice.best] == 0.0
         other = ({"multimode", "stribeck"} - {family}).pop()
-        if family == "stribeck":      # the richer family wins by more than 2 standard errors over moves
-            assert choice.excess[other] > 2 * choice.excess_se[other] > 0
+        if family == "stribeck":
+            # the richer family wins: multimode is separably worse by the rule's own test (Wilcoxon's
+            # signed rank over moves, W > 2 null sd) and worse on the mean score. (Until the fifth
+            # session this asserted mean excess > 2 SE — the output-error rule's test; with the new
+            # fits multimode's excess here is carried by a few moves it predicts 10³ σ off, and its
+            # SE with it, so the mean ± SE no longer measures what the rule decides on.)
+            w, sd = choice.ranks[other]
+            assert w > 2 * sd > 0 and choice.excess[other] > 0, (choice.ranks, choice.excess, choice.excess_se)
 
 
 def test_auto_folds_hold_every_kind_of_move_in_both_directions(plan):

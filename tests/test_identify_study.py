@@ -3,8 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 6262, 2 logs per family (test_auto_picks_the_generating_family; seed 6161 was the
-  third session's, on the output-error rule) and
+* the auto pick: seed 9393, 2 logs per family (test_auto_picks_the_generating_family; 6262 was the
+  fourth session's, 6161 the third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
 
@@ -21,7 +21,10 @@ from plant.identification import design_experiment, fit_log, simulate_log
 from plant.identification.families import FAMILY_FREE
 
 CORE = ("coulomb", "stiction", "inertia", "motor_time_constant")
-AUTO_SEED = 6262   # the auto study of issue 25's fourth session (never run while writing the criterion or the rule)
+AUTO_SEED = 6262   # the auto study of issue 25's fourth session (a dev seed since the fifth)
+# the auto study of issue 25's fifth session: named before it ran, never used while writing the
+# t predictive, the robust fold fits or the signed-rank rule (dev seed 6262)
+FRESH_AUTO_SEED = 9393
 
 
 def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10):
@@ -133,20 +136,22 @@ def test_lugre_coverage_on_held_out_truth():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, predictive criterion, sign-test rule) on 7 of the 8 "
-                   "logs: 3 of 7 — multimode 2/2, two-mass 1/2 (other: multimode), stribeck 0/2 (multimode, "
-                   "multimode), lugre 0/1 (multimode); at most 4 of 8, below the must-show of ≥ 90 % (docs/axis.md)")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, fifth session: t predictive, robust multi-start fold "
+                   "fits, signed-rank rule) on the 8 logs of the fresh seed 9393: 5 of 8 — multimode 2/2, lugre 2/2, "
+                   "two-mass 1/2 (other: multimode), stribeck 0/2 (multimode, multimode: signed-rank z = 1.35 and "
+                   "1.92, not > 2); below the must-show of ≥ 90 % (docs/axis.md)")
 def test_auto_picks_the_generating_family():
-    """``--family auto`` on 2 fresh logs per family (seed 6262, cases 0–1, :func:`auto_case`; the
-    criterion and the rule were fixed before these logs ran): the generating family picked in
-    ≥ 90 % of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has
-    the confusion matrix and the CPU per log). Measured on 7 of the 8 (lugre case 1's pick was not
-    recorded in the session's time): 3 of 7, CPU 33–98 s per log, loaded machine. The third session's
-    output-error rule: 3 of 8 on seed 6161."""
+    """``--family auto`` on 2 fresh logs per family (seed 9393, cases 0–1, :func:`auto_case`; the
+    criterion, the fits and the rule were fixed before these logs ran): the generating family picked
+    in ≥ 90 % of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has
+    the confusion matrix and the CPU per log). Measured: 5 of 8, CPU 47–151 s per log (median 68 s;
+    one process per log, loaded machine). The fourth session's rule: 3 of 7 on seed 6262; the
+    third session's output-error rule: 3 of 8 on seed 6161. The fold fits stop at CPU budgets, so a
+    rerun on another machine load may differ by a fit."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):
-            choice, cpu = auto_case(family, case)
+            choice, cpu = auto_case(family, case, seed=FRESH_AUTO_SEED)
             picked[family, case] = choice.family
             print(family, case, choice.family, f"cpu {cpu:.1f}")
     assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
