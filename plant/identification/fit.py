@@ -163,6 +163,7 @@ class _Model:
     :class:`_OutOfTime` once past it."""
 
     deadline: float = math.inf
+    share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -186,6 +187,16 @@ class _Model:
         # included), are simulated once per prediction (the default plan: 120 moves, 32 kinds)
         self.keys = [tuple((c.drive, tuple((o, v, math.copysign(1.0, v)) for o, v in c.segments))
                            for c in log.commands[s:e]) for s, e in self.segs]
+        # a move and its mirror (every nonzero level negated, zeros kept as they are) give exactly
+        # opposite noise-free responses on a symmetric plant (x5 = 0, no ripple, no disturbance
+        # torque: every operation of the steps is odd, and IEEE rounding is symmetric), so the
+        # mirror kind is simulated once too and negated (bit-identical: tests/test_identify_plan.py)
+        self.mirror = []
+        for key in self.keys:
+            flipped = tuple((d, tuple((o, -v, -sg) if v != 0.0 else (o, v, sg) for o, v, sg in segs))
+                            for d, segs in key)
+            first = next((v for _, segs in key for _, v, _ in segs if v != 0.0), 0.0)
+            self.mirror.append((flipped, -1.0) if first < 0.0 else (key, 1.0))
         self.groups = np.concatenate([[g] * len(i) for g, i in enumerate(self.index)])
         self.rows = np.concatenate(self.index)
 
@@ -211,11 +222,20 @@ class _Model:
         if lugre:   # bristle ring-down time 1/(ζ·ω0) ≤ 4/ω0 bounds the motion a velocity still makes
             ring = 4.0 / math.sqrt(p.bristle_stiffness / p.inertia)
         done: dict = {}     # noise-free: a kind of move's response, simulated once
+        symmetric = (self.share_mirror and streams is None and getattr(p, "friction_ripple", 0.0) == 0.0
+                     and getattr(p, "disturbance_torque_std", 0.0) == 0.0)
         for g, ((s, e), off, last, key) in enumerate(zip(self.segs, self.offsets, self.last, self.keys)):
             n_out = len(range(s + 1, min(e + 1, self.log.n)))
             if streams is None and key in done:
                 out.append(off + done[key][:n_out])
                 continue
+            if symmetric:
+                canon, sign = self.mirror[g]
+                if canon in done:       # (canon, +1): this kind's mirror was simulated; its response negated
+                    x1 = done[canon] if sign > 0.0 else -done[canon]
+                    done[key] = x1
+                    out.append(off + x1[:n_out])
+                    continue
             if time.process_time() > self.deadline:
                 raise _OutOfTime
             state = fam.initial_state(p, 0.0)
@@ -243,6 +263,9 @@ class _Model:
                     break
             if streams is None:
                 done[key] = x1
+                if symmetric:
+                    canon, sign = self.mirror[g]
+                    done[canon] = x1 if sign > 0.0 else -x1
             out.append(off + x1[:n_out])
         return np.concatenate(out)
 
