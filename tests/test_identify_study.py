@@ -206,3 +206,6 @@ def test_fresh_lugre_coverage_all_fields():
     Coverage over 10 logs is not shown. docs/axis.md, "Fourth session"."""
     inside = _fresh_coverage("lugre", range(10))
     assert np.mean([x for v in inside.values() for x in v]) >= 0.90
+
+
+FIFTH_SEED = 3907   # issue 25's fifth session: named before any run (designed starts, bootstrap on the point fit's path)
