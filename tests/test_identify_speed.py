@@ -78,3 +78,21 @@ def test_designed_starts_recover_a_noise_free_two_mass_log():
     for k, v in truth.items():
         assert fit.estimates[k] == pytest.approx(v, rel=1e-4), k
     assert "designed points" in fit.method
+
+
+def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop():
+    """plant.lugre.move_loop against the Python loop over the family's step (and no mirror
+    sharing: the path before issue 25's fifth session), at the truth, a stiffer and slower
+    bristle point, one of long slides (k̄c small) and one where the plant leaves ok (both None)."""
+    model, params = _model("lugre")
+    old = _Model(model.log, "lugre", model.base)
+    old.share_mirror = old.compiled_moves = False
+    for point in ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
+                  [1.0, 0.6, 0.8, 0.011, 0.002, 3e5]):
+        z = np.log(point)
+        a, b = model.predict(z), old.predict(z)
+        assert a is not None and b is not None
+        assert np.array_equal(a, b)
+    z = np.log([0.3, 1.2, 0.8, 0.011, 0.002, 3e5])     # wanders past 1 rad
+    assert model.predict(z) is None and old.predict(z) is None
+    assert len(model._prepared) > 0      # the compiled path ran

@@ -49,6 +49,8 @@ from plant.drive import DriveType
 from plant.identification.families import DEFAULT_BUDGET_S, FAMILY_FREE, NOT_IDENTIFIED_RULE
 from plant.identification.log import AxisLog
 from plant.identification.simulate import axis_params
+from plant.lugre import move_loop
+from plant.lugre.integrate import TOLERANCES as lugre_tolerances
 from plant.protocol import get_family
 from plant.state import SimOptions, Status
 
@@ -165,6 +167,7 @@ class _Model:
 
     deadline: float = math.inf
     share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
+    compiled_moves: bool = True   # lugre: a move in one compiled call (False: the Python loop, for tests)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -200,6 +203,7 @@ class _Model:
             self.mirror.append((flipped, -1.0) if first < 0.0 else (key, 1.0))
         self.groups = np.concatenate([[g] * len(i) for g, i in enumerate(self.index)])
         self.rows = np.concatenate(self.index)
+        self._prepared: dict = {}     # lugre: a move's commands as its compiled loop reads them
 
     def params(self, z: np.ndarray):
         v = np.exp(z)
@@ -240,6 +244,19 @@ class _Model:
             if time.process_time() > self.deadline:
                 raise _OutOfTime
             state = fam.initial_state(p, 0.0)
+            if lugre and streams is None and self.compiled_moves and p.disturbance_torque_std == 0.0:
+                # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop)
+                if g not in self._prepared:
+                    self._prepared[g] = move_loop.prepare(self.log.commands[s:e])
+                x1 = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring, _SETTLED)
+                if x1 is None:
+                    return None
+                done[key] = x1
+                if symmetric:
+                    canon, sign = self.mirror[g]
+                    done[canon] = x1 if sign > 0.0 else -x1
+                out.append(off + x1[:n_out])
+                continue
             noise = None if streams is None else streams(g)
             x1 = np.empty(e - s)
             k = 0
