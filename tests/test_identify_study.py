@@ -160,12 +160,12 @@ def test_auto_picks_the_generating_family():
 FRESH_SEED = 7207   # the coverage study of issue 25's fourth session (dev seed 5150; never used while writing)
 
 
-def _fresh_coverage(family: str, cases) -> dict[str, list[bool]]:
+def _fresh_coverage(family: str, cases, seed: int = FRESH_SEED) -> dict[str, list[bool]]:
     """Per fitted field, inside its stated 95 % interval on each of ``cases`` (:func:`coverage_case`
-    at :data:`FRESH_SEED`, 10-replicate bootstrap); relative errors and CPU printed."""
+    at ``seed``, 10-replicate bootstrap); relative errors and CPU printed."""
     inside: dict[str, list[bool]] = {}
     for case in cases:
-        res, cpu = coverage_case(family, case, seed=FRESH_SEED, bootstrap=10)
+        res, cpu = coverage_case(family, case, seed=seed, bootstrap=10)
         print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
         for k, (v, _, (lo, hi), _) in res.items():
             inside.setdefault(k, []).append(lo <= v <= hi)
@@ -211,3 +211,44 @@ def test_fresh_lugre_coverage_all_fields():
     Coverage over 10 logs is not shown. docs/axis.md, "Fourth session"."""
     inside = _fresh_coverage("lugre", range(10))
     assert np.mean([x for v in inside.values() for x in v]) >= 0.90
+
+
+FIFTH_SEED = 3907   # issue 25's fifth session: named before any run (designed starts, bootstrap on the point fit's path)
+LUGRE_CASES = TWO_MASS_CASES = 5
+
+
+def _fifth_coverage(family: str, cases) -> float:
+    """Share of the fitted fields inside their stated 95 % intervals over ``cases`` at
+    :data:`FIFTH_SEED` (:func:`coverage_case`, 10-replicate bootstrap; per case printed)."""
+    inside = _fresh_coverage(family, cases, FIFTH_SEED)
+    return float(np.mean([x for v in inside.values() for x in v]))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 16 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-4: 24 of 30 (80 %) — "
+                   "k̄c 4/5, k̄s 4/5, J 4/5, τ3 5/5, v_s 2/5, σ0 5/5; below 90 %")
+def test_fifth_lugre_coverage_all_fields():
+    """Random lugre axes at the fresh seed 3907 (draws from ``default_rng([3907, 2])``; named before
+    any run): every fitted field inside its stated 95 % interval in ≥ 90 % of the cases, with the
+    designed starts and the bootstrap on the point fit's path (issue 25's fifth session).
+    Measured on cases 0–4: 24 of 30 inside (80 %), a miss: case 3 ran past the 300-s CPU budget
+    (302 s) with intervals 0–7 % wide, 2 of 6 inside; the other four 22 of 24 (v_s −76 %, −69 % out).
+    CPU per log 77, 327, 137, 302, 129 s: the 60-s goal missed (docs/axis.md, "Fifth session")."""
+    assert _fifth_coverage("lugre", range(LUGRE_CASES)) >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 12 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-4: 18 of 25 (72 %) — "
+                   "k̄c, k̄s, J, τ3 4/5 each, k_sh 2/5 (estimates +52 % to +1013 %, fitted too stiff); below 90 %")
+def test_fifth_two_mass_coverage_all_fields():
+    """Random two-mass axes at the fresh seed 3907 (draws from ``default_rng([3907, 3])``; named
+    before any run): every fitted field inside its stated 95 % interval in ≥ 90 % of the cases,
+    with the designed starts and the bootstrap on the point fit's path (issue 25's fifth session).
+    Measured on cases 0–4: 18 of 25 inside (72 %), a miss: the shaft stiffness is fitted 1.5–11 times
+    too stiff and its bootstrap, simulated at that stiff estimate, does not see softer shafts; case 1
+    ran 334 CPU s, past the 300-s budget, with intervals 1–7 % wide: 1 of 5 inside (which fallback
+    the budget rule took was not recorded).
+    CPU per log 19, 334, 19, 50, 248 s (docs/axis.md, "Fifth session")."""
+    assert _fifth_coverage("two-mass", range(TWO_MASS_CASES)) >= 0.90
