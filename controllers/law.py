@@ -38,6 +38,8 @@ back.
 
 from __future__ import annotations
 
+import itertools
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,7 +55,8 @@ from plant.drive import DriveCommand, DriveType
 from plant.law_step import STEP_SIGNATURE, STEP_TYPE
 from plant.linear_drive import square_wave_segments
 
-__all__ = ["LinearLaw", "CompiledLaw", "law_command", "StepAddress", "step_address", "STEP_SIGNATURE"]
+__all__ = ["LinearLaw", "CompiledLaw", "law_command", "StepAddress", "step_address", "register_owner", "owner_of",
+           "STEP_SIGNATURE"]
 
 
 @dataclass(frozen=True)
@@ -206,3 +209,21 @@ def step_address(dispatcher):
     dispatcher itself when this numba has no wrapper-address helper (the compiled loop then types
     it at every entry: same rows, ~50 µs more per hand-back)."""
     return dispatcher if _get_wrapper_address is None else StepAddress(dispatcher)
+
+
+_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
+_KEYS = itertools.count(1)       # next() is atomic under the GIL: threads get distinct keys
+
+
+def register_owner(controller) -> float:
+    """A key (exact in float64) under which :func:`owner_of` finds ``controller`` (held weakly):
+    what a compiled step keeps in ``p`` to run the controller's Python sample from inside the
+    loop through numba's ``objmode`` (solnic's idle steps, oracle-pulse's firing samples)."""
+    key = next(_KEYS)
+    _OWNERS[key] = controller
+    return float(key)
+
+
+def owner_of(key: float):
+    """The controller registered under ``key`` (:func:`register_owner`), or None when it is gone."""
+    return _OWNERS.get(int(key))

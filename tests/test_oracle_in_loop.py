@@ -122,3 +122,18 @@ def test_a_compiled_step_reads_the_truth_only_when_privileged():
     for v in x1:
         acc += v
     assert bound._s[3] == acc and acc != 0.0
+
+
+def test_firing_samples_run_inside_the_loop(monkeypatch):
+    """A sample that may fire runs the Python step from inside the compiled loop (objmode): the
+    loop is entered once for the first such sample's hand-back (the runner hands over the true
+    plant) and once more, not once per pulse — and the row is still the Python loop's."""
+    import plant.multimode.law_loop as mm
+
+    entries = []
+    real = mm.run_law_chunks
+    monkeypatch.setattr(mm, "run_law_chunks", lambda *a, **k: entries.append(1) or real(*a, **k))
+    python, _ = _run(make_controller("oracle-pulse", band=0.5e-6), "thesis", 3, compiled=False)
+    fast, _ = _run(make_controller("oracle-pulse", band=0.5e-6), "thesis", 3)
+    assert _row(fast) == _row(python) and python.summary["pulses"] >= 20
+    assert len(entries) == 2, len(entries)

@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Controller, register
-from controllers.law import CompiledLaw
+from controllers.law import CompiledLaw, register_owner
 from plant.drive import DriveCommand, DriveType
 from plant.params import PlantParams
 from controllers.models.acker import max_on_time
@@ -243,7 +243,7 @@ class SolnicController(Controller):
         p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
         p[_idle.TAU4:_idle.Q44C + 1] = _idle.mode2_coefficients(f.tau4, f.sigma4_sq)
         p[_idle.EVAL_SAMPLES], p[_idle.OVERSHOOT] = o.evaluation_samples, o.overshoot_factor
-        owner = _idle.register_owner(self) if self.python_in_loop else 0.0
+        owner = register_owner(self) if self.python_in_loop else 0.0
         if not joint:
             p[_idle.OWNER] = owner
         if joint:

@@ -36,7 +36,7 @@ the last sample's plan by its key) and solves only the mean's backward equation 
 recorded (Python) path, tests/test_solnic_idle_step.py.
 
 A sample handed back need not leave the loop: when the controller registers itself
-(:func:`register_owner`, its key in ``p``), the step restores the sample's entry state (saved
+(:func:`controllers.law.register_owner`, its key in ``p``), the step restores the sample's entry state (saved
 behind the layout at each entry) and calls the controller's Python sample from inside the loop
 through numba's ``objmode`` (:func:`_python_sample`, ~1–2 µs), which returns the command's segments
 — the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
@@ -46,16 +46,14 @@ interval (:meth:`SolnicController._sample_in_loop
 
 from __future__ import annotations
 
-import itertools
 import math
-import weakref
 
 from numba import njit, objmode
 
 from controllers.solnic.filter_kernels import joint_predict, joint_update
 from controllers.solnic.noise_model import _GL_X, _GL_W, _coasting_moments, _pulse_bias
 from controllers.solnic.predictor import _conditional_kernel
-from controllers.law import StepAddress, step_address
+from controllers.law import StepAddress, owner_of, step_address
 
 __all__ = ["idle_step", "idle_step_address", "mode2_coefficients", "N_STATE", "N_PARAMS"]
 
@@ -70,23 +68,11 @@ TS, R, TAU4, B4, Q11C, Q14C, Q44C, EVAL_SAMPLES, OVERSHOOT, OWNER = range(10)
 N_PARAMS = 10
 
 
-_OWNERS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDictionary()
-_KEYS = itertools.count(1)       # next() is atomic under the GIL: threads get distinct keys
-
-
-def register_owner(controller) -> float:
-    """A key (exact in float64) under which :func:`_python_sample` finds ``controller`` (held
-    weakly): its ``_sample_in_loop(y, offs, levs)`` does a sample the step cannot."""
-    key = next(_KEYS)
-    _OWNERS[key] = controller
-    return float(key)
-
-
 def _python_sample(key, y, offs, levs):
     """Called from a compiled step (numba ``objmode``): the Python sample of the controller
     registered under ``key``, its command in (offs, levs); returns the segment count, or 0 to
     hand the sample back after all."""
-    owner = _OWNERS.get(int(key))
+    owner = owner_of(key)
     return 0 if owner is None else owner._sample_in_loop(y, offs, levs)
 
 
