@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from plant.identification import ExperimentOptions, design_experiment, simulate_log
@@ -79,19 +80,25 @@ def test_pulse_spread_matches_the_plants_own_noisy_log():
     assert abs(F[:, -1].mean() - np.mean(finals)) < 3 * np.std(finals) / math.sqrt(10)
 
 
-def test_feature_fit_recovers_a_stribeck_axis_from_a_perturbed_start():
-    """On a noise-free stribeck log (σ1 = 1e-9), the feature fit started 20 % off (k̄c, J, τ3,
-    v_s) lands within 1 % of the truth on k̄c, k̄s, J, τ3."""
+@pytest.fixture(scope="module")
+def stribeck_log():
+    """A noise-free stribeck log (σ1 = 1e-9, one repeat of the plan) of a known axis: (log, base,
+    fold-0 training moves, σ̂1, the truth's parameter vector in logarithms)."""
     plan = design_experiment(ExperimentOptions(repeats=1))
-    fam = get_family("stribeck")
-    p = fam.Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, stribeck_velocity=0.02, viscous=1.0,
-                             friction_noise_psd=0.0, correlated_friction_std=0.0, measurement_noise_std=1e-9)
+    p = get_family("stribeck").Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, stribeck_velocity=0.02,
+                                                viscous=1.0, friction_noise_psd=0.0, correlated_friction_std=0.0,
+                                                measurement_noise_std=1e-9)
     log, _ = simulate_log(plan, "stribeck", p, 9)
     base = p.replace(u_max=max(float(log.u_max), p.u_max), sample_period=log.sample_period)
     train = list(np.flatnonzero(_folds(log) == 0))
-    s1 = _sigma1(log, moves(log))[0]
-    fm = _FeatureModel(log, "stribeck", base, train)
     truth = np.log([1.2, 0.6, 0.6, p.motor_time_constant, 0.02, 1.0])
+    return log, base, train, _sigma1(log, moves(log))[0], truth
+
+def test_feature_fit_recovers_a_stribeck_axis_from_a_perturbed_start(stribeck_log):
+    """On a noise-free stribeck log (σ1 = 1e-9), the feature fit started 20 % off (k̄c, J, τ3,
+    v_s) lands within 1 % of the truth on k̄c, k̄s, J, τ3."""
+    log, base, train, s1, truth = stribeck_log
+    fm = _FeatureModel(log, "stribeck", base, train)
     start = truth + np.log([1.2, 1.0, 0.8, 1.2, 1.2, 1.0])
     z, _ = _feature_fit(fm, [start], fm.frame(start, s1, 0), s1, 0, budget_s=60.0)
     got = np.exp(z)
@@ -191,22 +198,14 @@ def test_signed_rank_statistic_is_wilcoxons():
     assert w3 < -2 * sd3
 
 
-def test_feature_fit_with_groups_keeps_the_first_round_end_of_least_cost():
+def test_feature_fit_with_groups_keeps_the_first_round_end_of_least_cost(stribeck_log):
     """Groups of starts (:func:`_feature_fit`, ``groups``): the first round runs from each group's
     best start and the end of least cost goes on. On a noise-free stribeck log (σ1 = 1e-9), a
     group at the nesting point (v_s = 0.1 mrad/s, b = 1e-3; the factor-30 box keeps v_s ≤ 3 mrad/s,
     so alone it cannot reach the truth's 20 mrad/s) next to a group 20 % off: the result is the
     truth within 1 % on k̄c, k̄s, J, τ3 (the nesting group first)."""
-    plan = design_experiment(ExperimentOptions(repeats=1))
-    fam = get_family("stribeck")
-    p = fam.Params().replace(coulomb=1.2, stiction=1.8, inertia=0.6, stribeck_velocity=0.02, viscous=1.0,
-                             friction_noise_psd=0.0, correlated_friction_std=0.0, measurement_noise_std=1e-9)
-    log, _ = simulate_log(plan, "stribeck", p, 9)
-    base = p.replace(u_max=max(float(log.u_max), p.u_max), sample_period=log.sample_period)
-    train = list(np.flatnonzero(_folds(log) == 0))
-    s1 = _sigma1(log, moves(log))[0]
+    log, base, train, s1, truth = stribeck_log
     fm = _FeatureModel(log, "stribeck", base, train)
-    truth = np.log([1.2, 0.6, 0.6, p.motor_time_constant, 0.02, 1.0])
     near = truth + np.log([1.2, 1.0, 0.8, 1.2, 1.2, 1.0])
     nested = np.concatenate([near[:4], np.log([1e-4, 1e-3])])
     frame = fm.frame(near, s1, 0)

@@ -332,8 +332,7 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             thh = th * h
             # explicit part: u + (1−θ)h(L u + f)
             ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
-            for i in range(1, n_x):
-                r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
+            _u1_rhs(r1, u1, x, n_x, D2, e, ao, bo, thh)
             an, bn = D - 0.5 * mu_n / dx, D + 0.5 * mu_n / dx
             lo_i, di_i, up_i = -th * h * an, 1.0 + 2 * th * h * D, -th * h * bn      # interior rows
             if reflect:                               # u_x(0) = 0: ghost u[-1] = u[1]
@@ -343,12 +342,7 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
                 r1[0] = 0.0
                 di_0, up_0 = 1.0, 0.0
             # x = X: no absorption before T, Gaussian moments (7); its row is (0, 1, 0)
-            M += 0.5 * h * (mu_o + mu_n)
-            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
-            w = T - t_n
-            y, vz = X + M, s2 * w
-            EI = X * w + K
-            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+            M, K, w, y, vz, EI, EP1 = _top_row(M, K, h, mu_o, mu_n, T, t_o, t_n, X, s2, a)
             r1[n_x] = EI + EP1
             # Thomas: factor while eliminating u1
             cp[0] = up_0 / di_0
@@ -368,6 +362,27 @@ def _absorbed_moments(al, U, tau, s2, ks, kc, dt_u, t_b, t_cz, n_x, n_abs, n_ref
             u1[0] -= cp[0] * u1[1]
             mu_o = mu_n
     return u1[0], math.nan
+
+
+@njit(cache=True)
+def _u1_rhs(r1, u1, x, n_x, D2, e, ao, bo, thh):
+    """The interior right-hand side of u1's time step: u1 + (1−θ)h(L u1 + x) + θh·x."""
+    for i in range(1, n_x):
+        r1[i] = u1[i] + e * (ao * u1[i - 1] - D2 * u1[i] + bo * u1[i + 1] + x[i]) + thh * x[i]
+
+
+@njit(cache=True)
+def _top_row(M, K, h, mu_o, mu_n, T, t_o, t_n, X, s2, a):
+    """The x = X row's Gaussian moments (7) at the step's new time t_n (no absorption before T):
+    the trapezoid sums M = ∫μ, K = ∫μ(T − r)dr advanced by one step, then (M, K, w = T − t_n,
+    y = X + M, v = σ²w, E∫x, E[P1])."""
+    M += 0.5 * h * (mu_o + mu_n)
+    K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
+    w = T - t_n
+    y, vz = X + M, s2 * w
+    EI = X * w + K
+    EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+    return M, K, w, y, vz, EI, EP1
 
 
 @njit(cache=True)
@@ -425,9 +440,7 @@ def _both_moments(al, U, tau, s2, kc, dt_u, x3_off, a, T, t_ks, t_b, X, dx, D, c
             e = (1.0 - th) * h
             thh = th * h
             ao, bo = D - 0.5 * mu_o / dx, D + 0.5 * mu_o / dx
-            for i in range(1, n_x):
-                r1[i] = (u1[j, i] + e * (ao * u1[j, i - 1] - D2 * u1[j, i] + bo * u1[j, i + 1] + x[i])
-                         + thh * x[i])
+            _u1_rhs(r1, u1[j], x, n_x, D2, e, ao, bo, thh)
             lag = j > 0
             q = j - 1                                 # u2's step in this one
             if lag:
@@ -441,12 +454,7 @@ def _both_moments(al, U, tau, s2, kc, dt_u, x3_off, a, T, t_ks, t_b, X, dx, D, c
             else:
                 r1[0] = 0.0
                 di_0, up_0 = 1.0, 0.0
-            M += 0.5 * h * (mu_o + mu_n)
-            K += 0.5 * h * (mu_o * (T - t_o) + mu_n * (T - t_n))
-            w = T - t_n
-            y, vz = X + M, s2 * w
-            EI = X * w + K
-            EP1 = y * y / (2 * a) + s2 * y / (2 * a * a) + vz / (2 * a)
+            M, K, w, y, vz, EI, EP1 = _top_row(M, K, h, mu_o, mu_n, T, t_o, t_n, X, s2, a)
             r1[n_x] = EI + EP1
             Ez2 = y * y + vz
             Ez3 = y * (y * y + 3 * vz)
