@@ -163,8 +163,9 @@ def identify_command(
     bootstrap: int = typer.Option(20, "--bootstrap", help="Parametric-bootstrap replicates (0: Gauss-Newton only)."),
     seed: int = typer.Option(0, "--seed", help="Root seed of the bootstrap."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget",
-                                 help="CPU seconds for the final fit (point fit + bootstrap); when hit, the output "
-                                      "says what was cut short."),
+                                 help="Nominal CPU seconds of simulation work for the final fit (point fit + "
+                                      "bootstrap), counted, so the fit is the same on every machine; "
+                                      "when hit, the output says what was cut short."),
 ) -> None:
     """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
     from plant.identification.fit import choose_family, fit_log
@@ -177,7 +178,7 @@ def identify_command(
     if not (bootstrap == 0 or 5 <= bootstrap <= 1000):
         raise UserError(f"--bootstrap: must be 0 or in [5, 1000], got {bootstrap}")
     if not (math.isfinite(budget) and budget > 0):
-        raise UserError(f"--budget: must be > 0 CPU seconds, got {budget}")
+        raise UserError(f"--budget: must be > 0 nominal CPU seconds, got {budget}")
     try:
         log = read_log(log_path)
     except LogError as exc:

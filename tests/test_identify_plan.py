@@ -90,11 +90,39 @@ def test_budget_cuts_the_fit_short_and_says_so(short_log):
     same = fit_log(short_log, "multimode", bootstrap=0, budget_s=1e6)
     assert same.estimates == ref.estimates and not ref.budget_note and not same.budget_note
     cut = fit_log(short_log, "multimode", bootstrap=20, budget_s=1e-3)
-    assert "CPU budget 0.001 s hit in the point fit" in cut.budget_note and "no bootstrap" in cut.budget_note
+    assert "work budget 0.001 s hit in the point fit" in cut.budget_note and "no bootstrap" in cut.budget_note
     assert cut.budget_note in cut.method and "cluster-robust" in cut.method
     assert all(math.isfinite(v) for v in cut.estimates.values())
     with pytest.raises(ValueError, match="budget_s"):
         fit_log(short_log, "multimode", bootstrap=0, budget_s=0)
+
+
+def test_the_budget_counts_work_not_the_cpu_clock(short_log, monkeypatch):
+    """The budget is counted simulation work (fit._WorkClock), so a fit it cuts short stops at the
+    same point on a fast machine and a loaded one: with the CPU clock racing 1000 s per reading,
+    a fit whose budget runs out half-way gives the same estimates and note, bit for bit (a budget
+    on ``time.process_time`` stopped that fit at its first move)."""
+    import time
+
+    from plant.identification import fit as fit_module
+
+    spent = []
+    add = fit_module._WorkClock.add
+
+    def counting(self, family, *work):
+        add(self, family, *work)
+        spent.append(self.spent)
+    monkeypatch.setattr(fit_module._WorkClock, "add", counting)
+    full = fit_log(short_log, "multimode", bootstrap=0)
+    assert not full.budget_note and max(spent) > 0
+    half = max(spent) / 2
+    monkeypatch.setattr(fit_module._WorkClock, "add", add)
+    cut = fit_log(short_log, "multimode", bootstrap=0, budget_s=half)
+    assert "budget" in cut.budget_note and cut.estimates != full.estimates
+    clock = iter(range(10**9))
+    monkeypatch.setattr(time, "process_time", lambda: 1000.0 * next(clock))
+    loaded = fit_log(short_log, "multimode", bootstrap=0, budget_s=half)
+    assert loaded.estimates == cut.estimates and loaded.budget_note == cut.budget_note
 
 
 def test_identify_prints_the_budget_and_the_identified_column(short_log, tmp_path):
@@ -102,10 +130,10 @@ def test_identify_prints_the_budget_and_the_identified_column(short_log, tmp_pat
     r = CliRunner().invoke(app, ["identify", str(tmp_path / "log.csv"), "--out", str(tmp_path / "a.toml"),
                                  "--bootstrap", "0", "--budget", "0.001"])
     assert r.exit_code == 0, r.stderr
-    assert "budget: CPU budget 0.001 s hit" in " ".join(r.stdout.split())
+    assert "budget: work budget 0.001 s hit" in " ".join(r.stdout.split())
     assert "identified" in r.stdout
     page = (tmp_path / "a.html").read_text()
-    assert "<th>identified</th>" in page and "CPU budget 0.001 s hit" in page
+    assert "<th>identified</th>" in page and "work budget 0.001 s hit" in page
     bad = CliRunner().invoke(app, ["identify", str(tmp_path / "log.csv"), "--budget", "-1"])
     assert bad.exit_code == 2 and "--budget" in bad.stderr
 

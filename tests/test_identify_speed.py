@@ -96,3 +96,28 @@ def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop():
     z = np.log([0.3, 1.2, 0.8, 0.011, 0.002, 3e5])     # wanders past 1 rad
     assert model.predict(z) is None and old.predict(z) is None
     assert len(model._prepared) > 0      # the compiled path ran
+
+
+def test_compiled_lugre_moves_count_the_work_the_python_loop_counts():
+    """The work budget's counts (samples, events, integrator steps: fit._WorkClock) of a compiled
+    move equal the Python loop's, summed from each step's IntervalResult, so a budget stops a fit
+    at the same point on either path — including a move where the plant leaves ok."""
+    model, _ = _model("lugre")
+    python = _Model(model.log, "lugre", model.base)
+    python.compiled_moves = False
+    from plant.identification.fit import _WorkClock
+
+    class Recording(_WorkClock):
+        __slots__ = ("seen",)
+
+        def add(self, family, *work):
+            self.seen.append(work)
+    for m in (model, python):
+        m.clock = Recording()
+        m.clock.seen = []
+    for point in ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.3, 1.2, 0.8, 0.011, 0.002, 3e5]):
+        model.predict(np.log(point))
+        python.predict(np.log(point))
+    compiled, loop = model.clock.seen, python.clock.seen
+    assert compiled == loop and len(compiled) > 10
+    assert all(s > 0 and sub > s for s, _, sub in compiled)     # LuGre: several integrator steps per sample

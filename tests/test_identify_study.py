@@ -146,8 +146,9 @@ def test_auto_picks_the_generating_family():
     in ≥ 90 % of the 8 logs (the must-show of issue 25 asks ≥ 10 logs per family; docs/axis.md has
     the confusion matrix and the CPU per log). Measured: 5 of 8, CPU 47–151 s per log (median 68 s;
     one process per log, loaded machine). The fourth session's rule: 3 of 7 on seed 6262; the
-    third session's output-error rule: 3 of 8 on seed 6161. The fold fits stop at CPU budgets, so a
-    rerun on another machine load may differ by a fit."""
+    third session's output-error rule: 3 of 8 on seed 6161. Measured with the fold fits stopping at
+    CPU-clock budgets (a rerun under another load could differ by a fit); since the seventh session
+    the budgets count work (docs/axis.md, "Budgets"), so a rerun gives the same picks anywhere."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):

@@ -14,7 +14,7 @@ fit (floored at σ̂1²). **Uncertainty: a parametric bootstrap** (:func:`fit_lo
 from the fit (Table 2-1 process noise, x5 drawn, σ̂1), each refitted by the final pass warm-started
 at the estimate (:func:`_refit`; lugre and two-mass: fitted by the point fit's own path from the
 real log's winning designed start, :func:`_multi_start`); the 95 % interval is bias-corrected, (estimate − mean deviation)
-± t(0.975, B−1)·sd·√(1+1/B). Without it (``bootstrap=0``, or the CPU budget hit early) the
+± t(0.975, B−1)·sd·√(1+1/B). Without it (``bootstrap=0``, or the work budget hit early) the
 **cluster-robust Gauss–Newton covariance** (a sandwich over moves): Cov = A⁻¹·B·A⁻¹·G/(G−1),
 A = JᵀJ, B = Σ_m (J_mᵀ r_m)(J_mᵀ r_m)ᵀ of the weighted residuals r and Jacobian J at the optimum,
 G moves; mapped to the physical parameters by the delta method; 95 % intervals ± t(0.975, G − p)·sd.
@@ -91,7 +91,7 @@ class AxisFit:
         Wall-clock time of the fit.
     method : str
     budget_note : str
-        Empty, or what the CPU budget (``fit_log(budget_s=…)``) cut short.
+        Empty, or what the work budget (``fit_log(budget_s=…)``, :class:`_WorkClock`) cut short.
     """
 
     family: str
@@ -157,13 +157,42 @@ def _sigma1(log: AxisLog, segs: list[tuple[int, int]]) -> tuple[float, int]:
 
 
 class _OutOfTime(Exception):
-    """A fold fit ran past its CPU budget (:data:`_FOLD_BUDGET_S`)."""
+    """A fit ran past its work budget (:class:`_WorkClock`)."""
+
+
+# Nominal CPU seconds per unit of simulation work (:class:`_WorkClock`), per family: (per sample
+# stepped, per plant event, per integrator step or Gaussian sub-step) of the noise-free model.
+# Fitted once (non-negative least squares on relative error) to the CPU time of 14 273 noise-free
+# predictions inside choose_family on three dev logs (lugre, two-mass, stribeck, seed 515), on
+# the loaded 2-core machine the studies ran on (2026-11-27, docs/axis.md "Budgets"): each
+# prediction's CPU within 0.74–1.78 × its price (5th–95th percentile; lugre 0.95–1.08).
+# Constants: a budget is the same count of work on every machine and under any load.
+_UNIT_COST_S = {"multimode": (2.2e-6, 48e-6, 0.0), "stribeck": (10e-6, 22e-6, 0.065e-6),
+                "lugre": (0.0, 16e-6, 0.27e-6), "two-mass": (4.0e-6, 88e-6, 0.0)}
+
+
+class _WorkClock:
+    """The work of a fit's noise-free simulations in nominal CPU seconds: samples stepped, plant
+    events and integrator steps (or Gaussian sub-steps) counted, times the family's
+    :data:`_UNIT_COST_S`. A budget on this clock stops a fit at the same point on every machine and
+    under any load (a ``time.process_time`` deadline did not: the family ``auto`` picked could
+    depend on the machine's load). Several models (a fit, its nested multimode fit, the bootstrap's
+    refits) may share one clock."""
+
+    __slots__ = ("spent",)
+
+    def __init__(self) -> None:
+        self.spent = 0.0
+
+    def add(self, family: str, samples: int, events: int, substeps: int) -> None:
+        a, b, c = _UNIT_COST_S[family]
+        self.spent += a * samples + b * events + c * substeps
 
 
 class _Model:
-    """The log's moves, simulated noise-free for a parameter vector. With a ``deadline``
-    (``time.process_time``), :meth:`residual` remembers the best point seen and raises
-    :class:`_OutOfTime` once past it."""
+    """The log's moves, simulated noise-free for a parameter vector. With a ``deadline`` (on the
+    model's :class:`_WorkClock`, ``clock.spent``), :meth:`residual` remembers the best point seen
+    and :meth:`predict` raises :class:`_OutOfTime` once past it."""
 
     deadline: float = math.inf
     share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
@@ -204,6 +233,7 @@ class _Model:
         self.groups = np.concatenate([[g] * len(i) for g, i in enumerate(self.index)])
         self.rows = np.concatenate(self.index)
         self._prepared: dict = {}     # lugre: a move's commands as its compiled loop reads them
+        self.clock = _WorkClock()     # a fit may replace it by a clock its other models share
 
     def params(self, z: np.ndarray):
         v = np.exp(z)
@@ -241,14 +271,16 @@ class _Model:
                     done[key] = x1
                     out.append(off + x1[:n_out])
                     continue
-            if time.process_time() > self.deadline:
+            if self.clock.spent > self.deadline:
                 raise _OutOfTime
             state = fam.initial_state(p, 0.0)
             if lugre and streams is None and self.compiled_moves and p.disturbance_torque_std == 0.0:
                 # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop)
                 if g not in self._prepared:
                     self._prepared[g] = move_loop.prepare(self.log.commands[s:e])
-                x1 = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring, _SETTLED)
+                x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
+                                               _SETTLED)
+                self.clock.add(self.family, *work)
                 if x1 is None:
                     return None
                 done[key] = x1
@@ -259,10 +291,13 @@ class _Model:
                 continue
             noise = None if streams is None else streams(g)
             x1 = np.empty(e - s)
-            k = 0
+            k = n_ev = n_sub = 0
             while k < e - s:
                 step = fam.step(state, self.log.commands[s + k], p, noise, opts)
+                n_ev += step.n_events
+                n_sub += step.n_substeps
                 if step.status is not Status.OK:
+                    self.clock.add(self.family, k + 1, n_ev, n_sub)
                     return None
                 state = step.state
                 x = state.x
@@ -279,6 +314,7 @@ class _Model:
                 elif state.mode == 2 and not state.flyback and abs(x[2]) <= p.stiction and x[1] == 0.0:
                     x1[k:] = x[0]
                     break
+            self.clock.add(self.family, k, n_ev, n_sub)
             if streams is None:
                 done[key] = x1
                 if symmetric:
@@ -357,7 +393,7 @@ def _multi_start(model: _Model, sigma1: float, box, deadline: float,
     (seed 5150: τ3 → 0, σ0 at its bound), and two-mass fits stopped in another basin (seed 7207)."""
     log, family, base = model.log, model.family, model.base
     mm_base = get_family("multimode").Params().replace(u_max=base.u_max, sample_period=base.sample_period)
-    zm, mm, *_ = _point_fit(log, "multimode", mm_base, deadline=deadline)
+    zm, mm, *_ = _point_fit(log, "multimode", mm_base, deadline=deadline, clock=model.clock)
     scale = mm.scale
     names = FAMILY_FREE[family]
     axes = [list(_MULTI_START[family][n]) for n in names]
@@ -393,15 +429,17 @@ def _multi_start(model: _Model, sigma1: float, box, deadline: float,
 
 
 def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, deadline: float = math.inf,
-               points=None):
+               points=None, clock: _WorkClock | None = None):
     """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian, hit).
 
-    ``deadline`` (``time.process_time``): past it, the best point of the current pass stands
-    and ``hit`` is True (the Jacobian is then a finite-difference one at that point). The families
+    ``deadline`` (on ``clock``, the model's own :class:`_WorkClock` when None): past it, the best
+    point of the current pass stands and ``hit`` is True (the Jacobian is then a finite-difference one at that point). The families
     of :data:`_MULTI_START` start from :func:`_multi_start` (its pass replaces the two first
     passes; ``points``: its starts, see there); the others from :func:`_start`, unweighted,
     reweighted twice."""
     model = _Model(log, family, base)
+    if clock is not None:
+        model.clock = clock
     sigma1, dof = _sigma1(log, model.segs)
     sigma1 = max(sigma1, 1e-12)   # a noise-free log: residuals in units of 1e-12 rad
     multi = z0 is None and family in _MULTI_START
@@ -513,10 +551,12 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
     seed : int
         Root of the bootstrap's ``SeedSequence``.
     budget_s : float
-        CPU seconds (``time.process_time``, this process) for the whole fit. Past it: during the
-        point fit, its best point so far stands; during the bootstrap, the replicates done so far
-        give the sd (at least 5), else the cluster-robust covariance does. Either is stated in
-        ``budget_note`` and ``method``.
+        Nominal CPU seconds of simulation work for the whole fit (:class:`_WorkClock`: the noise-free
+        simulations' samples, events and integrator steps counted and priced per family, so the
+        same log gives the same fit on every machine and under any load; the CPU time it takes
+        varies with the machine). Past it: during the point fit, its best point so far stands;
+        during the bootstrap, the replicates done so far give the sd (at least 5), else the
+        cluster-robust covariance does. Either is stated in ``budget_note`` and ``method``.
 
     Raises
     ------
@@ -532,16 +572,17 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
     if not (isinstance(bootstrap, int) and (bootstrap == 0 or 5 <= bootstrap <= 1000)):
         raise ValueError(f"bootstrap must be 0 or an integer in [5, 1000], got {bootstrap!r}")
     if not (isinstance(budget_s, (int, float)) and budget_s > 0):
-        raise ValueError(f"budget_s must be > 0 CPU seconds, got {budget_s!r}")
+        raise ValueError(f"budget_s must be > 0 nominal CPU seconds, got {budget_s!r}")
     t0 = time.perf_counter()
-    deadline = time.process_time() + budget_s
+    clock = _WorkClock()      # one budget for the point fit and the bootstrap's refits
+    deadline = budget_s
     notes = []
     fam = get_family(family)
     u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max), fam.Params().u_max)
     base = (base or fam.Params()).replace(u_max=u_max, sample_period=log.sample_period)
-    z, model, sigma1, dof, r, jac, hit = _point_fit(log, family, base, deadline=deadline)
+    z, model, sigma1, dof, r, jac, hit = _point_fit(log, family, base, deadline=deadline, clock=clock)
     if hit:
-        notes.append(f"CPU budget {budget_s:g} s hit in the point fit: its best point so far stands (not converged)"
+        notes.append(f"work budget {budget_s:g} s hit in the point fit: its best point so far stands (not converged)"
                      + ("; no bootstrap, the cluster-robust covariance (optimistic) instead" if bootstrap else ""))
     names = model.names
     values, D = _physical(z)
@@ -555,7 +596,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         at_bound = (z <= model.box[0] + 1e-6) | (z >= model.box[1] - 1e-6)
         failed = stuck = 0
         for child in np.random.SeedSequence(seed).spawn(bootstrap):
-            if time.process_time() > deadline:
+            if clock.spent > deadline:
                 break
             try:
                 blog, truth = simulate_log(plan, family, fitted, int(child.generate_state(1)[0]))
@@ -572,12 +613,12 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
                 # estimate's) is then not seen (the intervals shrank to 2–3 % and missed)
                 zs = z
                 zb, _, _, _, _, _, bhit = _point_fit(blog, family, base, deadline=deadline,
-                                                     points=[model.start_point])
+                                                     points=[model.start_point], clock=clock)
                 if bhit:
                     break
             else:
                 bmodel = _Model(blog, family, base)
-                bmodel.deadline = deadline      # the budget holds inside a refit too
+                bmodel.clock, bmodel.deadline = clock, deadline      # the budget holds inside a refit too
                 zs = z
                 try:
                     zb = _refit(bmodel, z, model.scale, model.box)
@@ -598,7 +639,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
             notes.append(f"{stuck} of {bootstrap} replicate refits never left the estimate: left out"
                          + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
         if len(devs) + failed + stuck < bootstrap:
-            notes.append(f"CPU budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
+            notes.append(f"work budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
                          + ("" if len(devs) >= 5 else "; the cluster-robust covariance (optimistic) instead"))
     if len(devs) >= 5:
         devs = np.array(devs)
@@ -730,7 +771,7 @@ class FamilyChoice:
 # = the plug-in Gaussian (the fourth session's); a number = a t with that ν and the plug-in scale
 _NU = None
 _MC = 24   # noisy replicates per held-out move (:func:`_predictive_scores`)
-_FOLD_BUDGET_S = 8.0   # CPU seconds per fold fit of a richer family; then its best point so far
+_FOLD_BUDGET_S = 8.0   # nominal CPU seconds (:class:`_WorkClock`) per fold fit of a richer family; then its best point so far
 # The start grid of each family's extras (:func:`_fold_fit`).
 _GRID = {"stribeck_velocity": (1e-3, 4e-3, 1.6e-2, 4e-2), "viscous": (0.05, 0.5, 2.0),
          "bristle_stiffness": (1e5, 3e5, 1e6), "shaft_stiffness": (1e4, 2e4, 4e4, 1e5)}
@@ -845,7 +886,7 @@ def _fold_fit(log: AxisLog, family: str, base, train: list[int], core: np.ndarra
         costs = [_loglik_cost(z0) for z0 in grid]
         starts = [grid[int(np.argmin(costs))]]
     if core is not None:
-        model.deadline = time.process_time() + _FOLD_BUDGET_S
+        model.deadline = model.clock.spent + _FOLD_BUDGET_S
     z = starts[0]
     # each parameter within a factor 30 of its start: a two-mass fold fit that wandered off spent
     # minutes in one plant step (a stiff shaft), beyond the budget's reach
@@ -1012,7 +1053,7 @@ def _predictive_scores(log: AxisLog, family: str, base, z: np.ndarray, test: lis
 
 
 _FEATURE_REPLICATES = 12   # noisy replicates per training move and round (:func:`_feature_fit`)
-_FEATURE_BUDGET_S = 8.0    # CPU seconds per feature fit; then its best point so far stands
+_FEATURE_BUDGET_S = 8.0    # nominal CPU seconds (:class:`_WorkClock`) per feature fit; then its best point so far stands
 # degrees of freedom of the feature fit's robust loss (:func:`_robust_cost`): the predictive t of a
 # 4-feature move whose covariance is estimated from _FEATURE_REPLICATES replicates, ν = n − d
 _FEATURE_NU = 8.0
@@ -1060,7 +1101,7 @@ class _FeatureModel:
         return target, whiten
 
     def residual(self, z: np.ndarray, frame) -> np.ndarray:
-        if time.process_time() > self.deadline:
+        if self.model.clock.spent > self.deadline:
             raise _OutOfTime
         target, whiten = frame
         nf = self.features(z)
@@ -1144,18 +1185,18 @@ def _feature_fit(fm: _FeatureModel, starts: list[np.ndarray], frame, sigma1: flo
 
     if groups is None:       # one start, one budget for both rounds
         z, box = boxed(min(starts, key=lambda c: fm.cost(c, frame)))
-        fm.deadline = time.process_time() + budget_s
+        fm.deadline = fm.model.clock.spent + budget_s
         z, out = lsq(z, box, frame)
     else:
         ends = []
         for group in groups:
             z0, box0 = boxed(min(group, key=lambda c: fm.cost(c, frame)))
-            fm.deadline = time.process_time() + budget_s / 2
+            fm.deadline = fm.model.clock.spent + budget_s / 2
             z1 = lsq(z0, box0, frame)[0]
             fm.deadline = math.inf
             ends.append((fm.cost(z1, frame), len(ends), z1, box0))
         _, _, z, box = min(ends, key=lambda e: e[:2])
-        fm.deadline = time.process_time() + budget_s / 2
+        fm.deadline = fm.model.clock.spent + budget_s / 2
         out = False
     if not out:
         fm_deadline, fm.deadline = fm.deadline, math.inf
@@ -1236,7 +1277,7 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     moves), the one with the fewest fitted parameters is chosen (not separable → simpler), and
     among equally many (stribeck and lugre, six each) the lower score. Each richer family's fit
     keeps its parameters within a factor 30 of its start
-    (lugre's σ0 ≤ 1e6, :data:`_FEATURE_CAP`) and has 8 CPU seconds per fold for its least
+    (lugre's σ0 ≤ 1e6, :data:`_FEATURE_CAP`) and has 8 nominal CPU seconds of work per fold for its least
     squares (:data:`_FEATURE_BUDGET_S`); past them its best point so far stands.
 
     Returns

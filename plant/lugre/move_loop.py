@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from plant.lugre.interval import (N_STATE, NO_EVENTS, SHEET_FLYBACK, SHEET_MODE, SHEET_SIZE, SHEET_STATUS,
-                                  SHEET_T, STATUS_OK, interval_kernel)
+from plant.lugre.interval import (N_STATE, NO_EVENTS, SHEET_EVENTS, SHEET_FLYBACK, SHEET_MODE, SHEET_SIZE,
+                                  SHEET_STATUS, SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel)
 
 __all__ = ["play_move", "prepare"]
 
@@ -27,18 +27,22 @@ _NO_NOISE = np.empty(0)
 @njit(cache=True)
 def _play(x, tau, offs, levs, starts, bridge, prm, L, o, tol, z, ev, last, sigma0, ring, settled, x1):
     """x1[k] = the angle after sample k of the move from state ``x`` (mode 2, no flyback, t = 0);
-    returns (kernel status code, samples done). After sample ``last`` (u = 0 from there) the shaft
-    is frozen once |z| + |x3|/σ0 + |x2|·ring ≤ ``settled`` (plant.identification.fit)."""
+    returns (kernel status code, samples done, the kernel's events and integrator steps summed).
+    After sample ``last`` (u = 0 from there) the shaft is frozen once |z| + |x3|/σ0 + |x2|·ring ≤
+    ``settled`` (plant.identification.fit)."""
     out = np.empty(N_STATE + SHEET_SIZE)
     mode, flyback, t = 2, False, 0.0
     n = x1.shape[0]
     k = 0
+    n_ev, n_sub = 0.0, 0.0
     while k < n:
         interval_kernel(x, mode, flyback, t, tau, offs[starts[k]:starts[k + 1]].copy(),
                         levs[starts[k]:starts[k + 1]].copy(), bridge, prm, L, o, z, 0, ev, out, tol)
+        n_ev += out[N_STATE + SHEET_EVENTS]
+        n_sub += out[N_STATE + SHEET_SUBSTEPS]
         code = int(out[N_STATE + SHEET_STATUS])
         if code != STATUS_OK:
-            return code, k
+            return code, k, n_ev, n_sub
         x = out[:N_STATE].copy()
         t = out[N_STATE + SHEET_T]
         mode = int(out[N_STATE + SHEET_MODE])
@@ -50,7 +54,7 @@ def _play(x, tau, offs, levs, starts, bridge, prm, L, o, tol, z, ev, last, sigma
         if abs(x[7]) + abs(x[2]) / sigma0 + abs(x[1]) * ring <= settled:
             x1[k:] = x[0]
             break
-    return STATUS_OK, k
+    return STATUS_OK, k, n_ev, n_sub
 
 
 def prepare(commands) -> tuple:
@@ -61,10 +65,13 @@ def prepare(commands) -> tuple:
     return offs, levs, starts, commands[0].drive.value == "bridge"
 
 
-def play_move(x0, prepared, params, options, tolerances, last: int, ring: float, settled: float) -> np.ndarray | None:
-    """The move's angles x1 after each of its commands (``prepared`` = :func:`prepare`) from the
-    state ``x0`` (t = 0, mode 2), or None when the plant leaves ``ok`` (the kernel's status, or
-    g(v) = 0: ZeroDivisionError, where ``advance`` returns ``Status.ERROR``).
+def play_move(x0, prepared, params, options, tolerances, last: int, ring: float,
+              settled: float) -> tuple[np.ndarray | None, tuple[int, int, int]]:
+    """(x1, work): the move's angles x1 after each of its commands (``prepared`` = :func:`prepare`)
+    from the state ``x0`` (t = 0, mode 2), or None when the plant leaves ``ok`` (the kernel's
+    status, or g(v) = 0: ZeroDivisionError, where ``advance`` returns ``Status.ERROR``); ``work``
+    = (samples stepped, events, integrator steps), the counts ``advance`` reports per interval,
+    summed (zeros after a ZeroDivisionError, whose counts are lost with the kernel's frame).
 
     ``options``: the noise is off whatever they say (as ``advance`` without a noise stream).
 
@@ -78,11 +85,11 @@ def play_move(x0, prepared, params, options, tolerances, last: int, ring: float,
     o[0] = 0.0
     x1 = np.empty(starts.shape[0] - 1)
     try:
-        code, _ = _play(np.asarray(x0, dtype=np.float64).copy(), params.sample_period, offs, levs, starts, bridge,
+        code, k, n_ev, n_sub = _play(np.asarray(x0, dtype=np.float64).copy(), params.sample_period, offs, levs, starts, bridge,
                         params.kernel_record(), params.law_vector(), o, tolerances, _NO_NOISE, NO_EVENTS, last,
                         params.bristle_stiffness, ring, settled, x1)
     except ZeroDivisionError:
-        return None
+        return None, (0, 0, 0)
     if code == _BAD_LEVEL:
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max})")
-    return x1 if code == STATUS_OK else None
+    return (x1 if code == STATUS_OK else None), (k + (code != STATUS_OK), int(n_ev), int(n_sub))
