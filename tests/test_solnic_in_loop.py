@@ -34,8 +34,9 @@ def _run(scenario, seed, duration, *, in_loop=True, name="solnic-modern", **kw):
     c = make_controller(name)
     c.python_in_loop = in_loop
     calls = []
-    step = c.step
+    step, staged = c.step, c._staged_step
     c.step = lambda y: calls.append(1) or step(y)            # counts the controller's Python samples
+    c._staged_step = lambda: calls.append(1) or staged()     # (those the joint step began: filters done)
     r = run_closed_loop(sc.params, c, duration_s=duration, warmup_s=duration / 5, seed=seed, family=sc.family,
                         model=sc.model, **kw)
     return r, len(calls), c
@@ -85,7 +86,7 @@ def test_a_sample_the_loop_redoes_is_not_a_second_python_sample(monkeypatch):
     orig = SolnicController._sample_in_loop
 
     def spy(self, y, offs, levs):
-        redo.append(self._in_loop is not None and self._in_loop[0] == self._idle.state[0])
+        redo.append(self._in_loop is not None and self._in_loop[0] == self._loop_sample()[1])
         return orig(self, y, offs, levs)
 
     monkeypatch.setattr(SolnicController, "_sample_in_loop", spy)
@@ -180,8 +181,8 @@ def test_a_command_only_the_plants_test_rejects_is_not_a_second_python_sample():
         c = make_controller("solnic-modern")
         c.python_in_loop = in_loop
         calls = []
-        step = c._step
-        c._step = lambda y: calls.append(1) or step(y)          # the controller's Python samples
+        tail = c._step_tail
+        c._step_tail = lambda *a: calls.append(1) or tail(*a)   # the controller's Python samples
         r = run_closed_loop(sc.params, c, duration_s=6.0, warmup_s=1.0, seed=2, family=sc.family, model=model)
         rows.append((_row(r), len(calls)))
     assert rows[0][0][0] == "error" and "level" in rows[0][0][1]

@@ -394,6 +394,14 @@ class SolnicController(Controller):
             self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
         s[_idle.PLAN_USED] = 0.0
 
+    def _loop_sample(self) -> tuple[bool, float]:
+        """(staged, n) of the sample the compiled step gives to Python: whether the joint step
+        has done its filter updates (``J_STAGE``), and the sample's number n (its entry state's
+        ``s[N]``; the staged array has n + 1)."""
+        s = self._idle.state
+        staged = self.joint is not None and s[_idle.J_STAGE] != 0.0
+        return staged, (s[_idle.N] - 1.0 if staged else s[_idle.N])
+
     def _sample_in_loop(self, y: float, offs: np.ndarray, levs: np.ndarray) -> int:
         """A sample the joint idle step cannot do, done from inside the compiled loop
         (:func:`~controllers.solnic.idle_step._python_sample`): :meth:`step` on the state array
@@ -408,7 +416,7 @@ class SolnicController(Controller):
         command and state again, not a second Python sample.
         """
         s = self._idle.state
-        n = s[_idle.N]
+        staged, n = self._loop_sample()
         done = self._in_loop
         if done is not None and done[0] == n:             # the loop redoes sample n
             _, k, o, v, after, _ = done
@@ -416,9 +424,12 @@ class SolnicController(Controller):
             offs[:k], levs[:k] = o, v
             return k
         try:
-            command = self.step(y)
+            command = self._staged_step() if staged else self.step(y)
         except BaseException as exc:
             self._replay = exc
+            # the loop restores the sample's entry state (s[N] = n); the objects stay as the
+            # exception left them, as on the Python path (no import of the entry state)
+            self._exported_n = int(n)
             return 0
         o, v = command.arrays()
         k = o.shape[0]
@@ -449,6 +460,15 @@ class SolnicController(Controller):
         self._export_idle()
         return command
 
+    def _staged_step(self) -> DriveCommand:
+        """:meth:`step` of a sample whose filter updates the joint idle step has done
+        (``J_STAGE`` 1: the array holds them, the counters and the posterior): the rest of it."""
+        fired = self._idle.state[_idle.J_STAGE] == 2.0
+        self._import_idle()
+        command = self._step_tail((self._n - 1) * self.params.sample_period, fired)
+        self._export_idle()
+        return command
+
     def _step(self, y: float) -> DriveCommand:
         t = self._n * self.params.sample_period
         self._n += 1
@@ -460,6 +480,11 @@ class SolnicController(Controller):
         else:
             self.counts["samples_rejected"] += 1
         self._posterior = self.mode2.moments()
+        return self._step_tail(t)
+
+    def _step_tail(self, t: float, fired: bool = False) -> DriveCommand:
+        """The sample at t = n·τs after the filters' updates: the set-boundary evaluation, the
+        plan (``fired``: the compiled step's first trigger test of :meth:`_plan` fired)."""
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
@@ -467,7 +492,7 @@ class SolnicController(Controller):
             # cycle is evaluated as soon as its samples are in and the trigger is planned with
             # the new size, not with the stale one.
             self._evaluate(t)
-        return self._plan(t)
+        return self._plan(t, fired)
 
     def _outcome_sets_next_size(self) -> bool:
         """Whether the pending cycle's evaluation changes the size of the next pulse."""
@@ -490,10 +515,19 @@ class SolnicController(Controller):
                 sch.dtu_startup = sch.dtu_inc / 4.0
         return min(max(sch.next_dtu(), sch.dtu_inc), self.dtu_max)
 
-    def _plan(self, t: float) -> DriveCommand:
+    def _plan(self, t: float, fired: bool = False) -> DriveCommand:
+        """The trigger test of the next pulse; with a pending cycle, a trigger evaluates it and
+        plans again. ``fired``: the compiled step has made the first test with the same Δt_u,
+        prediction and bias (its cached plan, key-matched: :func:`~controllers.solnic.idle_step._joint_idle`)
+        and it fired; the steps below have no side effect on the outcome there (the Δt_u is the
+        schedule's without a skip, the memo holds the prediction, the grid's predictive is cached),
+        so with a pending cycle they are not repeated."""
         ts = self.params.sample_period
         earliest = max(0.0, self._t_max - t)
         for attempt in range(2):
+            if attempt == 0 and fired and self._pending is not None:
+                self._evaluate(t)
+                continue
             dtu = self._next_dtu()
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
             x1, x4 = self.mode2.x1, self.mode2.x4
