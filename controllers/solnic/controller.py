@@ -83,6 +83,7 @@ __all__ = ["SolnicController", "adjusted_increment"]
 
 _NAN = float("nan")
 _OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command (2 µs a sample)
+_STD_NORMAL = NormalDist()                       # N(0, 1): one instance, not one per evaluation
 
 
 @lru_cache(maxsize=32)
@@ -704,7 +705,7 @@ class SolnicController(Controller):
             # Δc itself is uncertain (k̂ spread H P_b H', w2 scatter): marginal power
             var_k = c.spread_var if self.grid is not None else self.friction.motion_variance(c.H_b)
             spread = math.sqrt(sd * sd + var_k + c.noise_var)
-            power = NormalDist().cdf((c.delta_c - self.z_motion * sd) / spread)
+            power = _STD_NORMAL.cdf((c.delta_c - self.z_motion * sd) / spread)
             if power < self.options.no_motion_power:
                 self._undecided += 1
                 # past the bound: fall back to the start-up sizes, but this is no evidence

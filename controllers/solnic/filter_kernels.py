@@ -23,14 +23,16 @@ from __future__ import annotations
 
 import math
 
+import llvmlite.binding as llvm
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import get_cython_function_address
 
 from controllers._fma import fma          # a·b + c with one rounding (llvm.fma.f64)
 
 __all__ = ["joint_predict", "joint_update", "quadratic_form2", "friction_gain",
            "friction_covariance", "friction_update_clip", "joint_add_motion", "half_plane_moments",
-           "half_plane_apply"]
+           "half_plane_apply", "joint_condition", "joint_valid", "joint_moved"]
 
 
 @njit(cache=True)
@@ -281,3 +283,80 @@ def half_plane_apply(mean, P, c, m, v, mean_s, var_s):
             new_P[i, j] = s
             new_P[j, i] = s
     return new_mean, new_P
+
+
+# -- the joint EKF's constraints as one compiled call -----------------------------------------
+# log Φ(α) of scipy.special.log_ndtr (the same C function as the ufunc's double loop, through
+# scipy's Cython export, registered with LLVM by name so that numba's cache can link it again)
+llvm.add_symbol("solnic_log_ndtr", get_cython_function_address("scipy.special.cython_special",
+                                                                  "__pyx_fuse_1log_ndtr"))
+_log_ndtr = types.ExternalFunction("solnic_log_ndtr", types.float64(types.float64))
+_HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)     # as truncation.condition_half_plane forms it
+
+
+@njit(cache=True)
+def joint_condition(z, P, c, bound, always):
+    """In place: :func:`controllers.solnic.truncation.condition_half_plane` on (z, P) (the same
+    operations in the same order: λ = φ(α)/Φ(α) through ``log_ndtr``, the variance factor at
+    least 1e-6); returns whether anything changed."""
+    m, v = half_plane_moments(z, P, c)
+    if not v > 0:
+        return False
+    sd = math.sqrt(v)
+    alpha = (bound - m) / sd
+    if alpha > 8.0 or (alpha >= 0.0 and not always):
+        return False
+    lam = math.exp(-0.5 * alpha * alpha - _HALF_LOG_2PI - _log_ndtr(alpha))
+    mean_s = m - sd * lam
+    f = 1.0 - alpha * lam - lam * lam
+    if 1e-6 > f:                                  # Python's max(f, 1e-6), a NaN kept
+        f = 1e-6
+    var_s = v * f
+    new_mean, new_P = half_plane_apply(z, P, c, m, v, mean_s, var_s)
+    z[:] = new_mean
+    P[:, :] = new_P
+    return True
+
+
+@njit(cache=True)
+def joint_valid(z, P, u_max):
+    """In place: :meth:`JointFilter._valid <controllers.solnic.joint_filter.JointFilter._valid>`,
+    k_s < u_max, k_c ≤ k_s, k_c ≥ 0 as conditions, then the round-off guard on the means
+    (Python's min/max: the first argument unless the second is strictly beyond it)."""
+    n = z.shape[0]
+    cap = u_max * (1.0 - 1e-6)
+    c = np.zeros(n)
+    c[3] = 1.0
+    joint_condition(z, P, c, cap, True)
+    c = np.zeros(n)
+    c[2] = 1.0
+    c[3] = -1.0
+    joint_condition(z, P, c, 0.0, True)            # k_c ≤ k_s
+    c = np.zeros(n)
+    c[2] = -1.0
+    joint_condition(z, P, c, 0.0, True)            # k_c ≥ 0
+    kc = z[2]
+    if 0.0 > kc:
+        kc = 0.0
+    if cap < kc:
+        kc = cap
+    z[2] = kc
+    ks = z[3]
+    if kc > ks:
+        ks = kc
+    if cap < ks:
+        ks = cap
+    z[3] = ks
+
+
+@njit(cache=True)
+def joint_moved(z, P, peak_torque, u_max):
+    """In place: :meth:`JointFilter.moved <controllers.solnic.joint_filter.JointFilter.moved>`'s
+    k_s < peak torque (at most u_max), then :func:`joint_valid`."""
+    c = np.zeros(z.shape[0])
+    c[3] = 1.0
+    top = peak_torque
+    if u_max < top:
+        top = u_max
+    joint_condition(z, P, c, top * (1.0 - 1e-6), True)
+    joint_valid(z, P, u_max)
