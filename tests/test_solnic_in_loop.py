@@ -187,3 +187,26 @@ def test_a_command_only_the_plants_test_rejects_is_not_a_second_python_sample():
         rows.append((_row(r), len(calls)))
     assert rows[0][0][0] == "error" and "level" in rows[0][0][1]
     assert rows[0] == rows[1]
+
+
+def test_a_sample_given_to_python_keeps_the_steps_filter_updates_and_fired_trigger(monkeypatch):
+    """The joint step gives a sample to Python after its filter updates (J_STAGE 1) and, where its
+    trigger test fired, after that test (J_STAGE 2): Python does not update the joint EKF again
+    (only samples the step gives back before its update, e.g. a k̂ outside the valid set, do),
+    and a fired first test with a pending cycle goes straight to the evaluation, so the planner
+    tests a trigger a second time only where the step could not plan (the grid's predictive not
+    yet cached); the rows stay the runner's Python loop's. (b0b4871, before: 116 updates and 189
+    trigger tests for 119 Python samples and 87 evaluations; now 1 and 128.)"""
+    import controllers.solnic.controller as ctl
+    from controllers.solnic.joint_filter import JointFilter
+    updates, triggers = [], []
+    update, trigger = JointFilter.update, ctl.plan_trigger
+    monkeypatch.setattr(JointFilter, "update", lambda self, y: updates.append(1) or update(self, y))
+    monkeypatch.setattr(ctl, "plan_trigger", lambda *a, **k: triggers.append(1) or trigger(*a, **k))
+    in_loop, n_in, c = _run("thesis", 1, 10.0)
+    n_updates, n_triggers = len(updates), len(triggers)
+    python, _, _ = _run("thesis", 1, 10.0, compiled=False)
+    assert _row(in_loop) == _row(python)
+    assert n_in > 50 and c.counts["cycles_evaluated"] > 30
+    assert n_updates <= 0.1 * n_in                              # the old path: one per Python sample
+    assert n_triggers < n_in + 0.25 * c.counts["cycles_evaluated"]   # the old path: + one per evaluation at a trigger
