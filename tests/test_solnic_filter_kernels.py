@@ -219,3 +219,32 @@ def test_joint_valid_and_moved_equal_the_python_steps_bit_for_bit(seed):
         c[3] = 1.0
         z_p, P_p = _old_valid(*_old_condition(z, P, c, min(peak, u_max) * (1.0 - 1e-6)), u_max)
         assert z_k.tobytes() == z_p.tobytes() and P_k.tobytes() == P_p.tobytes()
+
+
+@pytest.mark.parametrize("limit", [np.inf, 0.05])
+def test_joint_launch_equals_the_python_launch_steps_bit_for_bit(limit):
+    """joint_launch against the JointFilter/FrictionView steps it replaces in a launch
+    (motion_variance, time_variance, prob_no_motion, add_motion, propagate), bit for bit, with
+    and without the correction limit and with a k_s variance of zero (Prob(no motion) 0 or 1)."""
+    from controllers.solnic.filter_kernels import joint_launch
+    from controllers.solnic.joint_filter import JointFilter
+    rng = np.random.default_rng(7)
+    for i in range(60):
+        scale = np.array([1e-5, 1e-4, 0.5, 0.7, 1e-5])
+        jf = JointFilter(1000.0, 1e-12, 5e-6, [0.0, 0.0], np.eye(2) * 1e-10, [0.8, 1.9], np.eye(2) * 0.1, 4.0)
+        jf.P[:] = _spd(rng, 5, 1.0) * np.outer(scale, scale)
+        if i % 10 == 0:
+            jf.P[3, :] = jf.P[:, 3] = 0.0
+        jf.z[:] = rng.standard_normal(5) * scale + np.array([0, 0, 0.8, 1.9, 0])
+        H_b, H_tb = rng.standard_normal(2) * 1e-5, rng.standard_normal(2) * 1e-3
+        peak, sign = rng.uniform(1.0, 3.0), int(rng.choice([-1, 1]))
+        dc, nv, moving, s5 = rng.uniform(1e-6, 5e-5), rng.uniform(0, 1e-12), rng.uniform(0, 3e-3), 1e-4
+        z, P = jf.z.copy(), jf.P.copy()
+        f = jf.friction
+        want = (f.motion_variance(H_b), f.time_variance(H_tb), f.prob_no_motion(peak))
+        jf.add_motion(sign, dc, H_b, nv + dc**2 * want[2], limit)
+        f.propagate(moving, s5)
+        out = np.empty(4)
+        joint_launch(z, P, H_b, H_tb, peak, sign, dc, dc**2, nv, limit, moving, s5, out)
+        assert out[:3].tobytes() == np.array(want).tobytes() and out[3] == jf.motion_prior[1]
+        assert z.tobytes() == jf.z.tobytes() and P.tobytes() == jf.P.tobytes()

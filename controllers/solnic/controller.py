@@ -70,7 +70,8 @@ from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic import idle_step as _idle
-from controllers.solnic.joint_filter import JointFilter
+from controllers.solnic.filter_kernels import joint_launch
+from controllers.solnic.joint_filter import KS as _KS, JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
 from controllers.solnic.predictor import LAZY, Predictor, PulsePrediction, peak_torque
@@ -343,31 +344,32 @@ class SolnicController(Controller):
 
     def _import_joint(self) -> None:
         s, j, pr = self._idle.state, self.joint, self.predictor
-        self._n = self._exported_n = int(s[_idle.N])
-        j.t = float(s[_idle.FT])
+        head = s[:_idle.J_Z].tolist()                   # the scalars N … J_CLEARED as Python floats
+        self._n = self._exported_n = int(head[_idle.N])
+        j.t = head[_idle.FT]
         j.z[:] = s[_idle.J_Z:_idle.J_Z + 5]
         j.P[:] = s[_idle.J_P:_idle.J_P + 25].reshape(5, 5)
-        ns = int(s[_idle.J_NS])
+        ns = int(head[_idle.J_NS])
         if ns:
             buf = iter(s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist())
             j._since.extend(zip(buf, buf))              # the (t, y) pairs in order
-        s[_idle.J_NS] = 0.0
-        since, used, rejected, *post = s[_idle.SINCE:_idle.POST + 5].tolist()
-        self._samples_since_launch = int(since)
-        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
-        self._posterior = tuple(post)
+            s[_idle.J_NS] = 0.0
+        self._samples_since_launch = int(head[_idle.SINCE])
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(head[_idle.USED]), int(head[_idle.REJECTED])
+        self._posterior = tuple(head[_idle.POST:_idle.POST + 5])
         # the predictor's memo and model runs as the idle samples' conditional() calls left them
-        pr.n_model_runs += int(s[_idle.J_RUNS])
+        pr.n_model_runs += int(head[_idle.J_RUNS])
         memo = pr.__dict__.setdefault("_conditional_memo", {})
-        mk0, mk = int(s[_idle.J_MK0]), int(s[_idle.J_MK])
-        if s[_idle.J_CLEARED] != 0.0:
+        mk0, mk = int(head[_idle.J_MK0]), int(head[_idle.J_MK])
+        if head[_idle.J_CLEARED] != 0.0:
             memo.clear()
             pr.memo_clears += 1
             mk0 = 0
-        # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
-        tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
-        rep = itertools.repeat
-        memo.update(zip(zip(tab, tab, tab, rep(1), rep(1e-6), rep(pr.brake_margin)), rep(LAZY)))
+        if mk > mk0:
+            # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
+            tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
+            rep = itertools.repeat
+            memo.update(zip(zip(tab, tab, tab, rep(1), rep(1e-6), rep(pr.brake_margin)), rep(LAZY)))
         s[_idle.J_MK0], s[_idle.J_CLEARED], s[_idle.J_RUNS] = mk, 0.0, 0.0
         self._memo_seen = (pr.memo_clears, len(memo))
 
@@ -560,6 +562,7 @@ class SolnicController(Controller):
             self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         noise_var = 0.0
+        fused = False
         gp = self._grid_predictive(dtu, pred)
         if gp is not None:
             # the posterior predictive of the grid: d ~ (mean, spread + w2 + no-motion mass),
@@ -569,6 +572,27 @@ class SolnicController(Controller):
             spread = gp.dc_var + (self.options.grid_model_error * dc) ** 2
             t_nominal, sd_t = gp.t_stop_mean, math.sqrt(gp.t_stop_var)
             moving = 0.0                                    # the grid has no x5 drift
+        elif self.joint is not None and type(self.joint) is JointFilter:
+            # the joint EKF's launch in one compiled call (filter_kernels.joint_launch): the
+            # spreads and Prob(no motion) on the k block, add_motion, propagate, as below
+            if self.options.noise_aware_model:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] with the w2 push and tail
+            j = self.joint
+            limit = (self.options.max_correction_fraction * j.z.item(_KS)
+                     if self.options.joint_correction_limit else math.inf)
+            j._snapshot = (j.z.copy(), j.P.copy(), j.t)     # JointFilter.add_motion's first steps
+            j._since = []
+            out = np.empty(4)
+            joint_launch(j.z, j.P, pred.H_b, pred.H_tb, float(pred.peak_torque), sign, dc, dc**2,
+                         float(noise_var), float(limit), (pred.t_nominal - pred.t_breakaway
+                                                          if pred.t_breakaway is not None else 0.0),
+                         float(self.params.sigma5_sq), out)
+            j.motion_prior = (j.z.item(4), out.item(3))
+            spread, t_nominal = out.item(0), pred.t_nominal
+            sd_t = math.sqrt(max(out.item(1), 0.0))
+            moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+            fused = True
         else:
             if self.options.noise_aware_model:
                 bias, noise_var = self._pulse_noise(pred, dtu)
@@ -578,19 +602,21 @@ class SolnicController(Controller):
             sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
             moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
             p_zero = self.friction.prob_no_motion(pred.peak_torque)
-        var_dc = spread + dc**2 * p_zero + noise_var        # (5-9), noise-aware: w2 over T_m
-        if gp is not None:
-            self.joint.add_motion(sign, dc, np.zeros(2), var_dc)
-        elif self.joint is not None:    # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
-            limit = (self.options.max_correction_fraction * self.friction.ks
-                     if self.options.joint_correction_limit else math.inf)
-            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
-        else:
-            self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
+        if not fused:
+            var_dc = spread + dc**2 * p_zero + noise_var    # (5-9), noise-aware: w2 over T_m
+            if gp is not None:
+                self.joint.add_motion(sign, dc, np.zeros(2), var_dc)
+            elif self.joint is not None:    # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
+                limit = (self.options.max_correction_fraction * self.friction.ks
+                         if self.options.joint_correction_limit else math.inf)
+                self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
+            else:
+                self.mode2.add_motion(sign * dc, var_dc)                            # (5-6)
         k = self.options.stuck_confidence_sigmas
         self._t_max = t_a + t_nominal + k * sd_t                                    # (5-11)
         self._samples_since_launch = 0
-        self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
+        if not fused:
+            self.friction.propagate(moving, self.params.sigma5_sq)                  # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
                                np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
                                noise_var, spread)

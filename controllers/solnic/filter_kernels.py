@@ -32,7 +32,7 @@ from controllers._fma import fma          # a·b + c with one rounding (llvm.fma
 
 __all__ = ["joint_predict", "joint_update", "quadratic_form2", "friction_gain",
            "friction_covariance", "friction_update_clip", "joint_add_motion", "half_plane_moments",
-           "half_plane_apply", "joint_condition", "joint_valid", "joint_moved"]
+           "half_plane_apply", "joint_condition", "joint_valid", "joint_moved", "joint_launch"]
 
 
 @njit(cache=True)
@@ -360,3 +360,38 @@ def joint_moved(z, P, peak_torque, u_max):
         top = u_max
     joint_condition(z, P, c, top * (1.0 - 1e-6), True)
     joint_valid(z, P, u_max)
+
+
+@njit(cache=True)
+def joint_launch(z, P, H_b, H_tb, peak_torque, sign, dc, dc_sq, noise_var, max_correction, moving, sigma5_sq, out):
+    """In place: the joint EKF's part of a launch (SolnicController._launch without the grid),
+    the Python steps' arithmetic in their order. First, on the k block before the pulse,
+    ``out`` = (H_b P_kk H_b' (5-1), H_tb P_kk H_tb' (5-11), Prob(k_s ≥ peak torque)) —
+    FrictionView.motion_variance, .time_variance, .prob_no_motion; then
+    JointFilter.add_motion(sign, dc, H_b, noise_var + dc²·Prob, max_correction) (its
+    VAR[d] in ``out[3]``) and FrictionView.propagate(moving, σ5²) (5-15). ``dc_sq`` is
+    Python's ``dc**2`` (libm's pow, which need not round as dc·dc does)."""
+    n = z.shape[0]
+    Pk = P[2:4, 2:4]
+    spread = quadratic_form2(H_b, Pk)
+    t_var = quadratic_form2(H_tb, Pk)
+    pks = P[3, 3]
+    sd = math.sqrt(0.0 if 0.0 > pks else pks)      # max(P_ks,ks, 0), a NaN kept
+    if sd == 0:
+        p_zero = 1.0 if z[3] >= peak_torque else 0.0
+    else:
+        p_zero = 0.5 * math.erfc((peak_torque - z[3]) / (sd * math.sqrt(2.0)))
+    h = np.zeros(n)
+    h[2] = sign * H_b[0]
+    h[3] = sign * H_b[1]
+    var_d = joint_add_motion(z, P, h, sign * dc, noise_var + dc_sq * p_zero, max_correction, abs(dc))
+    if moving > 0 and sigma5_sq > 0:
+        q = sigma5_sq * moving
+        P[2, 2] += q
+        P[2, 3] += q
+        P[3, 2] += q
+        P[3, 3] += q
+    out[0] = spread
+    out[1] = t_var
+    out[2] = p_zero
+    out[3] = var_d
