@@ -70,7 +70,7 @@ from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic import idle_step as _idle
-from controllers.solnic.filter_kernels import joint_launch
+from controllers.solnic.filter_kernels import joint_condition, joint_launch, joint_moved, joint_valid
 from controllers.solnic.joint_filter import KS as _KS, JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
@@ -85,6 +85,19 @@ __all__ = ["SolnicController", "adjusted_increment"]
 _NAN = float("nan")
 _OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command (2 µs a sample)
 _STD_NORMAL = NormalDist()                       # N(0, 1): one instance, not one per evaluation
+
+
+@lru_cache(maxsize=1)
+def _load_joint_kernels() -> None:
+    """Call the joint EKF's launch and constraint kernels once per process on dummy arrays, with
+    the argument types of a run: loading them from numba's cache costs ~10–140 ms the first time
+    (LLVM's set-up, their libraries), paid at the first run's set-up, like the idle step's
+    compilation, not at the first launch after the grid's hand-over. No result depends on it."""
+    z, P, h, out = np.array([0.0, 0.0, 1.0, 2.0, 0.0]), np.eye(5), np.ones(2), np.empty(4)
+    joint_launch(z, P, h, h.copy(), 1.5, 1, 1e-5, 1e-10, 0.0, math.inf, 1e-3, 1e-4, out)
+    joint_moved(z, P, 1.5, 4.0)
+    joint_valid(z, P, 4.0)
+    joint_condition(z, P, np.ones(5), 1.0, True)
 
 
 @lru_cache(maxsize=32)
@@ -236,6 +249,7 @@ class SolnicController(Controller):
         if joint:
             if not (type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled):
                 return None
+            _load_joint_kernels()
             f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
         else:
             if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
