@@ -91,8 +91,9 @@ _STD_NORMAL = NormalDist()                       # N(0, 1): one instance, not on
 def _load_joint_kernels() -> None:
     """Call the joint EKF's launch and constraint kernels once per process on dummy arrays, with
     the argument types of a run: loading them from numba's cache costs ~10–140 ms the first time
-    (LLVM's set-up, their libraries), paid at the first run's set-up, like the idle step's
-    compilation, not at the first launch after the grid's hand-over. No result depends on it."""
+    (LLVM's set-up, their libraries), paid at the first reset in the process (the forkserver's
+    warm-up, bench/warm.py, resets every controller: its cell processes inherit them), not at
+    the first launch after the grid's hand-over. No result depends on it."""
     z, P, h, out = np.array([0.0, 0.0, 1.0, 2.0, 0.0]), np.eye(5), np.ones(2), np.empty(4)
     joint_launch(z, P, h, h.copy(), 1.5, 1, 1e-5, 1e-10, 0.0, math.inf, 1e-3, 1e-4, out)
     joint_moved(z, P, 1.5, 4.0)
@@ -197,6 +198,7 @@ class SolnicController(Controller):
                                      prior, [kc0, ks0], self.friction.P, params.u_max)
             self.mode2 = self.joint
             self.friction = self.joint.friction
+            _load_joint_kernels()
         else:
             self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
                                      [0.0, 0.0], prior)
@@ -249,7 +251,6 @@ class SolnicController(Controller):
         if joint:
             if not (type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled):
                 return None
-            _load_joint_kernels()
             f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
         else:
             if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
