@@ -42,6 +42,10 @@ through numba's ``objmode`` (:func:`_python_sample`, ~1–2 µs), which returns 
 — the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
 interval (:meth:`SolnicController._sample_in_loop
 <controllers.solnic.controller.SolnicController._sample_in_loop>`; tests/test_solnic_in_loop.py).
+The joint step restores the entry state only where it stopped before its filter updates
+(``J_STAGE`` 0); past them (1), or past a trigger test that fired (2), the Python sample goes on
+from the step's work (:meth:`SolnicController._staged_step
+<controllers.solnic.controller.SolnicController._staged_step>`).
 """
 
 from __future__ import annotations
