@@ -13,7 +13,9 @@ Known misses are xfail (the assertion stays the goal): dithered (its cell is the
 sub-steps: normals, the bridge loop, erfc/log; docs/plant.md) and solnic-modern (the idle step's
 backward-equation solves and ~1130 Python samples a cell, since 8f0a95b called from inside the
 compiled loop: 0.302 → 0.234 s against 578603d, solnic 0.060 → 0.043 s; the full solve's second
-moment beside the first: 0.223 → 0.208 s against 75447cc; docs/solnic.md); oracle-pulse is
+moment beside the first: 0.223 → 0.208 s against 75447cc; the Python sample going on from the
+step's filter updates and trigger test, the joint EKF's launch and constraints compiled: 0.217 →
+0.195 s against b0b4871; docs/solnic.md); oracle-pulse is
 at the goal (0.093–0.097 s) and over it under load, so it stays a non-strict xfail.
 Measured with ``compare_revision.py`` against deed667, the revision before issue 27's work
 (2026-11-27 10:20 UTC, 2 cores loaded by two helpers, alternating fresh processes, medians of 3,

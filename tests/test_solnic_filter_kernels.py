@@ -145,3 +145,106 @@ def test_joint_add_motion_matches_the_augmented_matrix_formulas(limit):
     assert got == pytest.approx(var_d, rel=1e-12)
     np.testing.assert_allclose(z, z_ref, rtol=1e-12, atol=1e-20)
     np.testing.assert_allclose(P, P_ref, rtol=1e-12, atol=1e-12 * np.abs(P_ref).max())
+
+
+def _old_condition(z, P, c, bound):
+    """JointFilter.condition as it was (numpy and :func:`condition_half_plane`, new arrays)."""
+    from controllers.solnic.truncation import condition_half_plane
+    out = condition_half_plane(z, P, c, bound, True)
+    return (z, P) if out is None else out
+
+
+def _old_valid(z, P, u_max):
+    """JointFilter._valid as it was, step by step in Python."""
+    for idx, val, bound in (((3,), (1.0,), u_max * (1.0 - 1e-6)), ((2, 3), (1.0, -1.0), 0.0), ((2,), (-1.0,), 0.0)):
+        c = np.zeros(5)
+        c[list(idx)] = val
+        z, P = _old_condition(z, P, c, bound)
+    z = z.copy()
+    kc = min(max(z[2], 0.0), u_max * (1 - 1e-6))
+    z[2] = kc
+    z[3] = min(max(z[3], kc), u_max * (1 - 1e-6))
+    return z, P
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_joint_condition_is_the_truncated_gaussian_and_the_python_path_bit_for_bit(seed):
+    """c·z ≤ b: the conditioned mean and variance of s = c·z are scipy's truncated normal's
+    (independent truth, rtol 1e-9); z and P equal condition_half_plane's (the Python path) bit
+    for bit; a bound more than 8 σ above the mean changes nothing."""
+    from scipy.stats import truncnorm
+
+    from controllers.solnic.filter_kernels import joint_condition
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(50):
+        P = _spd(rng, 5, 0.1)
+        z = rng.standard_normal(5)
+        c = np.zeros(5)
+        c[rng.choice(5, 2, replace=False)] = (1.0, -1.0)
+        m, v = c @ z, c @ P @ c
+        b = m + rng.uniform(-3.0, 3.0) * np.sqrt(v)
+        z_k, P_k = z.copy(), P.copy()
+        assert joint_condition(z_k, P_k, c, b, True)
+        z_p, P_p = _old_condition(z, P, c, b)
+        assert z_k.tobytes() == z_p.tobytes() and P_k.tobytes() == P_p.tobytes()
+        tn = truncnorm(-np.inf, (b - m) / np.sqrt(v), loc=m, scale=np.sqrt(v))
+        np.testing.assert_allclose(c @ z_k, tn.mean(), rtol=1e-9, atol=1e-9 * np.sqrt(v))
+        np.testing.assert_allclose(c @ P_k @ c, tn.var(), rtol=1e-7)
+        z_f, P_f = z.copy(), P.copy()
+        assert not joint_condition(z_f, P_f, c, m + 8.5 * np.sqrt(v), True)
+        assert (z_f == z).all() and (P_f == P).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_joint_valid_and_moved_equal_the_python_steps_bit_for_bit(seed):
+    """The compiled constraints of JointFilter._valid and .moved against the Python steps they
+    replace (condition_half_plane three or four times, Python's min/max guard), on means inside
+    and outside the valid set 0 ≤ k_c ≤ k_s < u_max; after them the means lie inside it."""
+    from controllers.solnic.filter_kernels import joint_moved, joint_valid
+    rng = np.random.default_rng(200 + seed)
+    u_max = 4.0
+    for _ in range(100):
+        P = _spd(rng, 5, rng.uniform(1e-3, 1.0))
+        z = rng.standard_normal(5)
+        z[2:4] = rng.uniform(-1.0, 5.0, 2)
+        z_k, P_k = z.copy(), P.copy()
+        joint_valid(z_k, P_k, u_max)
+        z_p, P_p = _old_valid(z, P, u_max)
+        assert z_k.tobytes() == z_p.tobytes() and P_k.tobytes() == P_p.tobytes()
+        assert 0.0 <= z_k[2] <= z_k[3] < u_max
+        peak = rng.uniform(0.5, 5.0)
+        z_k, P_k = z.copy(), P.copy()
+        joint_moved(z_k, P_k, peak, u_max)
+        c = np.zeros(5)
+        c[3] = 1.0
+        z_p, P_p = _old_valid(*_old_condition(z, P, c, min(peak, u_max) * (1.0 - 1e-6)), u_max)
+        assert z_k.tobytes() == z_p.tobytes() and P_k.tobytes() == P_p.tobytes()
+
+
+@pytest.mark.parametrize("limit", [np.inf, 0.05])
+def test_joint_launch_equals_the_python_launch_steps_bit_for_bit(limit):
+    """joint_launch against the JointFilter/FrictionView steps it replaces in a launch
+    (motion_variance, time_variance, prob_no_motion, add_motion, propagate), bit for bit, with
+    and without the correction limit and with a k_s variance of zero (Prob(no motion) 0 or 1)."""
+    from controllers.solnic.filter_kernels import joint_launch
+    from controllers.solnic.joint_filter import JointFilter
+    rng = np.random.default_rng(7)
+    for i in range(60):
+        scale = np.array([1e-5, 1e-4, 0.5, 0.7, 1e-5])
+        jf = JointFilter(1000.0, 1e-12, 5e-6, [0.0, 0.0], np.eye(2) * 1e-10, [0.8, 1.9], np.eye(2) * 0.1, 4.0)
+        jf.P[:] = _spd(rng, 5, 1.0) * np.outer(scale, scale)
+        if i % 10 == 0:
+            jf.P[3, :] = jf.P[:, 3] = 0.0
+        jf.z[:] = rng.standard_normal(5) * scale + np.array([0, 0, 0.8, 1.9, 0])
+        H_b, H_tb = rng.standard_normal(2) * 1e-5, rng.standard_normal(2) * 1e-3
+        peak, sign = rng.uniform(1.0, 3.0), int(rng.choice([-1, 1]))
+        dc, nv, moving, s5 = rng.uniform(1e-6, 5e-5), rng.uniform(0, 1e-12), rng.uniform(0, 3e-3), 1e-4
+        z, P = jf.z.copy(), jf.P.copy()
+        f = jf.friction
+        want = (f.motion_variance(H_b), f.time_variance(H_tb), f.prob_no_motion(peak))
+        jf.add_motion(sign, dc, H_b, nv + dc**2 * want[2], limit)
+        f.propagate(moving, s5)
+        out = np.empty(4)
+        joint_launch(z, P, H_b, H_tb, peak, sign, dc, dc**2, nv, limit, moving, s5, out)
+        assert out[:3].tobytes() == np.array(want).tobytes() and out[3] == jf.motion_prior[1]
+        assert z.tobytes() == jf.z.tobytes() and P.tobytes() == jf.P.tobytes()

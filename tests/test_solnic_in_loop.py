@@ -34,8 +34,9 @@ def _run(scenario, seed, duration, *, in_loop=True, name="solnic-modern", **kw):
     c = make_controller(name)
     c.python_in_loop = in_loop
     calls = []
-    step = c.step
+    step, staged = c.step, c._staged_step
     c.step = lambda y: calls.append(1) or step(y)            # counts the controller's Python samples
+    c._staged_step = lambda: calls.append(1) or staged()     # (those the joint step began: filters done)
     r = run_closed_loop(sc.params, c, duration_s=duration, warmup_s=duration / 5, seed=seed, family=sc.family,
                         model=sc.model, **kw)
     return r, len(calls), c
@@ -85,7 +86,7 @@ def test_a_sample_the_loop_redoes_is_not_a_second_python_sample(monkeypatch):
     orig = SolnicController._sample_in_loop
 
     def spy(self, y, offs, levs):
-        redo.append(self._in_loop is not None and self._in_loop[0] == self._idle.state[0])
+        redo.append(self._in_loop is not None and self._in_loop[0] == self._loop_sample()[1])
         return orig(self, y, offs, levs)
 
     monkeypatch.setattr(SolnicController, "_sample_in_loop", spy)
@@ -180,9 +181,32 @@ def test_a_command_only_the_plants_test_rejects_is_not_a_second_python_sample():
         c = make_controller("solnic-modern")
         c.python_in_loop = in_loop
         calls = []
-        step = c._step
-        c._step = lambda y: calls.append(1) or step(y)          # the controller's Python samples
+        tail = c._step_tail
+        c._step_tail = lambda *a: calls.append(1) or tail(*a)   # the controller's Python samples
         r = run_closed_loop(sc.params, c, duration_s=6.0, warmup_s=1.0, seed=2, family=sc.family, model=model)
         rows.append((_row(r), len(calls)))
     assert rows[0][0][0] == "error" and "level" in rows[0][0][1]
     assert rows[0] == rows[1]
+
+
+def test_a_sample_given_to_python_keeps_the_steps_filter_updates_and_fired_trigger(monkeypatch):
+    """The joint step gives a sample to Python after its filter updates (J_STAGE 1) and, where its
+    trigger test fired, after that test (J_STAGE 2): Python does not update the joint EKF again
+    (only samples the step gives back before its update, e.g. a k̂ outside the valid set, do),
+    and a fired first test with a pending cycle goes straight to the evaluation, so the planner
+    tests a trigger a second time only where the step could not plan (the grid's predictive not
+    yet cached); the rows stay the runner's Python loop's. (b0b4871, before: 116 updates and 189
+    trigger tests for 119 Python samples and 87 evaluations; now 1 and 128.)"""
+    import controllers.solnic.controller as ctl
+    from controllers.solnic.joint_filter import JointFilter
+    updates, triggers = [], []
+    update, trigger = JointFilter.update, ctl.plan_trigger
+    monkeypatch.setattr(JointFilter, "update", lambda self, y: updates.append(1) or update(self, y))
+    monkeypatch.setattr(ctl, "plan_trigger", lambda *a, **k: triggers.append(1) or trigger(*a, **k))
+    in_loop, n_in, c = _run("thesis", 1, 10.0)
+    n_updates, n_triggers = len(updates), len(triggers)
+    python, _, _ = _run("thesis", 1, 10.0, compiled=False)
+    assert _row(in_loop) == _row(python)
+    assert n_in > 50 and c.counts["cycles_evaluated"] > 30
+    assert n_updates <= 0.1 * n_in                              # the old path: one per Python sample
+    assert n_triggers < n_in + 0.25 * c.counts["cycles_evaluated"]   # the old path: + one per evaluation at a trigger

@@ -70,7 +70,8 @@ from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
 from controllers.solnic import idle_step as _idle
-from controllers.solnic.joint_filter import JointFilter
+from controllers.solnic.filter_kernels import joint_condition, joint_launch, joint_moved, joint_valid
+from controllers.solnic.joint_filter import KS as _KS, JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
 from controllers.solnic.predictor import LAZY, Predictor, PulsePrediction, peak_torque
@@ -83,6 +84,21 @@ __all__ = ["SolnicController", "adjusted_increment"]
 
 _NAN = float("nan")
 _OFF = DriveCommand.hold(0.0, DriveType.BRIDGE)   # immutable: one shared "off" command (2 µs a sample)
+_STD_NORMAL = NormalDist()                       # N(0, 1): one instance, not one per evaluation
+
+
+@lru_cache(maxsize=1)
+def _load_joint_kernels() -> None:
+    """Call the joint EKF's launch and constraint kernels once per process on dummy arrays, with
+    the argument types of a run: loading them from numba's cache costs ~10–140 ms the first time
+    (LLVM's set-up, their libraries), paid at the first reset in the process (the forkserver's
+    warm-up, bench/warm.py, resets every controller: its cell processes inherit them), not at
+    the first launch after the grid's hand-over. No result depends on it."""
+    z, P, h, out = np.array([0.0, 0.0, 1.0, 2.0, 0.0]), np.eye(5), np.ones(2), np.empty(4)
+    joint_launch(z, P, h, h.copy(), 1.5, 1, 1e-5, 1e-10, 0.0, math.inf, 1e-3, 1e-4, out)
+    joint_moved(z, P, 1.5, 4.0)
+    joint_valid(z, P, 4.0)
+    joint_condition(z, P, np.ones(5), 1.0, True)
 
 
 @lru_cache(maxsize=32)
@@ -182,6 +198,7 @@ class SolnicController(Controller):
                                      prior, [kc0, ks0], self.friction.P, params.u_max)
             self.mode2 = self.joint
             self.friction = self.joint.friction
+            _load_joint_kernels()
         else:
             self.mode2 = Mode2Filter(params.command_velocity_tau, params.sigma4_sq, sigma1,
                                      [0.0, 0.0], prior)
@@ -342,31 +359,32 @@ class SolnicController(Controller):
 
     def _import_joint(self) -> None:
         s, j, pr = self._idle.state, self.joint, self.predictor
-        self._n = self._exported_n = int(s[_idle.N])
-        j.t = float(s[_idle.FT])
+        head = s[:_idle.J_Z].tolist()                   # the scalars N … J_CLEARED as Python floats
+        self._n = self._exported_n = int(head[_idle.N])
+        j.t = head[_idle.FT]
         j.z[:] = s[_idle.J_Z:_idle.J_Z + 5]
         j.P[:] = s[_idle.J_P:_idle.J_P + 25].reshape(5, 5)
-        ns = int(s[_idle.J_NS])
+        ns = int(head[_idle.J_NS])
         if ns:
             buf = iter(s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist())
             j._since.extend(zip(buf, buf))              # the (t, y) pairs in order
-        s[_idle.J_NS] = 0.0
-        since, used, rejected, *post = s[_idle.SINCE:_idle.POST + 5].tolist()
-        self._samples_since_launch = int(since)
-        self.counts["samples_used"], self.counts["samples_rejected"] = int(used), int(rejected)
-        self._posterior = tuple(post)
+            s[_idle.J_NS] = 0.0
+        self._samples_since_launch = int(head[_idle.SINCE])
+        self.counts["samples_used"], self.counts["samples_rejected"] = int(head[_idle.USED]), int(head[_idle.REJECTED])
+        self._posterior = tuple(head[_idle.POST:_idle.POST + 5])
         # the predictor's memo and model runs as the idle samples' conditional() calls left them
-        pr.n_model_runs += int(s[_idle.J_RUNS])
+        pr.n_model_runs += int(head[_idle.J_RUNS])
         memo = pr.__dict__.setdefault("_conditional_memo", {})
-        mk0, mk = int(s[_idle.J_MK0]), int(s[_idle.J_MK])
-        if s[_idle.J_CLEARED] != 0.0:
+        mk0, mk = int(head[_idle.J_MK0]), int(head[_idle.J_MK])
+        if head[_idle.J_CLEARED] != 0.0:
             memo.clear()
             pr.memo_clears += 1
             mk0 = 0
-        # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
-        tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
-        rep = itertools.repeat
-        memo.update(zip(zip(tab, tab, tab, rep(1), rep(1e-6), rep(pr.brake_margin)), rep(LAZY)))
+        if mk > mk0:
+            # the keys (k̂s, k̂c, Δt_u, 1, 1e-6, margin) in the order the samples added them
+            tab = iter(s[_idle.J_MTAB + 3 * mk0:_idle.J_MTAB + 3 * mk].tolist())
+            rep = itertools.repeat
+            memo.update(zip(zip(tab, tab, tab, rep(1), rep(1e-6), rep(pr.brake_margin)), rep(LAZY)))
         s[_idle.J_MK0], s[_idle.J_CLEARED], s[_idle.J_RUNS] = mk, 0.0, 0.0
         self._memo_seen = (pr.memo_clears, len(memo))
 
@@ -394,6 +412,14 @@ class SolnicController(Controller):
             self.predictor.conditional(*self._plan_key)     # what the first idle sample's _plan did
         s[_idle.PLAN_USED] = 0.0
 
+    def _loop_sample(self) -> tuple[bool, float]:
+        """(staged, n) of the sample the compiled step gives to Python: whether the joint step
+        has done its filter updates (``J_STAGE``), and the sample's number n (its entry state's
+        ``s[N]``; the staged array has n + 1)."""
+        s = self._idle.state
+        staged = self.joint is not None and s[_idle.J_STAGE] != 0.0
+        return staged, (s[_idle.N] - 1.0 if staged else s[_idle.N])
+
     def _sample_in_loop(self, y: float, offs: np.ndarray, levs: np.ndarray) -> int:
         """A sample the joint idle step cannot do, done from inside the compiled loop
         (:func:`~controllers.solnic.idle_step._python_sample`): :meth:`step` on the state array
@@ -408,7 +434,7 @@ class SolnicController(Controller):
         command and state again, not a second Python sample.
         """
         s = self._idle.state
-        n = s[_idle.N]
+        staged, n = self._loop_sample()
         done = self._in_loop
         if done is not None and done[0] == n:             # the loop redoes sample n
             _, k, o, v, after, _ = done
@@ -416,9 +442,12 @@ class SolnicController(Controller):
             offs[:k], levs[:k] = o, v
             return k
         try:
-            command = self.step(y)
+            command = self._staged_step() if staged else self.step(y)
         except BaseException as exc:
             self._replay = exc
+            # the loop restores the sample's entry state (s[N] = n); the objects stay as the
+            # exception left them, as on the Python path (no import of the entry state)
+            self._exported_n = int(n)
             return 0
         o, v = command.arrays()
         k = o.shape[0]
@@ -449,6 +478,15 @@ class SolnicController(Controller):
         self._export_idle()
         return command
 
+    def _staged_step(self) -> DriveCommand:
+        """:meth:`step` of a sample whose filter updates the joint idle step has done
+        (``J_STAGE`` 1: the array holds them, the counters and the posterior): the rest of it."""
+        fired = self._idle.state[_idle.J_STAGE] == 2.0
+        self._import_idle()
+        command = self._step_tail((self._n - 1) * self.params.sample_period, fired)
+        self._export_idle()
+        return command
+
     def _step(self, y: float) -> DriveCommand:
         t = self._n * self.params.sample_period
         self._n += 1
@@ -460,6 +498,11 @@ class SolnicController(Controller):
         else:
             self.counts["samples_rejected"] += 1
         self._posterior = self.mode2.moments()
+        return self._step_tail(t)
+
+    def _step_tail(self, t: float, fired: bool = False) -> DriveCommand:
+        """The sample at t = n·τs after the filters' updates: the set-boundary evaluation, the
+        plan (``fired``: the compiled step's first trigger test of :meth:`_plan` fired)."""
         if (self._pending is not None and self._outcome_sets_next_size()
                 and self._samples_since_launch >= self.options.evaluation_samples):
             # Set-boundary fix: the next Δt_u depends on this cycle's outcome (a finished set
@@ -467,7 +510,7 @@ class SolnicController(Controller):
             # cycle is evaluated as soon as its samples are in and the trigger is planned with
             # the new size, not with the stale one.
             self._evaluate(t)
-        return self._plan(t)
+        return self._plan(t, fired)
 
     def _outcome_sets_next_size(self) -> bool:
         """Whether the pending cycle's evaluation changes the size of the next pulse."""
@@ -490,10 +533,19 @@ class SolnicController(Controller):
                 sch.dtu_startup = sch.dtu_inc / 4.0
         return min(max(sch.next_dtu(), sch.dtu_inc), self.dtu_max)
 
-    def _plan(self, t: float) -> DriveCommand:
+    def _plan(self, t: float, fired: bool = False) -> DriveCommand:
+        """The trigger test of the next pulse; with a pending cycle, a trigger evaluates it and
+        plans again. ``fired``: the compiled step has made the first test with the same Δt_u,
+        prediction and bias (its cached plan, key-matched: :func:`~controllers.solnic.idle_step._joint_idle`)
+        and it fired; the steps below have no side effect on the outcome there (the Δt_u is the
+        schedule's without a skip, the memo holds the prediction, the grid's predictive is cached),
+        so with a pending cycle they are not repeated."""
         ts = self.params.sample_period
         earliest = max(0.0, self._t_max - t)
         for attempt in range(2):
+            if attempt == 0 and fired and self._pending is not None:
+                self._evaluate(t)
+                continue
             dtu = self._next_dtu()
             pred = self.predictor.conditional(self.friction.ks, self.friction.kc, dtu)
             x1, x4 = self.mode2.x1, self.mode2.x4
@@ -525,6 +577,7 @@ class SolnicController(Controller):
             self.mode2.set_anchor()
         dc = abs(pred.delta_c)
         noise_var = 0.0
+        fused = False
         gp = self._grid_predictive(dtu, pred)
         if gp is not None:
             # the posterior predictive of the grid: d ~ (mean, spread + w2 + no-motion mass),
@@ -534,6 +587,27 @@ class SolnicController(Controller):
             spread = gp.dc_var + (self.options.grid_model_error * dc) ** 2
             t_nominal, sd_t = gp.t_stop_mean, math.sqrt(gp.t_stop_var)
             moving = 0.0                                    # the grid has no x5 drift
+        elif self.joint is not None and type(self.joint) is JointFilter:
+            # the joint EKF's launch in one compiled call (filter_kernels.joint_launch): the
+            # spreads and Prob(no motion) on the k block, add_motion, propagate, as below
+            if self.options.noise_aware_model:
+                bias, noise_var = self._pulse_noise(pred, dtu)
+                dc += bias                                  # E[Δc] with the w2 push and tail
+            j = self.joint
+            limit = (self.options.max_correction_fraction * j.z.item(_KS)
+                     if self.options.joint_correction_limit else math.inf)
+            j._snapshot = (j.z.copy(), j.P.copy(), j.t)     # JointFilter.add_motion's first steps
+            j._since = []
+            out = np.empty(4)
+            joint_launch(j.z, j.P, pred.H_b, pred.H_tb, float(pred.peak_torque), sign, dc, dc**2,
+                         float(noise_var), float(limit), (pred.t_nominal - pred.t_breakaway
+                                                          if pred.t_breakaway is not None else 0.0),
+                         float(self.params.sigma5_sq), out)
+            j.motion_prior = (j.z.item(4), out.item(3))
+            spread, t_nominal = out.item(0), pred.t_nominal
+            sd_t = math.sqrt(max(out.item(1), 0.0))
+            moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
+            fused = True
         else:
             if self.options.noise_aware_model:
                 bias, noise_var = self._pulse_noise(pred, dtu)
@@ -543,19 +617,21 @@ class SolnicController(Controller):
             sd_t = math.sqrt(max(self.friction.time_variance(pred.H_tb), 0.0))
             moving = pred.t_nominal - pred.t_breakaway if pred.t_breakaway is not None else 0.0
             p_zero = self.friction.prob_no_motion(pred.peak_torque)
-        var_dc = spread + dc**2 * p_zero + noise_var        # (5-9), noise-aware: w2 over T_m
-        if gp is not None:
-            self.joint.add_motion(sign, dc, np.zeros(2), var_dc)
-        elif self.joint is not None:    # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
-            limit = (self.options.max_correction_fraction * self.friction.ks
-                     if self.options.joint_correction_limit else math.inf)
-            self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
-        else:
-            self.mode2.add_motion(sign * dc, var_dc)                                # (5-6)
+        if not fused:
+            var_dc = spread + dc**2 * p_zero + noise_var    # (5-9), noise-aware: w2 over T_m
+            if gp is not None:
+                self.joint.add_motion(sign, dc, np.zeros(2), var_dc)
+            elif self.joint is not None:    # d = sign(Δc + H_b(k − k̂)) + n; k̂ spread is in the state
+                limit = (self.options.max_correction_fraction * self.friction.ks
+                         if self.options.joint_correction_limit else math.inf)
+                self.joint.add_motion(sign, dc, pred.H_b, noise_var + dc**2 * p_zero, limit)
+            else:
+                self.mode2.add_motion(sign * dc, var_dc)                            # (5-6)
         k = self.options.stuck_confidence_sigmas
         self._t_max = t_a + t_nominal + k * sd_t                                    # (5-11)
         self._samples_since_launch = 0
-        self.friction.propagate(moving, self.params.sigma5_sq)                      # (5-15)
+        if not fused:
+            self.friction.propagate(moving, self.params.sigma5_sq)                  # (5-15)
         self._pending = _Cycle(t_a, x1_a, var_x1_a, sign, dtu, self.schedule.size, dc,
                                np.array(pred.H_b, dtype=float), pred.peak_torque, moving, overshoot,
                                noise_var, spread)
@@ -670,7 +746,7 @@ class SolnicController(Controller):
             # Δc itself is uncertain (k̂ spread H P_b H', w2 scatter): marginal power
             var_k = c.spread_var if self.grid is not None else self.friction.motion_variance(c.H_b)
             spread = math.sqrt(sd * sd + var_k + c.noise_var)
-            power = NormalDist().cdf((c.delta_c - self.z_motion * sd) / spread)
+            power = _STD_NORMAL.cdf((c.delta_c - self.z_motion * sd) / spread)
             if power < self.options.no_motion_power:
                 self._undecided += 1
                 # past the bound: fall back to the start-up sizes, but this is no evidence

@@ -23,14 +23,16 @@ from __future__ import annotations
 
 import math
 
+import llvmlite.binding as llvm
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import get_cython_function_address
 
 from controllers._fma import fma          # a·b + c with one rounding (llvm.fma.f64)
 
 __all__ = ["joint_predict", "joint_update", "quadratic_form2", "friction_gain",
            "friction_covariance", "friction_update_clip", "joint_add_motion", "half_plane_moments",
-           "half_plane_apply"]
+           "half_plane_apply", "joint_condition", "joint_valid", "joint_moved", "joint_launch"]
 
 
 @njit(cache=True)
@@ -281,3 +283,115 @@ def half_plane_apply(mean, P, c, m, v, mean_s, var_s):
             new_P[i, j] = s
             new_P[j, i] = s
     return new_mean, new_P
+
+
+# -- the joint EKF's constraints as one compiled call -----------------------------------------
+# log Φ(α) of scipy.special.log_ndtr (the same C function as the ufunc's double loop, through
+# scipy's Cython export, registered with LLVM by name so that numba's cache can link it again)
+llvm.add_symbol("solnic_log_ndtr", get_cython_function_address("scipy.special.cython_special",
+                                                                  "__pyx_fuse_1log_ndtr"))
+_log_ndtr = types.ExternalFunction("solnic_log_ndtr", types.float64(types.float64))
+_HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)     # as truncation.condition_half_plane forms it
+
+
+@njit(cache=True)
+def joint_condition(z, P, c, bound, always):
+    """In place: :func:`controllers.solnic.truncation.condition_half_plane` on (z, P) (the same
+    operations in the same order: λ = φ(α)/Φ(α) through ``log_ndtr``, the variance factor at
+    least 1e-6); returns whether anything changed."""
+    m, v = half_plane_moments(z, P, c)
+    if not v > 0:
+        return False
+    sd = math.sqrt(v)
+    alpha = (bound - m) / sd
+    if alpha > 8.0 or (alpha >= 0.0 and not always):
+        return False
+    lam = math.exp(-0.5 * alpha * alpha - _HALF_LOG_2PI - _log_ndtr(alpha))
+    mean_s = m - sd * lam
+    f = 1.0 - alpha * lam - lam * lam
+    if 1e-6 > f:                                  # Python's max(f, 1e-6), a NaN kept
+        f = 1e-6
+    var_s = v * f
+    new_mean, new_P = half_plane_apply(z, P, c, m, v, mean_s, var_s)
+    z[:] = new_mean
+    P[:, :] = new_P
+    return True
+
+
+@njit(cache=True)
+def joint_valid(z, P, u_max):
+    """In place: :meth:`JointFilter._valid <controllers.solnic.joint_filter.JointFilter._valid>`,
+    k_s < u_max, k_c ≤ k_s, k_c ≥ 0 as conditions, then the round-off guard on the means
+    (Python's min/max: the first argument unless the second is strictly beyond it)."""
+    n = z.shape[0]
+    cap = u_max * (1.0 - 1e-6)
+    c = np.zeros(n)
+    c[3] = 1.0
+    joint_condition(z, P, c, cap, True)
+    c = np.zeros(n)
+    c[2] = 1.0
+    c[3] = -1.0
+    joint_condition(z, P, c, 0.0, True)            # k_c ≤ k_s
+    c = np.zeros(n)
+    c[2] = -1.0
+    joint_condition(z, P, c, 0.0, True)            # k_c ≥ 0
+    kc = z[2]
+    if 0.0 > kc:
+        kc = 0.0
+    if cap < kc:
+        kc = cap
+    z[2] = kc
+    ks = z[3]
+    if kc > ks:
+        ks = kc
+    if cap < ks:
+        ks = cap
+    z[3] = ks
+
+
+@njit(cache=True)
+def joint_moved(z, P, peak_torque, u_max):
+    """In place: :meth:`JointFilter.moved <controllers.solnic.joint_filter.JointFilter.moved>`'s
+    k_s < peak torque (at most u_max), then :func:`joint_valid`."""
+    c = np.zeros(z.shape[0])
+    c[3] = 1.0
+    top = peak_torque
+    if u_max < top:
+        top = u_max
+    joint_condition(z, P, c, top * (1.0 - 1e-6), True)
+    joint_valid(z, P, u_max)
+
+
+@njit(cache=True)
+def joint_launch(z, P, H_b, H_tb, peak_torque, sign, dc, dc_sq, noise_var, max_correction, moving, sigma5_sq, out):
+    """In place: the joint EKF's part of a launch (SolnicController._launch without the grid),
+    the Python steps' arithmetic in their order. First, on the k block before the pulse,
+    ``out`` = (H_b P_kk H_b' (5-1), H_tb P_kk H_tb' (5-11), Prob(k_s ≥ peak torque)) —
+    FrictionView.motion_variance, .time_variance, .prob_no_motion; then
+    JointFilter.add_motion(sign, dc, H_b, noise_var + dc²·Prob, max_correction) (its
+    VAR[d] in ``out[3]``) and FrictionView.propagate(moving, σ5²) (5-15). ``dc_sq`` is
+    Python's ``dc**2`` (libm's pow, which need not round as dc·dc does)."""
+    n = z.shape[0]
+    Pk = P[2:4, 2:4]
+    spread = quadratic_form2(H_b, Pk)
+    t_var = quadratic_form2(H_tb, Pk)
+    pks = P[3, 3]
+    sd = math.sqrt(0.0 if 0.0 > pks else pks)      # max(P_ks,ks, 0), a NaN kept
+    if sd == 0:
+        p_zero = 1.0 if z[3] >= peak_torque else 0.0
+    else:
+        p_zero = 0.5 * math.erfc((peak_torque - z[3]) / (sd * math.sqrt(2.0)))
+    h = np.zeros(n)
+    h[2] = sign * H_b[0]
+    h[3] = sign * H_b[1]
+    var_d = joint_add_motion(z, P, h, sign * dc, noise_var + dc_sq * p_zero, max_correction, abs(dc))
+    if moving > 0 and sigma5_sq > 0:
+        q = sigma5_sq * moving
+        P[2, 2] += q
+        P[2, 3] += q
+        P[3, 2] += q
+        P[3, 3] += q
+    out[0] = spread
+    out[1] = t_var
+    out[2] = p_zero
+    out[3] = var_d

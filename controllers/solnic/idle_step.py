@@ -42,6 +42,10 @@ through numba's ``objmode`` (:func:`_python_sample`, ~1–2 µs), which returns 
 — the hand-back's own Python sample without the loop's exit and re-entry and the runner's Python
 interval (:meth:`SolnicController._sample_in_loop
 <controllers.solnic.controller.SolnicController._sample_in_loop>`; tests/test_solnic_in_loop.py).
+The joint step restores the entry state only where it stopped before its filter updates
+(``J_STAGE`` 0); past them (1), or past a trigger test that fired (2), the Python sample goes on
+from the step's work (:meth:`SolnicController._staged_step
+<controllers.solnic.controller.SolnicController._staged_step>`).
 """
 
 from __future__ import annotations
@@ -264,7 +268,13 @@ N_ENTRY = J_SBUF + 17 + 3
 # the plan cache as the step left it at a sample it gave to Python (not restored): the Python
 # planner reads its w2 bias where the key matches (SolnicController._pulse_bias)
 J_LAST = J_ENTRY + N_ENTRY
-N_JOINT_STATE = J_LAST + 17
+# how far the step got before it gave the sample to Python: 1 = the filters' time and
+# measurement updates, the counters and the posterior are done (the Python sample goes on from
+# there, :meth:`SolnicController._step_tail`), 2 = also the plan of the sample's first trigger
+# test (the cached plan, this k̂'s prediction, its w2 bias) fires, 0 = the sample's entry state
+# is restored
+J_STAGE = J_LAST + 17
+N_JOINT_STATE = J_STAGE + 1
 # params: TS..OVERSHOOT as above, then the predictor's and the noise model's constants, and the
 # key of the controller that does a Python sample inside the loop (0: hand it back instead)
 (J_U, J_T3, J_ALPHA, J_FD, J_S2, J_CAP, J_MINRATIO, J_UMAX, J_OWNER) = range(9, 18)
@@ -319,12 +329,14 @@ def joint_idle_step(s, p, y, offs, levs):
     owned = p[J_OWNER] != 0.0
     if owned:
         _save_entry(s)
+    s[J_STAGE] = 0.0
     k = _joint_idle(s, p, y, offs, levs)
     if k != 0 or not owned:
         return k
     for i in range(17):
         s[J_LAST + i] = s[J_CACHE + i]
-    _restore_entry(s)
+    if s[J_STAGE] == 0.0:
+        _restore_entry(s)
     with objmode(k="intp"):
         k = _python_sample(p[J_OWNER], y, offs, levs)
     return k
@@ -368,6 +380,7 @@ def _joint_idle(s, p, y, offs, levs):
     else:
         s[REJECTED] += 1.0
     s[POST], s[POST + 1], s[POST + 2], s[POST + 3], s[POST + 4] = z[0], z[1], P[0, 0], P[0, 1], P[1, 1]
+    s[J_STAGE] = 1.0                              # from here a hand-back keeps the filters' work
     if s[DUE] != 0.0 and s[SINCE] >= p[EVAL_SAMPLES]:
         return 0
     if s[PLAN_OK] == 0.0:
@@ -424,6 +437,7 @@ def _joint_idle(s, p, y, offs, levs):
         dc_plan += bias
     x4_std = math.sqrt(0.0 if 0.0 > P[1, 1] else P[1, 1])
     if _fires(z[0], z[1], x4_std, dc_plan, p[TS], earliest, tcz, p[OVERSHOOT]):
+        s[J_STAGE] = 2.0                          # the planner's first trigger test fires, too
         return 0
     offs[0] = 0.0
     levs[0] = 0.0

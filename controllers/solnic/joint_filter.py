@@ -28,10 +28,9 @@ import math
 
 import numpy as np
 
-from controllers.solnic.filter_kernels import (joint_add_motion, joint_predict, joint_update,
-                                                quadratic_form2)
+from controllers.solnic.filter_kernels import (joint_add_motion, joint_condition, joint_moved, joint_predict,
+                                                joint_update, joint_valid, quadratic_form2)
 from controllers.solnic.mode2_filter import mode2_transition
-from controllers.solnic.truncation import condition_half_plane
 
 __all__ = ["JointFilter", "FrictionView"]
 
@@ -239,10 +238,8 @@ class JointFilter:
     def moved(self, peak_torque: float) -> None:
         """Motion occurred: k_s < peak torque, and always k_s ≥ k_c ≥ 0, on the distribution."""
         self.n_motion_updates += 1
-        c = np.zeros(5)
-        c[KS] = 1.0
-        self.condition(c, min(peak_torque, self.u_max) * (1.0 - 1e-6))
-        self._valid()
+        joint_moved(self.z, self.P, float(peak_torque), self.u_max)     # compiled: the two steps below
+        # c = e_ks: self.condition(c, min(peak_torque, self.u_max) * (1.0 - 1e-6)); self._valid()
 
     def set_friction(self, mean, cov) -> None:
         """Replace the (k_c, k_s) block by an outside posterior (the grid's moments), with no
@@ -253,20 +250,15 @@ class JointFilter:
         self.P[KC:KS + 1, KC:KS + 1] = np.asarray(cov, dtype=float).reshape(2, 2)
 
     def _valid(self) -> None:
-        """k_c ≤ k_s, k_c ≥ 0 and k_s < u_max as conditions on the distribution."""
-        c = np.zeros(5)
-        c[KS] = 1.0
-        self.condition(c, self.u_max * (1.0 - 1e-6))
-        c = np.zeros(5)
-        c[KC], c[KS] = 1.0, -1.0
-        self.condition(c, 0.0)                      # k_c ≤ k_s
-        c = np.zeros(5)
-        c[KC] = -1.0
-        self.condition(c, 0.0)                      # k_c ≥ 0
-        # round-off guard only: the truncated means lie inside the half-planes
-        kc = min(max(self.z[KC], 0.0), self.u_max * (1 - 1e-6))
-        self.z[KC] = kc
-        self.z[KS] = min(max(self.z[KS], kc), self.u_max * (1 - 1e-6))
+        """k_c ≤ k_s, k_c ≥ 0 and k_s < u_max as conditions on the distribution.
+
+        Compiled (:func:`~controllers.solnic.filter_kernels.joint_valid`, one call): the
+        conditions c·z ≤ b of :meth:`condition` with (c, b) = (e_ks, u_max(1 − 1e-6)),
+        (e_kc − e_ks, 0), (−e_kc, 0) in this order, then the round-off guard on the means
+        (the truncated means lie inside the half-planes) k_c ← min(max(k_c, 0), u_max(1 − 1e-6)),
+        k_s ← min(max(k_s, k_c), u_max(1 − 1e-6)).
+        """
+        joint_valid(self.z, self.P, self.u_max)
 
     def condition(self, c: np.ndarray, bound: float, always: bool = True) -> None:
         """Condition the Gaussian on c·z ≤ ``bound`` (moment-matched truncation).
@@ -280,6 +272,6 @@ class JointFilter:
         (``always=False``) avoids that, but measured worse: on thesis seed 100 the joint
         filter's k̂ then wandered and the run diverged (peak 2.1 mrad).
         """
-        out = condition_half_plane(self.z, self.P, c, bound, always)
-        if out is not None:
-            self.z, self.P = out
+        # compiled (:func:`~controllers.solnic.filter_kernels.joint_condition`): the arithmetic of
+        # :func:`~controllers.solnic.truncation.condition_half_plane`, z and P updated in place
+        joint_condition(self.z, self.P, np.asarray(c, dtype=float), float(bound), bool(always))
