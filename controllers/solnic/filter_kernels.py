@@ -287,10 +287,12 @@ def half_plane_apply(mean, P, c, m, v, mean_s, var_s):
 
 # -- the joint EKF's constraints as one compiled call -----------------------------------------
 # log Φ(α) of scipy.special.log_ndtr (the same C function as the ufunc's double loop, through
-# scipy's Cython export, registered with LLVM by name so that numba's cache can link it again)
+# scipy's Cython export, registered with LLVM by name so that numba's cache can link it again).
+# Its C signature is "double (double, int __pyx_skip_dispatch)" (a module-level cpdef function:
+# the flag is unused; passed as 0, as numba-scipy declares these exports)
 llvm.add_symbol("solnic_log_ndtr", get_cython_function_address("scipy.special.cython_special",
                                                                   "__pyx_fuse_1log_ndtr"))
-_log_ndtr = types.ExternalFunction("solnic_log_ndtr", types.float64(types.float64))
+_log_ndtr = types.ExternalFunction("solnic_log_ndtr", types.float64(types.float64, types.intc))
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)     # as truncation.condition_half_plane forms it
 
 
@@ -306,7 +308,7 @@ def joint_condition(z, P, c, bound, always):
     alpha = (bound - m) / sd
     if alpha > 8.0 or (alpha >= 0.0 and not always):
         return False
-    lam = math.exp(-0.5 * alpha * alpha - _HALF_LOG_2PI - _log_ndtr(alpha))
+    lam = math.exp(-0.5 * alpha * alpha - _HALF_LOG_2PI - _log_ndtr(alpha, 0))
     mean_s = m - sd * lam
     f = 1.0 - alpha * lam - lam * lam
     if 1e-6 > f:                                  # Python's max(f, 1e-6), a NaN kept
