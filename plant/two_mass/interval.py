@@ -34,10 +34,11 @@ from plant.multimode.stuck import stuck_propagate
 from plant.multimode.zero_velocity import _crossed
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
-from plant.two_mass.bridge import bisect, bridge_tables
+from plant.two_mass.bridge import bisect, bisect_fresh, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
 from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _start_coords_w,
-                                   propagate, psd_factor, start_coords, transition)
+                                   propagate, psd_factor, start_coords, transition, transition_u, process_noise_u,
+                                   unit_coords)
 from plant.two_mass.params import TwoMassParams
 
 __all__ = ["advance", "N_X"]
@@ -352,8 +353,10 @@ def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
 def _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb):
     """A sub-step of its own width: Φ(h), Q(h) and the factor built afresh, then the Gaussian step
     (they allocate: reference counting on, explicitly)."""
-    transition(mode, step, p, q, V, Vi, lam, P)
-    process_noise(mode, step, p, q, V, Vi, lam, Q)
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)                 # the unit start coordinates, once for Φ and Q
+    transition_u(mode, step, p, V, lam, U, P)
+    process_noise_u(mode, step, p, V, lam, U, Q)
     psd_factor(Q, L)
     _gauss_step(X, P, L, z, cursor, Xb)
 
@@ -362,6 +365,13 @@ def _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb):
 def _bisect_rc(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table):
     """:func:`plant.two_mass.bridge.bisect` with reference counting on (it allocates)."""
     return bisect(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table)
+
+
+@njit(cache=True, _nrt=True)
+def _bisect_fresh_rc(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, P, Q):
+    """:func:`plant.two_mass.bridge.bisect_fresh` (a sub-step of its own width, whose Φ(h) and
+    Q(h) are P and Q) with reference counting on (it allocates)."""
+    return bisect_fresh(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, P, Q)
 
 
 @njit(cache=True, _nrt=False)
@@ -415,8 +425,11 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 Xb[PHI] -= s * (-low) * step / 2.0
         else:
             if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
-                tc, lv = _bisect_rc(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
-                                    BT[m] if not fresh else BT[m, :0])
+                if fresh:    # P, Q: this sub-step's Φ(step), Q(step) (_fresh_step)
+                    tc, lv = _bisect_fresh_rc(mode, X, Xb, step, o[_O_TOL], p, V, Vi, lam, sig_v2, z, cursor, Xc,
+                                              P, Q)
+                else:
+                    tc, lv = _bisect_rc(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc, BT[m])
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
                 for i in range(NX):

@@ -114,6 +114,16 @@ def _tiny(term, total):
     return abs(term) < 1e-18 * abs(total)
 
 
+@njit(cache=True, inline="always")
+def _div_k(a, k):
+    """a / k for a complex a and a positive integer k, as numba divides a complex by k + 0j
+    (CPython's _Py_c_quot, the |b.real| ≥ |b.imag| branch: ratio = 0/k = +0, denom = k + 0·0 = k),
+    without the branch, the ratio's division and the denominator: the same operations on the
+    same values (tests/test_two_mass_fast.py)."""
+    d = float(k)
+    return complex((a.real + a.imag * 0.0) / d, (a.imag - a.real * 0.0) / d)
+
+
 @njit(cache=True)
 def phi1(x):
     """(eˣ − 1)/x for complex x, 1 at 0."""
@@ -121,7 +131,7 @@ def phi1(x):
         term = 1.0 + 0j
         total = 1.0 + 0j
         for k in range(2, 30):
-            term = term * x / k
+            term = _div_k(term * x, k)
             total += term
             if _tiny(term, total):
                 break
@@ -136,7 +146,7 @@ def phi2(x):
         term = 0.5 + 0j
         total = 0.5 + 0j
         for k in range(3, 32):
-            term = term * x / k
+            term = _div_k(term * x, k)
             total += term
             if _tiny(term, total):
                 break

@@ -103,11 +103,17 @@ def _start_coords_w(X, mode, p, Vi, C, F):
 def _state_from_coords(X, mode, t, p, V, r, n, Xout, C):
     """The end state of :func:`propagate_w` / :func:`_propagate_g` from the propagated modal
     coordinates C[2], C[3] (rows back through V) and the decoupled x3, x4, x1 closed forms."""
+    _state_from_coords_e(X, mode, p, V, r, n, Xout, C, math.exp(-p.beta3 * t), -math.expm1(-p.beta4 * t))
+
+
+@njit(cache=True, _nrt=False)
+def _state_from_coords_e(X, mode, p, V, r, n, Xout, C, e3, E4):
+    """:func:`_state_from_coords` with its two scalar exponentials given: e3 = e^(−β3·t),
+    E4 = −expm1(−β4·t) (the same values, computed once per t by the callers that build Φ and Q)."""
     b4 = p.beta4
-    E4 = -math.expm1(-b4 * t)
     for j in range(NX):
         Xout[j] = X[j]
-    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
+    Xout[A3] = X[AU] + (X[A3] - X[AU]) * e3
     Xout[A4] = X[A4] * (1.0 - E4)
     if mode == 2:
         Xout[A1] = X[A1] - X[A4] * E4 / b4
@@ -179,17 +185,56 @@ def _row(V, r, k, w, n):
 
 
 @njit(cache=True)
+def unit_coords(mode, p, Vi, U):
+    """U[j, 0], U[j, 1] = w, b̃ (:func:`_start_coords_w`) of the unit vector e_j, j < NX: the
+    start coordinates every column of Φ and every noise source of Q begin with, independent of
+    the width, so :func:`transition_u` and :func:`process_noise_u` compute them once."""
+    E = np.zeros(NX)
+    C = np.empty((4, NCORE), dtype=np.complex128)
+    F = np.empty((2, NCORE))
+    for j in range(NX):
+        E[j] = 1.0
+        n = _start_coords_w(E, mode, p, Vi, C, F)
+        for i in range(n):
+            U[j, 0, i] = C[0, i]
+            U[j, 1, i] = C[1, i]
+        E[j] = 0.0
+
+
+@njit(cache=True, _nrt=False)
+def _unit_column(E, j, mode, t, p, V, U, G, k, e3, E4, Xout, C):
+    """:func:`_propagate_g` of the unit vector E = e_j with its start coordinates read from U[j]
+    and e^(−β3·t), −expm1(−β4·t) given: the same operations on the same values."""
+    r = mode_row(mode)
+    n = 3 if mode == 2 else 5
+    for i in range(n):
+        f1 = G[1, k, i]
+        C[2, i] = G[0, k, i] * U[j, 0, i] + t * f1 * U[j, 1, i]
+        C[3, i] = t * f1 * U[j, 0, i] + t * t * G[2, k, i] * U[j, 1, i]
+    _state_from_coords_e(E, mode, p, V, r, n, Xout, C, e3, E4)
+
+
+@njit(cache=True)
 def transition(mode, h, p, q, V, Vi, lam, P):
     """P = Φ(h) (9 × 9) of ``mode``, the matrix of :func:`propagate`."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
+    transition_u(mode, h, p, V, lam, U, P)
+
+
+@njit(cache=True)
+def transition_u(mode, h, p, V, lam, U, P):
+    """:func:`transition` with the unit start coordinates U (:func:`unit_coords` of ``mode``)."""
     E = np.zeros(NX)
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
-    F = np.empty((2, NCORE))
     G = np.empty((3, 1, NCORE), dtype=np.complex128)
     _modal_factors(mode, h, lam, G, 0)
+    e3 = math.exp(-p.beta3 * h)
+    E4 = -math.expm1(-p.beta4 * h)
     for j in range(NX):
         E[j] = 1.0
-        _propagate_g(E, mode, h, p, V, Vi, lam, col, C, F, G, 0)
+        _unit_column(E, j, mode, h, p, V, U, G, 0, e3, E4, col, C)
         for i in range(NX):
             P[i, j] = col[i]
         E[j] = 0.0
@@ -198,6 +243,15 @@ def transition(mode, h, p, q, V, Vi, lam, P):
 @njit(cache=True)
 def process_noise(mode, h, p, q, V, Vi, lam, Q):
     """Q (6 × 6 on NB) = COV of the noise over h while moving (module docstring); stuck: w4 only."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
+    process_noise_u(mode, h, p, V, lam, U, Q)
+
+
+@njit(cache=True)
+def process_noise_u(mode, h, p, V, lam, U, Q):
+    """:func:`process_noise` with the unit start coordinates U (:func:`unit_coords` of ``mode``);
+    e^(λt), φ1, φ2 and the two scalar exponentials once per Gauss–Legendre node."""
     for i in range(NNB):
         for j in range(NNB):
             Q[i, j] = 0.0
@@ -212,12 +266,16 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
     E = np.zeros(NX)
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
-    F = np.empty((2, NCORE))
     G = np.empty((3, panels * 8, NCORE), dtype=np.complex128)
+    e3 = np.empty(panels * 8)
+    E4 = np.empty(panels * 8)
     for pn in range(panels):
         lo = pn * width
         for k in range(8):
-            _modal_factors(mode, lo + 0.5 * width * (_GL_X[k] + 1.0), lam, G, pn * 8 + k)
+            v = lo + 0.5 * width * (_GL_X[k] + 1.0)
+            _modal_factors(mode, v, lam, G, pn * 8 + k)
+            e3[pn * 8 + k] = math.exp(-p.beta3 * v)
+            E4[pn * 8 + k] = -math.expm1(-p.beta4 * v)
     srcs = (A2, A4, A5)
     for s_i in range(3):
         j = srcs[s_i]
@@ -236,7 +294,7 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
             for k in range(8):
                 v = lo + 0.5 * width * (_GL_X[k] + 1.0)
                 E[j] = 1.0
-                _propagate_g(E, mode, v, p, V, Vi, lam, col, C, F, G, pn * 8 + k)
+                _unit_column(E, j, mode, v, p, V, U, G, pn * 8 + k, e3[pn * 8 + k], E4[pn * 8 + k], col, C)
                 E[j] = 0.0
                 wk = 0.5 * width * _GL_W[k] * qj
                 for a in range(NNB):
