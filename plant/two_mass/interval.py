@@ -123,7 +123,64 @@ def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
         C[4, i] = lam[M_STUCK, i]
     for i in range(n):
         F[2, i] = abs(C[4, i])
+    if _stays_inside(C, F, n, ks, horizon):
+        return math.inf, 0
     return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
+
+
+@njit(cache=True, _nrt=False)
+def _stays_inside(C, F, n, ks, horizon):
+    """True when a bound proves that :func:`first_exit_al` on (C[2], C[3], C[4], F[2]) returns
+    (inf, 0): |T| stays below ks on [0, horizon] with a margin far above the search's rounding,
+    so no safe step can see the level, and the steps are long enough that their number stays far
+    below its limit. The search's own answer, without its steps (each an exp, a sincos and a
+    hypot per modal term); where the bound does not decide, the search runs as before.
+
+    With Re λ ≤ 0: |a·e^(λt)| ≤ |a|, |b·t·φ1(λt)| = |b·(e^(λt) − 1)/λ| ≤ |b|·min(t, 2/|λ|), so
+    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|), and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1)
+    when no λ_i is 0, also |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the
+    ringing part), whichever is smaller (a rounding of the quotients is ~1e-16 of G, inside the
+    1e-9 margin below); |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the
+    search's curvature bound M2(t) ≤ M2 = Σ |λ_i|·|λ_i·a_i + b_i| (each |z| bounded above by
+    |Re z| + |Im z|). If G·(1 + 1e-9) < ks, the distance y to either level is ≥ δ = ks − G·(1 + 1e-9)
+    (the computed sum of the terms is within ~1e-14·G of the exact one) and ≤ 2·ks, so every safe
+    step s ≥ min(√(2δ/M2), 2δ/(2·D1 + √(4·M2·ks))) (:func:`plant.two_mass.modes.first_exit_al`'s
+    two step formulas); with s ≥ 2·s_min, s_min > 1e-12 s and horizon ≤ 1000·s_min the search
+    takes fewer than 1002 steps (its limit is 100000), none below 1e-15 s, and never finds
+    g ≥ ks or g ≤ −ks."""
+    if not (ks > 0.0):
+        return False
+    G = 0.0
+    D1 = 0.0
+    M2 = 0.0
+    Gs = 0.0                    # the second form: Σ|a_i + b_i/λ_i| ...
+    cs = 0j                     # ... and the steady part Σ −b_i/λ_i (all λ_i ≠ 0)
+    split = True
+    for i in range(n):
+        a, b, lam, al = C[2, i], C[3, i], C[4, i], F[2, i]
+        reach = horizon if al * horizon <= 2.0 else 2.0 / al
+        G += abs(a.real) + abs(a.imag) + (abs(b.real) + abs(b.imag)) * reach
+        d = lam * a + b
+        dm = abs(d.real) + abs(d.imag)
+        D1 += dm
+        M2 += (abs(lam.real) + abs(lam.imag)) * dm
+        if al > 0.0:
+            c = b / lam
+            Gs += abs(a.real + c.real) + abs(a.imag + c.imag)
+            cs -= c
+        else:
+            split = False
+    if split:
+        G = min(G, Gs + abs(cs.real))
+    bound = G * (1.0 + 1e-9)
+    if not (bound < ks):
+        return False
+    delta = ks - bound
+    s1 = math.sqrt(2.0 * delta / M2) if M2 > 0.0 else math.inf
+    den = 2.0 * D1 + math.sqrt(4.0 * M2 * ks)
+    s2 = 2.0 * delta / den if den > 0.0 else math.inf
+    s_min = 0.5 * min(s1, s2)
+    return s_min > 1e-12 and horizon <= 1000.0 * s_min
 
 
 @njit(cache=True)

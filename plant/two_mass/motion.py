@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.two_mass.modes import M_STUCK, NCORE, phi1, phi2
+from plant.two_mass.modes import M_STUCK, NCORE, phi1, phi1_e, phi2, phi2_e
 
 A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
 NX = 9
@@ -136,9 +136,10 @@ def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
     n = _start_coords_w(X, mode, p, Vi, C, F)
     for i in range(n):
         x = lam[r, i] * t
-        f1 = phi1(x)
-        C[2, i] = np.exp(x) * C[0, i] + t * f1 * C[1, i]
-        C[3, i] = t * f1 * C[0, i] + t * t * phi2(x) * C[1, i]
+        e = np.exp(x)
+        f1 = phi1_e(x, e)
+        C[2, i] = e * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * phi2_e(x, e) * C[1, i]
     _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
@@ -150,9 +151,10 @@ def _modal_factors(mode, t, lam, G, k):
     n = 3 if mode == 2 else 5
     for i in range(n):
         x = lam[r, i] * t
-        G[0, k, i] = np.exp(x)
-        G[1, k, i] = phi1(x)
-        G[2, k, i] = phi2(x)
+        e = np.exp(x)
+        G[0, k, i] = e
+        G[1, k, i] = phi1_e(x, e)
+        G[2, k, i] = phi2_e(x, e)
 
 
 @njit(cache=True, _nrt=False)
