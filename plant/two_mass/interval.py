@@ -392,13 +392,35 @@ def _gauss_step(X, P, L, z, cursor, out):
 def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
     """:func:`_gauss_step` with P = TP[m, j], L = TL[m, j] read in place (no views) and ζ in the
     scratch ``zeta``: the same operations and draws, allocation-free, without reference counting."""
-    for i in range(NX):
+    for i in (A1, A2, A5, PHI, WM):
         acc = 0.0
         for k in range(NX):
             acc += TP[m, j, i, k] * X[k]
         out[i] = acc
-    for i in range(NNB):
-        zeta[i] = normal(z, cursor)
+    # Φ's rows of x3, x4, kc and u are zero off (x3, u), x4, kc, u by construction (motion.
+    # _state_from_coords_e: 0 + (0 − 0)·e3, 0·(1 − E4), copies), and a product 0·X[k] added to
+    # a sum that starts at +0 never changes it (finite X): the same sums without those products
+    acc = 0.0
+    acc += TP[m, j, A3, A3] * X[A3]
+    acc += TP[m, j, A3, AU] * X[AU]
+    out[A3] = acc
+    acc = 0.0
+    acc += TP[m, j, A4, A4] * X[A4]
+    out[A4] = acc
+    acc = 0.0
+    acc += TP[m, j, AKC, AKC] * X[AKC]
+    out[AKC] = acc
+    acc = 0.0
+    acc += TP[m, j, AU, AU] * X[AU]
+    out[AU] = acc
+    i0 = cursor[0]
+    if 0 <= i0 and i0 + NNB <= z.shape[0]:     # the next six normals in one bounds check
+        for i in range(NNB):
+            zeta[i] = z[i0 + i]
+        cursor[0] = i0 + NNB
+    else:
+        for i in range(NNB):
+            zeta[i] = normal(z, cursor)
     for i in range(NNB):
         acc = 0.0
         for k in range(i + 1):

@@ -172,10 +172,15 @@ def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
 
 @njit(cache=True, _nrt=False)
 def _row_w(V, r, k, C, c, n):
-    acc = 0j
+    """Re Σ_i V[r, k, i]·C[c, i]: the real part of numba's complex sum (componentwise from 0j)
+    of its complex products (real part a.real·b.real − a.imag·b.imag, CPython's _Py_c_prod),
+    without the imaginary parts nobody reads: the same operations on the same values."""
+    acc = 0.0
     for i in range(n):
-        acc += V[r, k, i] * C[c, i]
-    return acc.real
+        v = V[r, k, i]
+        w = C[c, i]
+        acc += v.real * w.real - v.imag * w.imag
+    return acc
 
 
 @njit(cache=True)
