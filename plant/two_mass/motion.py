@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.two_mass.modes import M_STUCK, NCORE, phi1, phi1_e, phi2, phi2_e
+from plant.two_mass.modes import M_STUCK, NCORE, _div_k, _small, _tiny, phi1, phi1_e, phi2, phi2_e
 
 A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
 NX = 9
@@ -146,15 +146,49 @@ def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
 @njit(cache=True, _nrt=False)
 def _modal_factors(mode, t, lam, G, k):
     """G[0, k], G[1, k], G[2, k] = e^x, φ1(x), φ2(x) at x = λ_i·t for the modes of ``mode``: what
-    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike."""
+    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike.
+
+    The series of φ1 and φ2 (|x| < ½) of all modes are summed side by side, a term of each per
+    pass (G[3, k], G[4, k] hold the running terms): each series takes the steps of
+    :func:`plant.two_mass.modes.phi1_e` / ``phi2_e`` in its own order and stops where they stop,
+    so the values are theirs; the interleaving only lets the independent divisions overlap."""
     r = mode_row(mode)
     n = 3 if mode == 2 else 5
+    act = 0
     for i in range(n):
         x = lam[r, i] * t
         e = np.exp(x)
         G[0, k, i] = e
-        G[1, k, i] = phi1_e(x, e)
-        G[2, k, i] = phi2_e(x, e)
+        if _small(x):
+            G[1, k, i] = 1.0 + 0j
+            G[3, k, i] = 1.0 + 0j
+            G[2, k, i] = 0.5 + 0j
+            G[4, k, i] = 0.5 + 0j
+            act |= (1 << i) | (1 << (8 + i))
+        else:
+            G[1, k, i] = phi1_e(x, e)
+            G[2, k, i] = phi2_e(x, e)
+    for kk in range(2, 32):
+        if act == 0:
+            break
+        for i in range(n):
+            if kk < 30 and act & (1 << i):              # φ1: k = 2 … 29
+                term = _div_k(G[3, k, i] * (lam[r, i] * t), kk)
+                total = G[1, k, i] + term
+                G[3, k, i] = term
+                G[1, k, i] = total
+                if _tiny(term, total):
+                    act &= ~(1 << i)
+            if kk >= 3 and act & (1 << (8 + i)):        # φ2: k = 3 … 31
+                term = _div_k(G[4, k, i] * (lam[r, i] * t), kk)
+                total = G[2, k, i] + term
+                G[4, k, i] = term
+                G[2, k, i] = total
+                if _tiny(term, total):
+                    act &= ~(1 << (8 + i))
+        if kk == 29:
+            act &= ~0xFF                                # φ1's series ends at k = 29
+    return
 
 
 @njit(cache=True, _nrt=False)
@@ -170,7 +204,7 @@ def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
     _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _row_w(V, r, k, C, c, n):
     """Re Σ_i V[r, k, i]·C[c, i]: the real part of numba's complex sum (componentwise from 0j)
     of its complex products (real part a.real·b.real − a.imag·b.imag, CPython's _Py_c_prod),
@@ -208,7 +242,7 @@ def unit_coords(mode, p, Vi, U):
         E[j] = 0.0
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _unit_column(E, j, mode, t, p, V, U, G, k, e3, E4, Xout, C):
     """:func:`_propagate_g` of the unit vector E = e_j with its start coordinates read from U[j]
     and e^(−β3·t), −expm1(−β4·t) given: the same operations on the same values."""
@@ -235,7 +269,7 @@ def transition_u(mode, h, p, V, lam, U, P):
     E = np.zeros(NX)
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
-    G = np.empty((3, 1, NCORE), dtype=np.complex128)
+    G = np.empty((5, 1, NCORE), dtype=np.complex128)
     _modal_factors(mode, h, lam, G, 0)
     e3 = math.exp(-p.beta3 * h)
     E4 = -math.expm1(-p.beta4 * h)
@@ -273,7 +307,7 @@ def process_noise_u(mode, h, p, V, lam, U, Q):
     E = np.zeros(NX)
     col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
-    G = np.empty((3, panels * 8, NCORE), dtype=np.complex128)
+    G = np.empty((5, panels * 8, NCORE), dtype=np.complex128)
     e3 = np.empty(panels * 8)
     E4 = np.empty(panels * 8)
     for pn in range(panels):
