@@ -25,7 +25,7 @@ from plant.randomness import normal, uniform_below
 from plant.two_mass.modes import NCORE
 from plant.two_mass.motion import A2, NB, NNB, NX, process_noise_u, psd_factor, transition_u, unit_coords
 
-__all__ = ["bridge_law", "bridge_tables", "bisect", "bisect_fresh", "LAW_SIZE"]
+__all__ = ["bridge_law", "bridge_tables", "bisect", "bisect_w", "bisect_fresh", "LAW_SIZE", "BISECT_SCRATCH"]
 
 # Packed law: Φ(w/2) (81), Φ(w) (81), G (36), √Σ22 (1), regression on x2 (5), residual factor (25).
 _PH, _PW, _G, _SD, _REG, _RES = 0, 81, 162, 198, 199, 204
@@ -257,4 +257,50 @@ def bisect_fresh(mode, Xa0, Xb0, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout,
         w = half
         levels += 1
     Xout[:] = Xb
+    return ta + w, levels
+
+
+BISECT_SCRATCH = 3 * NX + LAW_SIZE + NX + NNB + 5     # bisect_w's Wb: Xa, Xb, Xm, a law, _level's scratch
+
+
+@njit(cache=True, _nrt=True)
+def _bridge_law_rc(mode, w, p, q, V, Vi, lam, law):
+    """:func:`bridge_law` with reference counting on (it allocates)."""
+    bridge_law(mode, w, p, q, V, Vi, lam, law)
+
+
+@njit(cache=True, _nrt=False)
+def bisect_w(mode, Xa0, Xb0, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table, Wb):
+    """:func:`bisect` in the caller's scratch Wb (BISECT_SCRATCH floats), compiled without
+    reference counting (each level's table view and _level call counted their arrays: ~60
+    atomic operations per bisection); the same operations and draws."""
+    Xa = Wb[:NX]
+    Xb = Wb[NX:2 * NX]
+    Xm = Wb[2 * NX:3 * NX]
+    law = Wb[3 * NX:3 * NX + LAW_SIZE]
+    sc = Wb[3 * NX + LAW_SIZE:BISECT_SCRATCH]
+    for i in range(NX):
+        Xa[i] = Xa0[i]
+        Xb[i] = Xb0[i]
+    ta = 0.0
+    w = h
+    levels = 0
+    while w > tol:
+        half = w / 2
+        if levels < table.shape[0]:
+            left = _level(table[levels], Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
+        else:
+            _bridge_law_rc(mode, w, p, q, V, Vi, lam, law)
+            left = _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
+        if left:
+            for i in range(NX):
+                Xb[i] = Xm[i]
+        else:
+            ta += half
+            for i in range(NX):
+                Xa[i] = Xm[i]
+        w = half
+        levels += 1
+    for i in range(NX):
+        Xout[i] = Xb[i]
     return ta + w, levels

@@ -34,9 +34,9 @@ from plant.multimode.stuck import stuck_propagate
 from plant.multimode.zero_velocity import _crossed
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
-from plant.two_mass.bridge import bisect, bisect_fresh, bridge_tables
+from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _start_coords_w,
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _propagate_c, _start_coords_w,
                                    propagate, psd_factor, start_coords, transition, transition_u, process_noise_u,
                                    unit_coords)
 from plant.two_mass.params import TwoMassParams
@@ -223,7 +223,8 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     h = min(h_end, h_fb, h_brk)
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
-    propagate_w(X, 2, h, p, V, Vi, lam, Xn, C, F)
+    # C[0], C[1]: X's stuck start coordinates, from _torque_exit_w (X unchanged since)
+    _propagate_c(X, 2, h, p, V, lam, Xn, C, 3)
     X[PHI], X[WM] = Xn[PHI], Xn[WM]
     stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)    # x1, x4 (with w4) and x3
     S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))
@@ -309,7 +310,7 @@ def _quiet_segment(X, S, mode, s, h, bridge, p, q, V, Vi, lam, noise_on, z, curs
     return 1 if stopped else 0
 
 
-MOVE_SCRATCH = 2 * NX + NX * NX + 2 * NNB * NNB + NNB      # _moving's W: Xb, Xc, P, Q, L, ζ
+MOVE_SCRATCH = 2 * NX + NX * NX + 2 * NNB * NNB + NNB + BISECT_SCRATCH  # _moving's W: Xb, Xc, P, Q, L, ζ, bisection
 
 
 @njit(cache=True, _nrt=False)
@@ -331,7 +332,8 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
         o5 = o4 + NNB * NNB
         advanced, stopped, peak, n, chattered = _noisy_segment(
             X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, S[_PEAK], budget, W[:o1], W[o1:o2],
-            W[o2:o3].reshape((NX, NX)), W[o3:o4].reshape((NNB, NNB)), W[o4:o5].reshape((NNB, NNB)), W[o5:o5 + NNB])
+            W[o2:o3].reshape((NX, NX)), W[o3:o4].reshape((NNB, NNB)), W[o4:o5].reshape((NNB, NNB)), W[o5:o5 + NNB],
+            W[o5 + NNB:o5 + NNB + BISECT_SCRATCH])
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -441,12 +443,6 @@ def _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb):
 
 
 @njit(cache=True, _nrt=True)
-def _bisect_rc(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table):
-    """:func:`plant.two_mass.bridge.bisect` with reference counting on (it allocates)."""
-    return bisect(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table)
-
-
-@njit(cache=True, _nrt=True)
 def _bisect_fresh_rc(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, P, Q):
     """:func:`plant.two_mass.bridge.bisect_fresh` (a sub-step of its own width, whose Φ(h) and
     Q(h) are P and Q) with reference counting on (it allocates)."""
@@ -454,11 +450,13 @@ def _bisect_fresh_rc(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xou
 
 
 @njit(cache=True, _nrt=False)
-def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, Xb, Xc, P, Q, L, zeta):
+def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, Xb, Xc, P, Q, L, zeta,
+                   Wb):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
     ``substep`` (``reflect_substep`` while s·T > ks), the bridge crossing test and bisection.
-    Xb, Xc (NX), P (NX × NX), Q, L (NNB × NNB) and ζ (NNB): the caller's scratch; compiled without
-    reference counting (:func:`_fresh_step` and :func:`_bisect_rc` keep it).
+    Xb, Xc (NX), P (NX × NX), Q, L (NNB × NNB), ζ (NNB) and Wb (the bisection's,
+    BISECT_SCRATCH): the caller's scratch; compiled without reference counting
+    (:func:`_fresh_step` and :func:`_bisect_fresh_rc` keep it).
 
     Returns (advanced, stopped, peak, sub-steps, chattered).
     """
@@ -508,7 +506,8 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                     tc, lv = _bisect_fresh_rc(mode, X, Xb, step, o[_O_TOL], p, V, Vi, lam, sig_v2, z, cursor, Xc,
                                               P, Q)
                 else:
-                    tc, lv = _bisect_rc(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc, BT[m])
+                    tc, lv = bisect_w(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc, BT[m],
+                                      Wb)
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
                 for i in range(NX):

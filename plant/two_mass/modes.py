@@ -140,7 +140,7 @@ def phi2(x):
     return (cmath.exp(x) - 1.0 - x) / (x * x)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def phi1_e(x, e):
     """:func:`phi1` given e = cmath.exp(x) (np.exp of a complex is numba's cmath.exp): the same
     value, without computing eˣ again where the caller has it."""
@@ -149,7 +149,7 @@ def phi1_e(x, e):
     return (e - 1.0) / x
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def phi2_e(x, e):
     """:func:`phi2` given e = cmath.exp(x), as :func:`phi1_e`."""
     if _small(x):

@@ -132,8 +132,15 @@ def _state_from_coords_e(X, mode, p, V, r, n, Xout, C, e3, E4):
 def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
     """:func:`propagate` with scratch C (4 × NCORE complex) and F (2 × NCORE): the same
     operations, allocation-free and compiled without reference counting."""
-    r = mode_row(mode)
     n = _start_coords_w(X, mode, p, Vi, C, F)
+    _propagate_c(X, mode, t, p, V, lam, Xout, C, n)
+
+
+@njit(cache=True, _nrt=False)
+def _propagate_c(X, mode, t, p, V, lam, Xout, C, n):
+    """:func:`propagate_w` with X's start coordinates already in C[0], C[1] (n of them, from
+    :func:`_start_coords_w` of this X and mode)."""
+    r = mode_row(mode)
     for i in range(n):
         x = lam[r, i] * t
         e = np.exp(x)
@@ -266,10 +273,14 @@ def transition(mode, h, p, q, V, Vi, lam, P):
 @njit(cache=True)
 def transition_u(mode, h, p, V, lam, U, P):
     """:func:`transition` with the unit start coordinates U (:func:`unit_coords` of ``mode``)."""
-    E = np.zeros(NX)
-    col = np.empty(NX)
-    C = np.empty((4, NCORE), dtype=np.complex128)
-    G = np.empty((5, 1, NCORE), dtype=np.complex128)
+    _transition_k(mode, h, p, V, lam, U, P, np.zeros(NX), np.empty(NX), np.empty((4, NCORE), dtype=np.complex128),
+                  np.empty((5, 1, NCORE), dtype=np.complex128))
+
+
+@njit(cache=True, _nrt=False)
+def _transition_k(mode, h, p, V, lam, U, P, E, col, C, G):
+    """:func:`transition_u`'s work in the caller's scratch (E zeros), compiled without reference
+    counting (the per-column calls counted their array arguments: ~90 atomic operations)."""
     _modal_factors(mode, h, lam, G, 0)
     e3 = math.exp(-p.beta3 * h)
     E4 = -math.expm1(-p.beta4 * h)
@@ -303,13 +314,15 @@ def process_noise_u(mode, h, p, V, lam, U, Q):
     for i in range(NCORE):
         rho = max(rho, abs(lam[r, i]))
     panels = max(1, int(math.ceil(rho * h / 0.125)))
+    _noise_k(mode, h, p, V, lam, U, Q, panels, np.zeros(NX), np.empty(NX), np.empty((4, NCORE), dtype=np.complex128),
+             np.empty((5, panels * 8, NCORE), dtype=np.complex128), np.empty(panels * 8), np.empty(panels * 8))
+
+
+@njit(cache=True, _nrt=False)
+def _noise_k(mode, h, p, V, lam, U, Q, panels, E, col, C, G, e3, E4):
+    """:func:`process_noise_u`'s Gauss–Legendre sum (Q zeroed, ``panels`` panels) in the caller's
+    scratch, compiled without reference counting (its node loop counted ~200 atomic operations)."""
     width = h / panels
-    E = np.zeros(NX)
-    col = np.empty(NX)
-    C = np.empty((4, NCORE), dtype=np.complex128)
-    G = np.empty((5, panels * 8, NCORE), dtype=np.complex128)
-    e3 = np.empty(panels * 8)
-    E4 = np.empty(panels * 8)
     for pn in range(panels):
         lo = pn * width
         for k in range(8):
