@@ -121,15 +121,15 @@ def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
         C[2, i] = cv * C[0, i]
         C[3, i] = cv * C[1, i]
         C[4, i] = lam[M_STUCK, i]
+    if _stays_inside(C, n, ks, horizon):
+        return math.inf, 0
     for i in range(n):
         F[2, i] = abs(C[4, i])
-    if _stays_inside(C, F, n, ks, horizon):
-        return math.inf, 0
     return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
 
 
 @njit(cache=True, _nrt=False)
-def _stays_inside(C, F, n, ks, horizon):
+def _stays_inside(C, n, ks, horizon):
     """True when a bound proves that :func:`first_exit_al` on (C[2], C[3], C[4], F[2]) returns
     (inf, 0): |T| stays below ks on [0, horizon] with a margin far above the search's rounding,
     so no safe step can see the level, and the steps are long enough that their number stays far
@@ -137,7 +137,7 @@ def _stays_inside(C, F, n, ks, horizon):
     hypot per modal term); where the bound does not decide, the search runs as before.
 
     With Re λ ≤ 0: |a·e^(λt)| ≤ |a|, |b·t·φ1(λt)| = |b·(e^(λt) − 1)/λ| ≤ |b|·min(t, 2/|λ|), so
-    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|), and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1)
+    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|) (|λ_i| bounded below by max(|Re|, |Im|)), and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1)
     when no λ_i is 0, also |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the
     ringing part), whichever is smaller (a rounding of the quotients is ~1e-16 of G, inside the
     1e-9 margin below); |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the
@@ -157,7 +157,8 @@ def _stays_inside(C, F, n, ks, horizon):
     cs = 0j                     # ... and the steady part Σ −b_i/λ_i (all λ_i ≠ 0)
     split = True
     for i in range(n):
-        a, b, lam, al = C[2, i], C[3, i], C[4, i], F[2, i]
+        a, b, lam = C[2, i], C[3, i], C[4, i]
+        al = max(abs(lam.real), abs(lam.imag))      # ≤ |λ|: 2/al ≥ 2/|λ|, the bound stays one
         reach = horizon if al * horizon <= 2.0 else 2.0 / al
         G += abs(a.real) + abs(a.imag) + (abs(b.real) + abs(b.imag)) * reach
         d = lam * a + b
