@@ -36,7 +36,7 @@ from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _propagate_c, _start_coords_w,
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, rotor_after, _start_coords_w,
                                    propagate, psd_factor, start_coords, transition, transition_u, process_noise_u,
                                    unit_coords)
 from plant.two_mass.params import TwoMassParams
@@ -225,7 +225,7 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
     # C[0], C[1]: X's stuck start coordinates, from _torque_exit_w (X unchanged since)
-    _propagate_c(X, 2, h, p, V, lam, Xn, C, 3)
+    rotor_after(X, h, V, lam, C, Xn)
     X[PHI], X[WM] = Xn[PHI], Xn[WM]
     stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)    # x1, x4 (with w4) and x3
     S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))

@@ -137,6 +137,22 @@ def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
 
 
 @njit(cache=True, _nrt=False)
+def rotor_after(X, t, V, lam, C, Xout):
+    """Stuck load: Xout[PHI], Xout[WM] after t from X, its start coordinates already in C[0], C[1]
+    (:func:`_start_coords_w` of X in mode 2): the two rows of :func:`_propagate_c` the stuck
+    segment keeps (x1, x3, x4 are plant.multimode.stuck's), by the same operations — only e^x and
+    φ1 enter them (φ2 and the scalar exponentials go to rows nobody reads here)."""
+    r = M_STUCK
+    for i in range(3):
+        x = lam[r, i] * t
+        e = np.exp(x)
+        f1 = phi1_e(x, e)
+        C[2, i] = e * C[0, i] + t * f1 * C[1, i]
+    Xout[PHI] = _row_w(V, r, 0, C, 2, 3)
+    Xout[WM] = _row_w(V, r, 1, C, 2, 3)
+
+
+@njit(cache=True, _nrt=False)
 def _propagate_c(X, mode, t, p, V, lam, Xout, C, n):
     """:func:`propagate_w` with X's start coordinates already in C[0], C[1] (n of them, from
     :func:`_start_coords_w` of this X and mode)."""
