@@ -36,9 +36,9 @@ from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, rotor_after, _start_coords_w,
-                                   propagate, psd_factor, start_coords, transition, transition_u, process_noise_u,
-                                   unit_coords)
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
+                                   propagate_w, rotor_after, _start_coords_w, propagate, psd_factor, start_coords,
+                                   transition, transition_u, process_noise_u, unit_coords)
 from plant.two_mass.params import TwoMassParams
 
 __all__ = ["advance", "N_X"]
@@ -137,8 +137,8 @@ def _stays_inside(C, n, ks, horizon):
     hypot per modal term); where the bound does not decide, the search runs as before.
 
     With Re λ ≤ 0: |a·e^(λt)| ≤ |a|, |b·t·φ1(λt)| = |b·(e^(λt) − 1)/λ| ≤ |b|·min(t, 2/|λ|), so
-    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|) (|λ_i| bounded below by max(|Re|, |Im|)), and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1)
-    when no λ_i is 0, also |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the
+    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|) (|λ_i| bounded below by max(|Re|, |Im|)),
+    and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1) when no λ_i is 0, also |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the
     ringing part), whichever is smaller (a rounding of the quotients is ~1e-16 of G, inside the
     1e-9 margin below); |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the
     search's curvature bound M2(t) ≤ M2 = Σ |λ_i|·|λ_i·a_i + b_i| (each |z| bounded above by
