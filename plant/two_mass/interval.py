@@ -138,16 +138,16 @@ def _stays_inside(C, n, ks, horizon):
 
     With Re λ ≤ 0: |a·e^(λt)| ≤ |a|, |b·t·φ1(λt)| = |b·(e^(λt) − 1)/λ| ≤ |b|·min(t, 2/|λ|), so
     |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|) (|λ_i| bounded below by max(|Re|, |Im|)),
-    and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1) when no λ_i is 0, also |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the
-    ringing part), whichever is smaller (a rounding of the quotients is ~1e-16 of G, inside the
-    1e-9 margin below); |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the
-    search's curvature bound M2(t) ≤ M2 = Σ |λ_i|·|λ_i·a_i + b_i| (each |z| bounded above by
-    |Re z| + |Im z|). If G·(1 + 1e-9) < ks, the distance y to either level is ≥ δ = ks − G·(1 + 1e-9)
-    (the computed sum of the terms is within ~1e-14·G of the exact one) and ≤ 2·ks, so every safe
-    step s ≥ min(√(2δ/M2), 2δ/(2·D1 + √(4·M2·ks))) (:func:`plant.two_mass.modes.first_exit_al`'s
-    two step formulas); with s ≥ 2·s_min, s_min > 1e-12 s and horizon ≤ 1000·s_min the search
-    takes fewer than 1002 steps (its limit is 100000), none below 1e-15 s, and never finds
-    g ≥ ks or g ≤ −ks."""
+    and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1) when no λ_i is 0, also
+    |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the ringing part), whichever is
+    smaller (a rounding of the quotients is ~1e-16 of G, inside the 1e-9 margin below);
+    |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the search's curvature bound M2(t) ≤ M2 = Σ |λ_i|·|λ_i·a_i + b_i|
+    (each |z| bounded above by |Re z| + |Im z|). If G·(1 + 1e-9) < ks, the distance y to either
+    level is ≥ δ = ks − G·(1 + 1e-9) (the computed sum of the terms is within ~1e-14·G of the exact
+    one) and ≤ 2·ks, so every safe step s ≥ min(√(2δ/M2), 2δ/(2·D1 + √(4·M2·ks)))
+    (:func:`plant.two_mass.modes.first_exit_al`'s two step formulas); with s ≥ 2·s_min,
+    s_min > 1e-12 s and horizon ≤ 1000·s_min the search takes fewer than 1002 steps (its limit is
+    100000), none below 1e-15 s, and never finds g ≥ ks or g ≤ −ks."""
     if not (ks > 0.0):
         return False
     G = 0.0
