@@ -22,9 +22,10 @@ from numba import njit
 
 from plant.multimode.zero_velocity import _cross_prob, _hitting_midpoint
 from plant.randomness import normal, uniform_below
-from plant.two_mass.motion import A2, NB, NNB, NX, process_noise, psd_factor, transition
+from plant.two_mass.modes import NCORE
+from plant.two_mass.motion import A2, NB, NNB, NX, process_noise_u, psd_factor, transition_u, unit_coords
 
-__all__ = ["bridge_law", "bridge_tables", "bisect", "LAW_SIZE"]
+__all__ = ["bridge_law", "bridge_tables", "bisect", "bisect_w", "bisect_fresh", "LAW_SIZE", "BISECT_SCRATCH"]
 
 # Packed law: Φ(w/2) (81), Φ(w) (81), G (36), √Σ22 (1), regression on x2 (5), residual factor (25).
 _PH, _PW, _G, _SD, _REG, _RES = 0, 81, 162, 198, 199, 204
@@ -57,15 +58,24 @@ def _pinv_scaled(Q, out):
 @njit(cache=True)
 def bridge_law(mode, w, p, q, V, Vi, lam, law):
     """Fill the packed law (module docstring) of the midpoint of a sub-step of width w."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
     Ph = law[_PH:_PW].reshape((NX, NX))
     Pw = law[_PW:_G].reshape((NX, NX))
-    G = law[_G:_SD].reshape((NNB, NNB))
-    transition(mode, w / 2, p, q, V, Vi, lam, Ph)
-    transition(mode, w, p, q, V, Vi, lam, Pw)
+    transition_u(mode, w / 2, p, V, lam, U, Ph)
+    transition_u(mode, w, p, V, lam, U, Pw)
     Qh = np.empty((NNB, NNB))
     Qw = np.empty((NNB, NNB))
-    process_noise(mode, w / 2, p, q, V, Vi, lam, Qh)
-    process_noise(mode, w, p, q, V, Vi, lam, Qw)
+    process_noise_u(mode, w / 2, p, V, lam, U, Qh)
+    process_noise_u(mode, w, p, V, lam, U, Qw)
+    _law_from(Qh, Qw, law)
+
+
+@njit(cache=True)
+def _law_from(Qh, Qw, law):
+    """The rest of the packed law from Φ(w/2), Φ(w) (already in ``law``), Q(w/2) and Q(w)."""
+    Ph = law[_PH:_PW].reshape((NX, NX))
+    G = law[_G:_SD].reshape((NNB, NNB))
     M = np.empty((NNB, NNB))
     for i in range(NNB):
         for j in range(NNB):
@@ -205,4 +215,92 @@ def bisect(mode, Xa0, Xb0, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, ta
         w = half
         levels += 1
     Xout[:] = Xb
+    return ta + w, levels
+
+
+@njit(cache=True)
+def bisect_fresh(mode, Xa0, Xb0, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, Pw0, Qw0):
+    """:func:`bisect` of a sub-step of its own width h (no table), given its Φ(h) ``Pw0`` and
+    Q(h) ``Qw0`` (the sub-step's own): each level's law needs Φ and Q at w and w/2, and the
+    next level's w is this one's w/2 (the same bits, ``w / 2`` both times), so Φ(w) and Q(w) are
+    carried from the level before instead of rebuilt — the laws :func:`bridge_law` fills, bit
+    for bit, with half the matrices built (tests/test_two_mass_fast.py)."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
+    Xa = Xa0.copy()
+    Xb = Xb0.copy()
+    Xm = np.empty(NX)
+    law = np.empty(LAW_SIZE)
+    sc = np.empty(NX + NNB + 5)                     # _level's scratch
+    Ph = law[_PH:_PW].reshape((NX, NX))
+    Pw = law[_PW:_G].reshape((NX, NX))
+    Qh = np.empty((NNB, NNB))
+    Qw = Qw0.copy()
+    Pw[:, :] = Pw0
+    ta = 0.0
+    w = h
+    levels = 0
+    while w > tol:
+        half = w / 2
+        if levels > 0:
+            Pw[:, :] = Ph
+            Qw[:, :] = Qh
+        transition_u(mode, w / 2, p, V, lam, U, Ph)
+        process_noise_u(mode, w / 2, p, V, lam, U, Qh)
+        _law_from(Qh, Qw, law)
+        left = _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
+        if left:
+            Xb[:] = Xm
+        else:
+            ta += half
+            Xa[:] = Xm
+        w = half
+        levels += 1
+    Xout[:] = Xb
+    return ta + w, levels
+
+
+BISECT_SCRATCH = 3 * NX + LAW_SIZE + NX + NNB + 5     # bisect_w's Wb: Xa, Xb, Xm, a law, _level's scratch
+
+
+@njit(cache=True, _nrt=True)
+def _bridge_law_rc(mode, w, p, q, V, Vi, lam, law):
+    """:func:`bridge_law` with reference counting on (it allocates)."""
+    bridge_law(mode, w, p, q, V, Vi, lam, law)
+
+
+@njit(cache=True, _nrt=False)
+def bisect_w(mode, Xa0, Xb0, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table, Wb):
+    """:func:`bisect` in the caller's scratch Wb (BISECT_SCRATCH floats), compiled without
+    reference counting (each level's table view and _level call counted their arrays: ~60
+    atomic operations per bisection); the same operations and draws."""
+    Xa = Wb[:NX]
+    Xb = Wb[NX:2 * NX]
+    Xm = Wb[2 * NX:3 * NX]
+    law = Wb[3 * NX:3 * NX + LAW_SIZE]
+    sc = Wb[3 * NX + LAW_SIZE:BISECT_SCRATCH]
+    for i in range(NX):
+        Xa[i] = Xa0[i]
+        Xb[i] = Xb0[i]
+    ta = 0.0
+    w = h
+    levels = 0
+    while w > tol:
+        half = w / 2
+        if levels < table.shape[0]:
+            left = _level(table[levels], Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
+        else:
+            _bridge_law_rc(mode, w, p, q, V, Vi, lam, law)
+            left = _level(law, Xa, Xb, Xm, half, sig_v2, z, cursor, sc)
+        if left:
+            for i in range(NX):
+                Xb[i] = Xm[i]
+        else:
+            ta += half
+            for i in range(NX):
+                Xa[i] = Xm[i]
+        w = half
+        levels += 1
+    for i in range(NX):
+        Xout[i] = Xb[i]
     return ta + w, levels

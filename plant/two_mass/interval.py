@@ -34,10 +34,11 @@ from plant.multimode.stuck import stuck_propagate
 from plant.multimode.zero_velocity import _crossed
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
-from plant.two_mass.bridge import bisect, bridge_tables
+from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
-from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise, propagate_w, _start_coords_w,
-                                   propagate, psd_factor, start_coords, transition)
+from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
+                                   propagate_w, rotor_after, _start_coords_w, propagate, psd_factor, start_coords,
+                                   transition, transition_u, process_noise_u, unit_coords)
 from plant.two_mass.params import TwoMassParams
 
 __all__ = ["advance", "N_X"]
@@ -120,9 +121,67 @@ def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
         C[2, i] = cv * C[0, i]
         C[3, i] = cv * C[1, i]
         C[4, i] = lam[M_STUCK, i]
+    if _stays_inside(C, n, ks, horizon):
+        return math.inf, 0
     for i in range(n):
         F[2, i] = abs(C[4, i])
     return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
+
+
+@njit(cache=True, _nrt=False)
+def _stays_inside(C, n, ks, horizon):
+    """True when a bound proves that :func:`first_exit_al` on (C[2], C[3], C[4], F[2]) returns
+    (inf, 0): |T| stays below ks on [0, horizon] with a margin far above the search's rounding,
+    so no safe step can see the level, and the steps are long enough that their number stays far
+    below its limit. The search's own answer, without its steps (each an exp, a sincos and a
+    hypot per modal term); where the bound does not decide, the search runs as before.
+
+    With Re λ ≤ 0: |a·e^(λt)| ≤ |a|, |b·t·φ1(λt)| = |b·(e^(λt) − 1)/λ| ≤ |b|·min(t, 2/|λ|), so
+    |g(t)| ≤ G = Σ |a_i| + |b_i|·min(horizon, 2/|λ_i|) (|λ_i| bounded below by max(|Re|, |Im|)),
+    and, writing b·t·φ1(λt) = (b/λ)(e^(λt) − 1) when no λ_i is 0, also
+    |g(t)| ≤ |Re Σ b_i/λ_i| + Σ |a_i + b_i/λ_i| (the steady part, the ringing part), whichever is
+    smaller (a rounding of the quotients is ~1e-16 of G, inside the 1e-9 margin below);
+    |g'| ≤ D1 = Σ |λ_i·a_i + b_i| and the search's curvature bound M2(t) ≤ M2 = Σ |λ_i|·|λ_i·a_i + b_i|
+    (each |z| bounded above by |Re z| + |Im z|). If G·(1 + 1e-9) < ks, the distance y to either
+    level is ≥ δ = ks − G·(1 + 1e-9) (the computed sum of the terms is within ~1e-14·G of the exact
+    one) and ≤ 2·ks, so every safe step s ≥ min(√(2δ/M2), 2δ/(2·D1 + √(4·M2·ks)))
+    (:func:`plant.two_mass.modes.first_exit_al`'s two step formulas); with s ≥ 2·s_min,
+    s_min > 1e-12 s and horizon ≤ 1000·s_min the search takes fewer than 1002 steps (its limit is
+    100000), none below 1e-15 s, and never finds g ≥ ks or g ≤ −ks."""
+    if not (ks > 0.0):
+        return False
+    G = 0.0
+    D1 = 0.0
+    M2 = 0.0
+    Gs = 0.0                    # the second form: Σ|a_i + b_i/λ_i| ...
+    cs = 0j                     # ... and the steady part Σ −b_i/λ_i (all λ_i ≠ 0)
+    split = True
+    for i in range(n):
+        a, b, lam = C[2, i], C[3, i], C[4, i]
+        al = max(abs(lam.real), abs(lam.imag))      # ≤ |λ|: 2/al ≥ 2/|λ|, the bound stays one
+        reach = horizon if al * horizon <= 2.0 else 2.0 / al
+        G += abs(a.real) + abs(a.imag) + (abs(b.real) + abs(b.imag)) * reach
+        d = lam * a + b
+        dm = abs(d.real) + abs(d.imag)
+        D1 += dm
+        M2 += (abs(lam.real) + abs(lam.imag)) * dm
+        if al > 0.0:
+            c = b / lam
+            Gs += abs(a.real + c.real) + abs(a.imag + c.imag)
+            cs -= c
+        else:
+            split = False
+    if split:
+        G = min(G, Gs + abs(cs.real))
+    bound = G * (1.0 + 1e-9)
+    if not (bound < ks):
+        return False
+    delta = ks - bound
+    s1 = math.sqrt(2.0 * delta / M2) if M2 > 0.0 else math.inf
+    den = 2.0 * D1 + math.sqrt(4.0 * M2 * ks)
+    s2 = 2.0 * delta / den if den > 0.0 else math.inf
+    s_min = 0.5 * min(s1, s2)
+    return s_min > 1e-12 and horizon <= 1000.0 * s_min
 
 
 @njit(cache=True)
@@ -165,7 +224,8 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     h = min(h_end, h_fb, h_brk)
     x1_before = abs(X[A1])
     _torque_metrics(S, X[A3], X[AU], h, bridge, p)
-    propagate_w(X, 2, h, p, V, Vi, lam, Xn, C, F)
+    # C[0], C[1]: X's stuck start coordinates, from _torque_exit_w (X unchanged since)
+    rotor_after(X, h, V, lam, C, Xn)
     X[PHI], X[WM] = Xn[PHI], Xn[WM]
     stuck_propagate(X, h, p, o[_O_NOISE] != 0.0, z, cursor)    # x1, x4 (with w4) and x3
     S[_PEAK] = max(S[_PEAK], x1_before, abs(X[A1]))
@@ -251,7 +311,7 @@ def _quiet_segment(X, S, mode, s, h, bridge, p, q, V, Vi, lam, noise_on, z, curs
     return 1 if stopped else 0
 
 
-MOVE_SCRATCH = 2 * NX + NX * NX + 2 * NNB * NNB + NNB      # _moving's W: Xb, Xc, P, Q, L, ζ
+MOVE_SCRATCH = 2 * NX + NX * NX + 2 * NNB * NNB + NNB + BISECT_SCRATCH  # _moving's W: Xb, Xc, P, Q, L, ζ, bisection
 
 
 @njit(cache=True, _nrt=False)
@@ -273,7 +333,8 @@ def _moving(X, S, t_end, bridge, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, ev,
         o5 = o4 + NNB * NNB
         advanced, stopped, peak, n, chattered = _noisy_segment(
             X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, S[_PEAK], budget, W[:o1], W[o1:o2],
-            W[o2:o3].reshape((NX, NX)), W[o3:o4].reshape((NNB, NNB)), W[o4:o5].reshape((NNB, NNB)), W[o5:o5 + NNB])
+            W[o2:o3].reshape((NX, NX)), W[o3:o4].reshape((NNB, NNB)), W[o4:o5].reshape((NNB, NNB)), W[o5:o5 + NNB],
+            W[o5 + NNB:o5 + NNB + BISECT_SCRATCH])
         _torque_metrics(S, x3, u, advanced, bridge, p)
         S[_PEAK] = peak
         S[_NSUB] += n
@@ -334,13 +395,35 @@ def _gauss_step(X, P, L, z, cursor, out):
 def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
     """:func:`_gauss_step` with P = TP[m, j], L = TL[m, j] read in place (no views) and ζ in the
     scratch ``zeta``: the same operations and draws, allocation-free, without reference counting."""
-    for i in range(NX):
+    for i in (A1, A2, A5, PHI, WM):
         acc = 0.0
         for k in range(NX):
             acc += TP[m, j, i, k] * X[k]
         out[i] = acc
-    for i in range(NNB):
-        zeta[i] = normal(z, cursor)
+    # Φ's rows of x3, x4, kc and u are zero off (x3, u), x4, kc, u by construction (motion.
+    # _state_from_coords_e: 0 + (0 − 0)·e3, 0·(1 − E4), copies), and a product 0·X[k] added to
+    # a sum that starts at +0 never changes it (finite X): the same sums without those products
+    acc = 0.0
+    acc += TP[m, j, A3, A3] * X[A3]
+    acc += TP[m, j, A3, AU] * X[AU]
+    out[A3] = acc
+    acc = 0.0
+    acc += TP[m, j, A4, A4] * X[A4]
+    out[A4] = acc
+    acc = 0.0
+    acc += TP[m, j, AKC, AKC] * X[AKC]
+    out[AKC] = acc
+    acc = 0.0
+    acc += TP[m, j, AU, AU] * X[AU]
+    out[AU] = acc
+    i0 = cursor[0]
+    if 0 <= i0 and i0 + NNB <= z.shape[0]:     # the next six normals in one bounds check
+        for i in range(NNB):
+            zeta[i] = z[i0 + i]
+        cursor[0] = i0 + NNB
+    else:
+        for i in range(NNB):
+            zeta[i] = normal(z, cursor)
     for i in range(NNB):
         acc = 0.0
         for k in range(i + 1):
@@ -352,24 +435,29 @@ def _gauss_step_t(X, TP, TL, m, j, z, cursor, out, zeta):
 def _fresh_step(X, mode, step, p, q, V, Vi, lam, P, Q, L, z, cursor, Xb):
     """A sub-step of its own width: Φ(h), Q(h) and the factor built afresh, then the Gaussian step
     (they allocate: reference counting on, explicitly)."""
-    transition(mode, step, p, q, V, Vi, lam, P)
-    process_noise(mode, step, p, q, V, Vi, lam, Q)
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)                 # the unit start coordinates, once for Φ and Q
+    transition_u(mode, step, p, V, lam, U, P)
+    process_noise_u(mode, step, p, V, lam, U, Q)
     psd_factor(Q, L)
     _gauss_step(X, P, L, z, cursor, Xb)
 
 
 @njit(cache=True, _nrt=True)
-def _bisect_rc(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table):
-    """:func:`plant.two_mass.bridge.bisect` with reference counting on (it allocates)."""
-    return bisect(mode, Xa, Xb, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, table)
+def _bisect_fresh_rc(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, P, Q):
+    """:func:`plant.two_mass.bridge.bisect_fresh` (a sub-step of its own width, whose Φ(h) and
+    Q(h) are P and Q) with reference counting on (it allocates)."""
+    return bisect_fresh(mode, Xa, Xb, h, tol, p, V, Vi, lam, sig_v2, z, cursor, Xout, P, Q)
 
 
 @njit(cache=True, _nrt=False)
-def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, Xb, Xc, P, Q, L, zeta):
+def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak, max_steps, Xb, Xc, P, Q, L, zeta,
+                   Wb):
     """Advance a noisy moving segment of length h in place: exact Gaussian sub-steps of
     ``substep`` (``reflect_substep`` while s·T > ks), the bridge crossing test and bisection.
-    Xb, Xc (NX), P (NX × NX), Q, L (NNB × NNB) and ζ (NNB): the caller's scratch; compiled without
-    reference counting (:func:`_fresh_step` and :func:`_bisect_rc` keep it).
+    Xb, Xc (NX), P (NX × NX), Q, L (NNB × NNB), ζ (NNB) and Wb (the bisection's,
+    BISECT_SCRATCH): the caller's scratch; compiled without reference counting
+    (:func:`_fresh_step` and :func:`_bisect_fresh_rc` keep it).
 
     Returns (advanced, stopped, peak, sub-steps, chattered).
     """
@@ -415,8 +503,12 @@ def _noisy_segment(X, mode, h, p, q, V, Vi, lam, o, TP, TL, BT, z, cursor, peak,
                 Xb[PHI] -= s * (-low) * step / 2.0
         else:
             if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
-                tc, lv = _bisect_rc(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc,
-                                    BT[m] if not fresh else BT[m, :0])
+                if fresh:    # P, Q: this sub-step's Φ(step), Q(step) (_fresh_step)
+                    tc, lv = _bisect_fresh_rc(mode, X, Xb, step, o[_O_TOL], p, V, Vi, lam, sig_v2, z, cursor, Xc,
+                                              P, Q)
+                else:
+                    tc, lv = bisect_w(mode, X, Xb, step, o[_O_TOL], p, q, V, Vi, lam, sig_v2, z, cursor, Xc, BT[m],
+                                      Wb)
                 n += lv
                 peak = substep_peak(X, Xc, tc, peak)
                 for i in range(NX):

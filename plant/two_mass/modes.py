@@ -114,18 +114,21 @@ def _tiny(term, total):
     return abs(term) < 1e-18 * abs(total)
 
 
+@njit(cache=True, inline="always")
+def _div_k(a, k):
+    """a / k for a complex a and a positive integer k, as numba divides a complex by k + 0j
+    (CPython's _Py_c_quot, the |b.real| ≥ |b.imag| branch: ratio = 0/k = +0, denom = k + 0·0 = k),
+    without the branch, the ratio's division and the denominator: the same operations on the
+    same values (tests/test_two_mass_fast.py)."""
+    d = float(k)
+    return complex((a.real + a.imag * 0.0) / d, (a.imag - a.real * 0.0) / d)
+
+
 @njit(cache=True)
 def phi1(x):
     """(eˣ − 1)/x for complex x, 1 at 0."""
     if _small(x):
-        term = 1.0 + 0j
-        total = 1.0 + 0j
-        for k in range(2, 30):
-            term = term * x / k
-            total += term
-            if _tiny(term, total):
-                break
-        return total
+        return _phi1_series(x)
     return (cmath.exp(x) - 1.0) / x
 
 
@@ -133,15 +136,49 @@ def phi1(x):
 def phi2(x):
     """(eˣ − 1 − x)/x² for complex x, ½ at 0."""
     if _small(x):
-        term = 0.5 + 0j
-        total = 0.5 + 0j
-        for k in range(3, 32):
-            term = term * x / k
-            total += term
-            if _tiny(term, total):
-                break
-        return total
+        return _phi2_series(x)
     return (cmath.exp(x) - 1.0 - x) / (x * x)
+
+
+@njit(cache=True, inline="always")
+def phi1_e(x, e):
+    """:func:`phi1` given e = cmath.exp(x) (np.exp of a complex is numba's cmath.exp): the same
+    value, without computing eˣ again where the caller has it."""
+    if _small(x):
+        return _phi1_series(x)
+    return (e - 1.0) / x
+
+
+@njit(cache=True, inline="always")
+def phi2_e(x, e):
+    """:func:`phi2` given e = cmath.exp(x), as :func:`phi1_e`."""
+    if _small(x):
+        return _phi2_series(x)
+    return (e - 1.0 - x) / (x * x)
+
+
+@njit(cache=True, inline="always")
+def _phi1_series(x):
+    term = 1.0 + 0j
+    total = 1.0 + 0j
+    for k in range(2, 30):
+        term = _div_k(term * x, k)
+        total += term
+        if _tiny(term, total):
+            break
+    return total
+
+
+@njit(cache=True, inline="always")
+def _phi2_series(x):
+    term = 0.5 + 0j
+    total = 0.5 + 0j
+    for k in range(3, 32):
+        term = _div_k(term * x, k)
+        total += term
+        if _tiny(term, total):
+            break
+    return total
 
 
 @njit(cache=True, _nrt=False)
@@ -160,7 +197,7 @@ def _g_fast(ca, cb, lam, al, n, t, want_size):
         if cb[i].real == 0.0 and cb[i].imag == 0.0:
             term = ca[i] * e
         else:
-            term = ca[i] * e + cb[i] * (t * phi1(l * t))
+            term = ca[i] * e + cb[i] * (t * phi1_e(l * t, e))
         g += term.real
         if want_size:
             size += abs(term)

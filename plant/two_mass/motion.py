@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.two_mass.modes import M_STUCK, NCORE, phi1, phi2
+from plant.two_mass.modes import M_STUCK, NCORE, _div_k, _small, _tiny, phi1, phi1_e, phi2, phi2_e
 
 A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
 NX = 9
@@ -103,11 +103,17 @@ def _start_coords_w(X, mode, p, Vi, C, F):
 def _state_from_coords(X, mode, t, p, V, r, n, Xout, C):
     """The end state of :func:`propagate_w` / :func:`_propagate_g` from the propagated modal
     coordinates C[2], C[3] (rows back through V) and the decoupled x3, x4, x1 closed forms."""
+    _state_from_coords_e(X, mode, p, V, r, n, Xout, C, math.exp(-p.beta3 * t), -math.expm1(-p.beta4 * t))
+
+
+@njit(cache=True, _nrt=False)
+def _state_from_coords_e(X, mode, p, V, r, n, Xout, C, e3, E4):
+    """:func:`_state_from_coords` with its two scalar exponentials given: e3 = e^(−β3·t),
+    E4 = −expm1(−β4·t) (the same values, computed once per t by the callers that build Φ and Q)."""
     b4 = p.beta4
-    E4 = -math.expm1(-b4 * t)
     for j in range(NX):
         Xout[j] = X[j]
-    Xout[A3] = X[AU] + (X[A3] - X[AU]) * math.exp(-p.beta3 * t)
+    Xout[A3] = X[AU] + (X[A3] - X[AU]) * e3
     Xout[A4] = X[A4] * (1.0 - E4)
     if mode == 2:
         Xout[A1] = X[A1] - X[A4] * E4 / b4
@@ -126,27 +132,86 @@ def _state_from_coords(X, mode, t, p, V, r, n, Xout, C):
 def propagate_w(X, mode, t, p, V, Vi, lam, Xout, C, F):
     """:func:`propagate` with scratch C (4 × NCORE complex) and F (2 × NCORE): the same
     operations, allocation-free and compiled without reference counting."""
-    r = mode_row(mode)
     n = _start_coords_w(X, mode, p, Vi, C, F)
+    _propagate_c(X, mode, t, p, V, lam, Xout, C, n)
+
+
+@njit(cache=True, _nrt=False)
+def rotor_after(X, t, V, lam, C, Xout):
+    """Stuck load: Xout[PHI], Xout[WM] after t from X, its start coordinates already in C[0], C[1]
+    (:func:`_start_coords_w` of X in mode 2): the two rows of :func:`_propagate_c` the stuck
+    segment keeps (x1, x3, x4 are plant.multimode.stuck's), by the same operations — only e^x and
+    φ1 enter them (φ2 and the scalar exponentials go to rows nobody reads here)."""
+    r = M_STUCK
+    for i in range(3):
+        x = lam[r, i] * t
+        e = np.exp(x)
+        f1 = phi1_e(x, e)
+        C[2, i] = e * C[0, i] + t * f1 * C[1, i]
+    Xout[PHI] = _row_w(V, r, 0, C, 2, 3)
+    Xout[WM] = _row_w(V, r, 1, C, 2, 3)
+
+
+@njit(cache=True, _nrt=False)
+def _propagate_c(X, mode, t, p, V, lam, Xout, C, n):
+    """:func:`propagate_w` with X's start coordinates already in C[0], C[1] (n of them, from
+    :func:`_start_coords_w` of this X and mode)."""
+    r = mode_row(mode)
     for i in range(n):
         x = lam[r, i] * t
-        f1 = phi1(x)
-        C[2, i] = np.exp(x) * C[0, i] + t * f1 * C[1, i]
-        C[3, i] = t * f1 * C[0, i] + t * t * phi2(x) * C[1, i]
+        e = np.exp(x)
+        f1 = phi1_e(x, e)
+        C[2, i] = e * C[0, i] + t * f1 * C[1, i]
+        C[3, i] = t * f1 * C[0, i] + t * t * phi2_e(x, e) * C[1, i]
     _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
 @njit(cache=True, _nrt=False)
 def _modal_factors(mode, t, lam, G, k):
     """G[0, k], G[1, k], G[2, k] = e^x, φ1(x), φ2(x) at x = λ_i·t for the modes of ``mode``: what
-    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike."""
+    :func:`propagate_w` computes for every column of Φ(t) and every source of Q alike.
+
+    The series of φ1 and φ2 (|x| < ½) of all modes are summed side by side, a term of each per
+    pass (G[3, k], G[4, k] hold the running terms): each series takes the steps of
+    :func:`plant.two_mass.modes.phi1_e` / ``phi2_e`` in its own order and stops where they stop,
+    so the values are theirs; the interleaving only lets the independent divisions overlap."""
     r = mode_row(mode)
     n = 3 if mode == 2 else 5
+    act = 0
     for i in range(n):
         x = lam[r, i] * t
-        G[0, k, i] = np.exp(x)
-        G[1, k, i] = phi1(x)
-        G[2, k, i] = phi2(x)
+        e = np.exp(x)
+        G[0, k, i] = e
+        if _small(x):
+            G[1, k, i] = 1.0 + 0j
+            G[3, k, i] = 1.0 + 0j
+            G[2, k, i] = 0.5 + 0j
+            G[4, k, i] = 0.5 + 0j
+            act |= (1 << i) | (1 << (8 + i))
+        else:
+            G[1, k, i] = phi1_e(x, e)
+            G[2, k, i] = phi2_e(x, e)
+    for kk in range(2, 32):
+        if act == 0:
+            break
+        for i in range(n):
+            if kk < 30 and act & (1 << i):              # φ1: k = 2 … 29
+                term = _div_k(G[3, k, i] * (lam[r, i] * t), kk)
+                total = G[1, k, i] + term
+                G[3, k, i] = term
+                G[1, k, i] = total
+                if _tiny(term, total):
+                    act &= ~(1 << i)
+            if kk >= 3 and act & (1 << (8 + i)):        # φ2: k = 3 … 31
+                term = _div_k(G[4, k, i] * (lam[r, i] * t), kk)
+                total = G[2, k, i] + term
+                G[4, k, i] = term
+                G[2, k, i] = total
+                if _tiny(term, total):
+                    act &= ~(1 << (8 + i))
+        if kk == 29:
+            act &= ~0xFF                                # φ1's series ends at k = 29
+    return
 
 
 @njit(cache=True, _nrt=False)
@@ -162,12 +227,17 @@ def _propagate_g(X, mode, t, p, V, Vi, lam, Xout, C, F, G, k):
     _state_from_coords(X, mode, t, p, V, r, n, Xout, C)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _row_w(V, r, k, C, c, n):
-    acc = 0j
+    """Re Σ_i V[r, k, i]·C[c, i]: the real part of numba's complex sum (componentwise from 0j)
+    of its complex products (real part a.real·b.real − a.imag·b.imag, CPython's _Py_c_prod),
+    without the imaginary parts nobody reads: the same operations on the same values."""
+    acc = 0.0
     for i in range(n):
-        acc += V[r, k, i] * C[c, i]
-    return acc.real
+        v = V[r, k, i]
+        w = C[c, i]
+        acc += v.real * w.real - v.imag * w.imag
+    return acc
 
 
 @njit(cache=True)
@@ -179,17 +249,60 @@ def _row(V, r, k, w, n):
 
 
 @njit(cache=True)
-def transition(mode, h, p, q, V, Vi, lam, P):
-    """P = Φ(h) (9 × 9) of ``mode``, the matrix of :func:`propagate`."""
+def unit_coords(mode, p, Vi, U):
+    """U[j, 0], U[j, 1] = w, b̃ (:func:`_start_coords_w`) of the unit vector e_j, j < NX: the
+    start coordinates every column of Φ and every noise source of Q begin with, independent of
+    the width, so :func:`transition_u` and :func:`process_noise_u` compute them once."""
     E = np.zeros(NX)
-    col = np.empty(NX)
     C = np.empty((4, NCORE), dtype=np.complex128)
     F = np.empty((2, NCORE))
-    G = np.empty((3, 1, NCORE), dtype=np.complex128)
-    _modal_factors(mode, h, lam, G, 0)
     for j in range(NX):
         E[j] = 1.0
-        _propagate_g(E, mode, h, p, V, Vi, lam, col, C, F, G, 0)
+        n = _start_coords_w(E, mode, p, Vi, C, F)
+        for i in range(n):
+            U[j, 0, i] = C[0, i]
+            U[j, 1, i] = C[1, i]
+        E[j] = 0.0
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _unit_column(E, j, mode, t, p, V, U, G, k, e3, E4, Xout, C):
+    """:func:`_propagate_g` of the unit vector E = e_j with its start coordinates read from U[j]
+    and e^(−β3·t), −expm1(−β4·t) given: the same operations on the same values."""
+    r = mode_row(mode)
+    n = 3 if mode == 2 else 5
+    for i in range(n):
+        f1 = G[1, k, i]
+        C[2, i] = G[0, k, i] * U[j, 0, i] + t * f1 * U[j, 1, i]
+        C[3, i] = t * f1 * U[j, 0, i] + t * t * G[2, k, i] * U[j, 1, i]
+    _state_from_coords_e(E, mode, p, V, r, n, Xout, C, e3, E4)
+
+
+@njit(cache=True)
+def transition(mode, h, p, q, V, Vi, lam, P):
+    """P = Φ(h) (9 × 9) of ``mode``, the matrix of :func:`propagate`."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
+    transition_u(mode, h, p, V, lam, U, P)
+
+
+@njit(cache=True)
+def transition_u(mode, h, p, V, lam, U, P):
+    """:func:`transition` with the unit start coordinates U (:func:`unit_coords` of ``mode``)."""
+    _transition_k(mode, h, p, V, lam, U, P, np.zeros(NX), np.empty(NX), np.empty((4, NCORE), dtype=np.complex128),
+                  np.empty((5, 1, NCORE), dtype=np.complex128))
+
+
+@njit(cache=True, _nrt=False)
+def _transition_k(mode, h, p, V, lam, U, P, E, col, C, G):
+    """:func:`transition_u`'s work in the caller's scratch (E zeros), compiled without reference
+    counting (the per-column calls counted their array arguments: ~90 atomic operations)."""
+    _modal_factors(mode, h, lam, G, 0)
+    e3 = math.exp(-p.beta3 * h)
+    E4 = -math.expm1(-p.beta4 * h)
+    for j in range(NX):
+        E[j] = 1.0
+        _unit_column(E, j, mode, h, p, V, U, G, 0, e3, E4, col, C)
         for i in range(NX):
             P[i, j] = col[i]
         E[j] = 0.0
@@ -198,6 +311,15 @@ def transition(mode, h, p, q, V, Vi, lam, P):
 @njit(cache=True)
 def process_noise(mode, h, p, q, V, Vi, lam, Q):
     """Q (6 × 6 on NB) = COV of the noise over h while moving (module docstring); stuck: w4 only."""
+    U = np.empty((NX, 2, NCORE), dtype=np.complex128)
+    unit_coords(mode, p, Vi, U)
+    process_noise_u(mode, h, p, V, lam, U, Q)
+
+
+@njit(cache=True)
+def process_noise_u(mode, h, p, V, lam, U, Q):
+    """:func:`process_noise` with the unit start coordinates U (:func:`unit_coords` of ``mode``);
+    e^(λt), φ1, φ2 and the two scalar exponentials once per Gauss–Legendre node."""
     for i in range(NNB):
         for j in range(NNB):
             Q[i, j] = 0.0
@@ -208,16 +330,22 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
     for i in range(NCORE):
         rho = max(rho, abs(lam[r, i]))
     panels = max(1, int(math.ceil(rho * h / 0.125)))
+    _noise_k(mode, h, p, V, lam, U, Q, panels, np.zeros(NX), np.empty(NX), np.empty((4, NCORE), dtype=np.complex128),
+             np.empty((5, panels * 8, NCORE), dtype=np.complex128), np.empty(panels * 8), np.empty(panels * 8))
+
+
+@njit(cache=True, _nrt=False)
+def _noise_k(mode, h, p, V, lam, U, Q, panels, E, col, C, G, e3, E4):
+    """:func:`process_noise_u`'s Gauss–Legendre sum (Q zeroed, ``panels`` panels) in the caller's
+    scratch, compiled without reference counting (its node loop counted ~200 atomic operations)."""
     width = h / panels
-    E = np.zeros(NX)
-    col = np.empty(NX)
-    C = np.empty((4, NCORE), dtype=np.complex128)
-    F = np.empty((2, NCORE))
-    G = np.empty((3, panels * 8, NCORE), dtype=np.complex128)
     for pn in range(panels):
         lo = pn * width
         for k in range(8):
-            _modal_factors(mode, lo + 0.5 * width * (_GL_X[k] + 1.0), lam, G, pn * 8 + k)
+            v = lo + 0.5 * width * (_GL_X[k] + 1.0)
+            _modal_factors(mode, v, lam, G, pn * 8 + k)
+            e3[pn * 8 + k] = math.exp(-p.beta3 * v)
+            E4[pn * 8 + k] = -math.expm1(-p.beta4 * v)
     srcs = (A2, A4, A5)
     for s_i in range(3):
         j = srcs[s_i]
@@ -236,7 +364,7 @@ def process_noise(mode, h, p, q, V, Vi, lam, Q):
             for k in range(8):
                 v = lo + 0.5 * width * (_GL_X[k] + 1.0)
                 E[j] = 1.0
-                _propagate_g(E, mode, v, p, V, Vi, lam, col, C, F, G, pn * 8 + k)
+                _unit_column(E, j, mode, v, p, V, U, G, pn * 8 + k, e3[pn * 8 + k], E4[pn * 8 + k], col, C)
                 E[j] = 0.0
                 wk = 0.5 * width * _GL_W[k] * qj
                 for a in range(NNB):
