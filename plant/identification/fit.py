@@ -14,7 +14,8 @@ fit (floored at σ̂1²). **Uncertainty: a parametric bootstrap** (:func:`fit_lo
 from the fit (Table 2-1 process noise, x5 drawn, σ̂1), each refitted by the final pass warm-started
 at the estimate (:func:`_refit`; lugre and two-mass: fitted by the point fit's own path from the
 real log's winning designed start, :func:`_multi_start`); the 95 % interval is bias-corrected, (estimate − mean deviation)
-± t(0.975, B−1)·sd·√(1+1/B). Without it (``bootstrap=0``, or the CPU budget hit early) the
+± t(0.975, B−1)·sd·√(1+1/B); two-mass k_sh: the replicates' truths spread over a span and the calibration
+interval of :func:`_calibration_interval`. Without it (``bootstrap=0``, or the CPU budget hit early) the
 **cluster-robust Gauss–Newton covariance** (a sandwich over moves): Cov = A⁻¹·B·A⁻¹·G/(G−1),
 A = JᵀJ, B = Σ_m (J_mᵀ r_m)(J_mᵀ r_m)ᵀ of the weighted residuals r and Jacobian J at the optimum,
 G moves; mapped to the physical parameters by the delta method; 95 % intervals ± t(0.975, G − p)·sd.
@@ -545,7 +546,8 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         Parametric-bootstrap replicates for the uncertainties, each a simulated log refitted by
         the final pass from the estimate (:func:`_refit`); intervals bias-corrected (0: the
         cluster-robust Gauss–Newton covariance alone, which is optimistic — see the module
-        docstring).
+        docstring). Two-mass: replicate i simulated with k_sh at the i-th log-even point of
+        :data:`_CALIBRATED`'s span, k_sh's interval the calibration one (:func:`_calibration_interval`).
     seed : int
         Root of the bootstrap's ``SeedSequence``.
     budget_s : float
