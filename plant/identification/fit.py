@@ -592,11 +592,17 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         plan = AxisLog(log.drive, log.sample_period, log.u_max, log.commands, None)
         at_bound = (z <= model.box[0] + 1e-6) | (z >= model.box[1] - 1e-6)
         failed = stuck = 0
-        # calibrated extras: replicate i's truth at the i-th of B log-even points of the span (midpoints)
+        # calibrated extras: replicate i's truth at the i-th of B log-even points of the span (midpoints);
+        # the replicates are run in golden-ratio order (the k-th run is i = rank of frac(k·φ)), so those
+        # done when the budget cuts the bootstrap still spread over the span
         spans = {names.index(k): (max(math.log(a), model.box[0][names.index(k)]),
                                   min(math.log(b), model.box[1][names.index(k)]))
                  for k, (a, b) in _CALIBRATED.get(family, {}).items()}
-        for i, child in enumerate(np.random.SeedSequence(seed).spawn(bootstrap)):
+        children = np.random.SeedSequence(seed).spawn(bootstrap)
+        runs = (np.argsort(np.argsort(np.arange(bootstrap) * ((math.sqrt(5.0) - 1.0) / 2.0) % 1.0, kind="stable"))
+                if spans else range(bootstrap))
+        for i in runs:
+            child = children[i]
             if time.process_time() > deadline:
                 break
             at = {names[c]: math.exp(lo + (i + 0.5) / bootstrap * (hi - lo)) for c, (lo, hi) in spans.items()}
