@@ -260,11 +260,15 @@ SEVENTH_TWO_MASS_CASES = 10
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 10 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 15 min of CPU: SOLNIC_AXIS_STUDY=1")
 def test_seventh_two_mass_coverage_all_fields():
     """Random two-mass axes at the fresh seed 2718 (draws from ``default_rng([2718, 3])``, log seed
     2718·1000 + k; named before any run): every fitted field inside its stated 95 % interval in
     ≥ 90 % of the cases, with k_sh's calibration interval (replicate truths spread over
-    2.5e3–2e5 ozf·in/rad, issue 25's seventh session; docs/axis.md, "Seventh session")."""
+    2.5e3–2e5 ozf·in/rad, issue 25's seventh session; docs/axis.md, "Seventh session").
+    Measured (2026-11-27, loaded machine, cases 0–9): 47 of 50 (94 %) — k̄c, k̄s, J 9/10 (all three
+    misses on case 2, where the 300-s budget cut the bootstrap below 5 replicates and the optimistic
+    cluster-robust covariance stood in), τ3 10/10, k_sh 10/10 (the bounded range, not identified,
+    on 8). CPU per log 16–377 s (median 22 s)."""
     inside = _fresh_coverage("two-mass", range(SEVENTH_TWO_MASS_CASES), SEVENTH_SEED)
     assert np.mean([x for v in inside.values() for x in v]) >= 0.90
