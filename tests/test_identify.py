@@ -452,3 +452,70 @@ def test_a_parameter_no_refit_moves_gets_no_zero_width_interval(monkeypatch):
     fit = fit_log(log, "multimode", bootstrap=8)      # no refit moves τ3: the cluster-robust sd for it
     lo, hi = fit.interval["motor_time_constant"]
     assert hi > lo and "motor_time_constant: no replicate refit moved it" in fit.method
+
+
+def test_calibration_interval_is_the_closed_form_inverse_regression_and_covers():
+    """fit._calibration_interval against Eisenhart's closed form: the x with
+    (y0 − a − b·x)² ≤ q²s²(1 + 1/n + (x − x̄)²/Sxx), the roots of a quadratic (to the grid's step);
+    on a Monte-Carlo of 2000 straight-line data sets (b = 0.8, s = 0.3, n = 10) it holds the true
+    x0 in 95 % ± 1.5 % of them (3 binomial sd); with no slope (b = 0, an estimator that does not
+    follow the truth) it reaches the span's ends and goes on to the bound."""
+    from plant.identification.fit import _calibration_interval
+
+    rng = np.random.default_rng(20261127)
+    lo, hi, bound = 0.0, 4.0, (-3.0, 7.0)
+    x = lo + (np.arange(10) + 0.5) / 10 * (hi - lo)
+    n = x.size
+    q = __import__("scipy.stats").stats.t.ppf(0.975, n - 2)
+    hits, checked = 0, 0
+    for trial in range(2000):
+        y = 1.0 + 0.8 * x + 0.3 * rng.standard_normal(n)
+        x0 = rng.uniform(0.5, 3.5)
+        y0 = 1.0 + 0.8 * x0 + 0.3 * rng.standard_normal()
+        a_, b_ = _calibration_interval(x, y, y0, lo, hi, bound)[:2]
+        hits += a_ <= x0 <= b_
+        if trial < 50:        # closed form: A x² + B x + C ≤ 0
+            b, a = np.polyfit(x, y, 1)
+            s2 = np.sum((y - a - b * x) ** 2) / (n - 2)
+            xm, sxx = x.mean(), np.sum((x - x.mean()) ** 2)
+            k = q * q * s2
+            A = b * b - k / sxx
+            B = -2 * b * (y0 - a) + 2 * k * xm / sxx
+            C = (y0 - a) ** 2 - k * (1 + 1 / n) - k * xm * xm / sxx
+            if A > 0 and B * B - 4 * A * C > 0:
+                r1, r2 = sorted(np.roots([A, B, C]).real)
+                if lo < r1 and r2 < hi:
+                    checked += 1
+                    assert a_ == pytest.approx(r1, abs=(hi - lo) / 800) and b_ == pytest.approx(r2, abs=(hi - lo) / 800)
+    assert checked >= 20
+    assert abs(hits / 2000 - 0.95) <= 3 * math.sqrt(0.95 * 0.05 / 2000)
+    y = 2.0 + 0.3 * rng.standard_normal(n)          # flat: the estimate does not follow the truth
+    assert _calibration_interval(x, y, float(np.mean(y)), lo, hi, bound)[:2] == bound
+
+
+@pytest.mark.slow
+def test_two_mass_bootstrap_spreads_the_shaft_truths_and_states_the_calibration(monkeypatch):
+    """The two-mass bootstrap simulates replicate i at k_sh = the i-th log-even midpoint of
+    2.5e3–2e5 ozf·in/rad (the other fields at the estimate), in golden-ratio order, states the calibration interval for
+    k_sh in ``fit.method``, and that interval holds the estimate's own calibration: it is within
+    the fit's bound (a factor 30 of 4e4) and nonempty; the core keeps its bootstrap interval."""
+    import plant.identification.simulate as sim
+
+    plan = design_experiment(ExperimentOptions(repeats=1, holds=1))
+    p = get_family("two-mass").Params().replace(coulomb=1.2, stiction=1.7, inertia=0.55,
+                                                motor_time_constant=0.0085, shaft_stiffness=1.5e4)
+    log, _ = simulate_log(plan, "two-mass", p, 5150)
+    seen = []
+
+    def spy(plan_, family, params, seed):
+        seen.append(params.shaft_stiffness)
+        return simulate_log(plan_, family, params, seed)
+    monkeypatch.setattr(sim, "simulate_log", spy)
+    fit = fit_log(log, "two-mass", bootstrap=5)
+    expect = np.exp(np.log(2.5e3) + (np.arange(5) + 0.5) / 5 * np.log(2e5 / 2.5e3))
+    # run in golden-ratio order: frac(k·0.618…) = 0, .618, .236, .854, .472 for k = 0..4, ranks 0 3 1 4 2
+    np.testing.assert_allclose(seen, expect[[0, 3, 1, 4, 2]], rtol=1e-12)
+    assert "shaft_stiffness: calibration interval" in fit.method
+    lo, hi = fit.interval["shaft_stiffness"]
+    assert 4e4 / 30 * (1 - 1e-9) <= lo < hi <= 4e4 * 30 * (1 + 1e-9)
+    assert all(fit.interval[k][0] < fit.interval[k][1] for k in CORE)

@@ -240,9 +240,7 @@ def test_fifth_lugre_coverage_all_fields():
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 12 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-4: 18 of 25 (72 %) — "
-                   "k̄c, k̄s, J, τ3 4/5 each, k_sh 2/5 (estimates +52 % to +1013 %, fitted too stiff); below 90 %")
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 4 min of CPU: SOLNIC_AXIS_STUDY=1")
 def test_fifth_two_mass_coverage_all_fields():
     """Random two-mass axes at the fresh seed 3907 (draws from ``default_rng([3907, 3])``; named
     before any run): every fitted field inside its stated 95 % interval in ≥ 90 % of the cases,
@@ -251,5 +249,27 @@ def test_fifth_two_mass_coverage_all_fields():
     too stiff and its bootstrap, simulated at that stiff estimate, does not see softer shafts; case 1
     ran 334 CPU s, past the 300-s budget, with intervals 1–7 % wide: 1 of 5 inside (which fallback
     the budget rule took was not recorded).
-    CPU per log 19, 334, 19, 50, 248 s (docs/axis.md, "Fifth session")."""
+    CPU per log 19, 334, 19, 50, 248 s (docs/axis.md, "Fifth session"). Re-run with k_sh's calibration
+    interval (seventh session; the point estimates unchanged): 25 of 25 inside, k_sh the bounded
+    range (not identified) on all five; CPU per log 20, 21, 24, 25, 146 s. The strict xfail is removed."""
     assert _fifth_coverage("two-mass", range(TWO_MASS_CASES)) >= 0.90
+
+
+SEVENTH_SEED = 2718   # issue 25's seventh session: named before any run (the calibration interval for k_sh;
+                      # dev seed 5150)
+SEVENTH_TWO_MASS_CASES = 10
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 15 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_seventh_two_mass_coverage_all_fields():
+    """Random two-mass axes at the fresh seed 2718 (draws from ``default_rng([2718, 3])``, log seed
+    2718·1000 + k; named before any run): every fitted field inside its stated 95 % interval in
+    ≥ 90 % of the cases, with k_sh's calibration interval (replicate truths spread over
+    2.5e3–2e5 ozf·in/rad, issue 25's seventh session; docs/axis.md, "Seventh session").
+    Measured (2026-11-27, loaded machine, cases 0–9): 47 of 50 (94 %) — k̄c, k̄s, J 9/10 (all three
+    misses on case 2, where the 300-s budget cut the bootstrap below 5 replicates and the optimistic
+    cluster-robust covariance stood in), τ3 10/10, k_sh 10/10 (the bounded range, not identified,
+    on 8). CPU per log 16–377 s (median 22 s)."""
+    inside = _fresh_coverage("two-mass", range(SEVENTH_TWO_MASS_CASES), SEVENTH_SEED)
+    assert np.mean([x for v in inside.values() for x in v]) >= 0.90
