@@ -215,7 +215,8 @@ def test_fresh_lugre_coverage_all_fields():
 
 
 FIFTH_SEED = 3907   # issue 25's fifth session: named before any run (designed starts, bootstrap on the point fit's path)
-LUGRE_CASES = TWO_MASS_CASES = 5
+LUGRE_CASES = 10      # the must-show asks >= 10 logs (cases 5-9 run in the seventh session)
+TWO_MASS_CASES = 5
 
 
 def _fifth_coverage(family: str, cases) -> float:
@@ -226,16 +227,19 @@ def _fifth_coverage(family: str, cases) -> float:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 16 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-4: 24 of 30 (80 %) — "
-                   "k̄c 4/5, k̄s 4/5, J 4/5, τ3 5/5, v_s 2/5, σ0 5/5; below 90 %")
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 30 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-9: 50 of 60 (83 %) — "
+                   "k̄c 8/10, k̄s 8/10, J 9/10, τ3 10/10, v_s 5/10, σ0 10/10; below 90 %")
 def test_fifth_lugre_coverage_all_fields():
     """Random lugre axes at the fresh seed 3907 (draws from ``default_rng([3907, 2])``; named before
     any run): every fitted field inside its stated 95 % interval in ≥ 90 % of the cases, with the
     designed starts and the bootstrap on the point fit's path (issue 25's fifth session).
     Measured on cases 0–4: 24 of 30 inside (80 %), a miss: case 3 ran past the 300-s CPU budget
     (302 s) with intervals 0–7 % wide, 2 of 6 inside; the other four 22 of 24 (v_s −76 %, −69 % out).
-    CPU per log 77, 327, 137, 302, 129 s: the 60-s goal missed (docs/axis.md, "Fifth session")."""
+    CPU per log 77, 327, 137, 302, 129 s: the 60-s goal missed (docs/axis.md, "Fifth session").
+    Cases 5–9 (seventh session, on the work-clock budgets; estimator otherwise unchanged): 26 of 30
+    — v_s out on cases 5 and 9 (+60 %, −83 %), k̄c and k̄s out on case 8 (+7 %, −19 %); CPU 316,
+    76, 185, 358, 177 s. All ten: 50 of 60 (83 %), a miss."""
     assert _fifth_coverage("lugre", range(LUGRE_CASES)) >= 0.90
 
 
