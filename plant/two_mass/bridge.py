@@ -191,6 +191,8 @@ def bisect(mode, Xa0, Xb0, h, tol, p, q, V, Vi, lam, sig_v2, z, cursor, Xout, ta
     """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
 
     ``table`` holds the laws of widths h/2^k (empty for a sub-step of another width: computed).
+    The plain form: the kernel runs :func:`bisect_w` and :func:`bisect_fresh`, which
+    tests/test_two_mass_fast.py checks against it bit for bit.
     """
     Xa = Xa0.copy()
     Xb = Xb0.copy()

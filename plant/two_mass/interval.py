@@ -37,7 +37,7 @@ from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, Sim
 from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
 from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
-                                   propagate_w, rotor_after, _start_coords_w, propagate, psd_factor, start_coords,
+                                   rotor_after, _start_coords_w, propagate, psd_factor, start_coords,
                                    transition, transition_u, process_noise_u, unit_coords)
 from plant.two_mass.params import TwoMassParams
 
@@ -538,7 +538,7 @@ def interval_k(x, mode, flyback, t0, duration, offsets, levels, k, bridge, prm, 
                ev, out, cursor, X, Xn, C, F, W):
     """:func:`interval_kernel` on the drive's first ``k`` segments, with a compiled caller's
     scratch (``cursor`` one int64, X and Xn NX floats, C 5 × NCORE complex and F 3 × NCORE, as
-    :func:`propagate_w` and :func:`_torque_exit_w` use them, W MOVE_SCRATCH floats for
+    :func:`~plant.two_mass.motion.rotor_after` and :func:`_torque_exit_w` use them, W MOVE_SCRATCH floats for
     :func:`_moving`): the same operations, compiled without reference counting (its fifteen array
     arguments and five allocations cost ~40 atomic operations per sample)."""
     p = prm[0]

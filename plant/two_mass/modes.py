@@ -39,7 +39,7 @@ from numba import njit
 
 from plant.two_mass.params import TwoMassParams
 
-__all__ = ["decompose", "first_root", "phi1", "phi2", "NCORE"]
+__all__ = ["decompose", "first_root", "phi1", "NCORE"]
 
 NCORE = 5
 # Rows of the decomposition tables: mode 1, mode 3, stuck.
@@ -132,12 +132,6 @@ def phi1(x):
     return (cmath.exp(x) - 1.0) / x
 
 
-@njit(cache=True)
-def phi2(x):
-    """(eˣ − 1 − x)/x² for complex x, ½ at 0."""
-    if _small(x):
-        return _phi2_series(x)
-    return (cmath.exp(x) - 1.0 - x) / (x * x)
 
 
 @njit(cache=True, inline="always")
@@ -151,7 +145,7 @@ def phi1_e(x, e):
 
 @njit(cache=True, inline="always")
 def phi2_e(x, e):
-    """:func:`phi2` given e = cmath.exp(x), as :func:`phi1_e`."""
+    """(eˣ − 1 − x)/x² for complex x (½ at 0) given e = cmath.exp(x), as :func:`phi1_e`."""
     if _small(x):
         return _phi2_series(x)
     return (e - 1.0 - x) / (x * x)

@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from plant.two_mass.modes import M_STUCK, NCORE, _div_k, _small, _tiny, phi1, phi1_e, phi2, phi2_e
+from plant.two_mass.modes import M_STUCK, NCORE, _div_k, _small, _tiny, phi1_e, phi2_e
 
 A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
 NX = 9
