@@ -125,7 +125,10 @@ class LocalExecutor(Executor):
 
 def _dask_task(fn, args, deadline, key=None):
     """Runs on a dask worker: the cell in a cell process when the worker may have children
-    (the worker keeps its idle cell process for the next task with the same key)."""
+    (the worker keeps its idle cell process for the next task with the same key). On a daemonic
+    worker (one started without ``DASK_DISTRIBUTED__WORKER__DAEMON=False``) the cell runs in the
+    worker itself: its result is the same, but ``deadline`` is not enforced and a crash takes the
+    worker with it (docs/dask.md)."""
     if multiprocessing.current_process().daemon:
         return ("ok", fn(*args))
     try:
@@ -160,7 +163,8 @@ class DaskExecutor(Executor):
             except (TimeoutError, OSError):
                 self.close()
                 raise ExecutorError(f"--scheduler {self.address}: no worker joined within {wait_s:g} s; "
-                                    f"start one with `dask worker {self.address}`") from None
+                                    f"start one with `DASK_DISTRIBUTED__WORKER__DAEMON=False dask worker {self.address}` "
+                                    f"(docs/dask.md)") from None
             self.workers = len(self._client.scheduler_info().get("workers", {})) or self.workers
         else:
             with dask.config.set({"distributed.worker.daemon": False}):

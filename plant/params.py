@@ -197,7 +197,7 @@ class PlantParams:
 
     @property
     def sigma4_sq(self) -> float:
-        """σ4² = 2·VAR(x4)/τ4, intensity of w4 [rad²/s³·s]."""
+        """σ4² = 2·VAR(x4)/τ4, intensity of w4 [rad²/s³] (white noise in rad/s², (rad/s²)²·s)."""
         return 2.0 * self.command_velocity_std**2 / self.command_velocity_tau
 
     @property
