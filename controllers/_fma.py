@@ -1,7 +1,7 @@
 """Compiled per-sample kernels of the PID and pulse-width peers, with exact fused multiply–add.
 
-numpy's small products here go through OpenBLAS, whose kernels on this machine (Haswell and
-later: FMA hardware) accumulate with fused multiply–adds: a dot product ``c @ x`` is
+numpy's small products here go through OpenBLAS, whose SkylakeX kernels (the ones it picks on
+this AMD EPYC with ``OPENBLAS_CORETYPE`` unset) accumulate with fused multiply–adds: a dot product ``c @ x`` is
 ``s = 0; s = fma(c_k, x_k, s)`` for k = 0, 1, …, and a 2 × 2 (1 × 1) matrix–vector product row
 is ``fma(a_i0, x0, fma(a_i1, x1, 0))``. Python 3.11 has no ``math.fma``, so straight-line float
 code cannot reproduce those bits; these kernels call LLVM's ``llvm.fma.f64`` (a correctly
@@ -9,8 +9,10 @@ rounded fma, in hardware or libm) in the same order, so the numbers are those of
 expressions they replace here (whole recorded closed-loop runs compared bit for bit;
 tests/test_peer_kernels.py checks the fma against exact rational arithmetic and the kernels
 against the numpy forms to 1e−12), at ~0.3 µs per call instead of ~3 µs of small numpy
-operations. On a machine whose BLAS does not fuse, the old numpy forms themselves would round
-differently; these kernels give the same numbers everywhere.
+operations. Under another kernel (``OPENBLAS_CORETYPE=Haswell``, as this machine's shell sets it)
+the numpy forms round differently (a 2-vector ``c @ x`` differed on 6584 of 20 000 random
+steps); these kernels give the same numbers everywhere (docs/results.md, "Reproducibility across
+machines").
 """
 
 from __future__ import annotations
