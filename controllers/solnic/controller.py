@@ -101,6 +101,38 @@ def _load_joint_kernels() -> None:
     joint_condition(z, P, np.ones(5), 1.0, True)
 
 
+_WARMED_STEPS: set[str] = set()     # the idle step kinds whose in-loop Python sample has run here
+
+
+def _warm_in_loop(controller: "SolnicController") -> None:
+    """Run a throwaway copy of ``controller`` (same class and options, same plant) for a few
+    samples through its compiled idle step once per process and step kind: the step's
+    ``objmode`` block (:func:`~controllers.solnic.idle_step._python_sample`) is compiled at its
+    first execution in each process — numba does not cache it — and the Python sample's kernels
+    are loaded from numba's cache at their first call (~0.14 s of a worker process's first
+    solnic-modern cell, ~0.13 s of solnic's, issue 27). Paid at the first reset in the process
+    (the forkserver's warm-up, bench/warm.py, resets every controller: its cell processes
+    inherit the compiled block), not in a timed cell. No result depends on it: the throwaway
+    has its own objects, generator and owner key; anything it raises is dropped."""
+    kind = controller._compiled_kind()
+    if kind is None or kind in _WARMED_STEPS:
+        return
+    _WARMED_STEPS.add(kind)
+    try:
+        twin = type(controller)(controller.options)
+        twin.reset(controller.params, np.random.default_rng(0))
+        tw = twin.compiled_law()
+        offs, levs = np.empty(tw.max_segments), np.empty(tw.max_segments)
+        for n in range(40):                     # an offset the filters see: pulses, evaluations
+            tw.step(tw.state, tw.params, 2e-4 if n < 20 else -2e-4, offs, levs)
+        twin._import_idle()
+        twin._reoptimise()                      # a set's costs (the optimiser's predictions)
+        if twin.options.noise_aware_model:      # a braking pair's moments (after the grid's hand-over)
+            braked_pulse_noise(twin.params, 2.0, 1.0, 1.2e-3, 2e-4, 3e-3, 4e-3)
+    except Exception:  # noqa: BLE001 — a warm-up never changes an outcome
+        pass
+
+
 @lru_cache(maxsize=32)
 def adjusted_increment(params: PlantParams, a_c: float, a_ratio: float = 2.0) -> tuple[float, float]:
     """(Δt_u,opt, Δt_u,inc) properly adjusted for the true plant: the optimum of the noise-free
@@ -234,6 +266,7 @@ class SolnicController(Controller):
                            undecided_cycles=0, grid_handover_cycle=0, braked_pulses=0)
         self._idle: CompiledLaw | None = None
         self._ready = True
+        _warm_in_loop(self)
 
     # ------------------------------------------------------------------ the compiled idle sample
     def compiled_law(self) -> CompiledLaw | None:
@@ -245,16 +278,13 @@ class SolnicController(Controller):
         imports it first and exports it after (a hand-back is the Python path's sample).
         """
         o = self.options
-        if not self._ready or self._n != 0:
+        kind = self._compiled_kind()
+        if kind is None:
             return None
-        joint = self.joint is not None
+        joint = kind == "joint"
         if joint:
-            if not (type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled):
-                return None
             f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
         else:
-            if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
-                return None
             f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, 2 * _idle.N_STATE, _idle.idle_step_address()
         p = np.empty(n_p)
         p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
@@ -275,6 +305,18 @@ class SolnicController(Controller):
         self._memo_seen = (0, 0)
         self._export_idle()
         return self._idle
+
+    def _compiled_kind(self) -> str | None:
+        """Which idle step :meth:`compiled_law` would give now: ``"joint"`` (the joint EKF with
+        the noise-aware model), ``"mode2"`` (the faithful estimators) or None."""
+        o = self.options
+        if not self._ready or self._n != 0:
+            return None
+        if self.joint is not None:
+            ok = type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled
+            return "joint" if ok else None
+        ok = self.grid is None and not o.noise_aware_model and type(self.mode2) is Mode2Filter
+        return "mode2" if ok else None
 
     def _export_idle(self) -> None:
         """The state into the idle step's array, with the plan of the next sample cached."""
