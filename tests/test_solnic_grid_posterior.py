@@ -191,3 +191,42 @@ def test_noise_moments_kept_with_the_table_follow_the_lattice():
         dc = pulse_table(p, dtu, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
         g.update(dtu, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
     assert len(versions) > 1 and g.n_regrids > 0
+
+
+def test_compiled_table_is_the_numpy_table_bit_for_bit(monkeypatch):
+    """The lattice table is one compiled call (issue 27): Δc, t_stop, t_breakaway and the cell
+    spread at the valid points equal the numpy formulation (tests/reference_kernels.py:
+    np.clip, the closed form, np.gradient per axis) bit for bit — lattices of 2, 3, 5 and
+    64 points a side (edges everywhere, and the default), five Δt_u each, the first lattice and
+    re-fitted ones — and the table no longer calls np.gradient."""
+    from tests.reference_kernels import grid_table
+
+    p = PlantParams()
+    rng = np.random.default_rng(11)
+    grids = []
+    for n in (2, 3, 5, 64):
+        for _ in range(3):
+            k0 = [rng.uniform(0.3, 1.5) * p.coulomb, rng.uniform(0.5, 1.5) * p.stiction]
+            grids.append(FrictionGrid(p, k0, np.diag(rng.uniform(0.05, 1.0, 2) * np.square(k0)), n=n))
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    while g.n_regrids < 2:
+        g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2)
+    grids.append(g)
+    want = {}
+    for i, grid in enumerate(grids):
+        for dtu in (0.5e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            want[i, dtu] = grid_table(grid, dtu)
+
+    def no_gradient(*a, **k):
+        raise AssertionError("np.gradient called")
+
+    monkeypatch.setattr(np, "gradient", no_gradient)
+    moved = 0
+    for i, grid in enumerate(grids):
+        for dtu in (0.5e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            grid._tables.clear()
+            got = grid.table(dtu)
+            assert all(a.shape == b.shape and a.tobytes() == b.tobytes() for a, b in zip(got, want[i, dtu]))
+            moved += int(np.sum(got[2] >= 0))
+    assert moved > 0

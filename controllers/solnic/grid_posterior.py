@@ -77,6 +77,53 @@ def _table_kernel(dt_u, U, t3, a, kc, ks, need, dc, t_stop, t_brk):
             dc[i], t_stop[i], t_brk[i] = d, ts, tb
 
 
+@njit(cache=True)
+def _valid_table_kernel(dt_u, U, t3, a, kc, ks, need, idx, n, ks_hi, dc, t_stop, t_brk, spread_out):
+    """:meth:`FrictionGrid.table` in one call: the frictions clipped into the valid set,
+    :func:`_table_kernel` on the needed points (``dc``, ``t_stop``, ``t_brk``: scratch of the
+    n × n lattice), and at the valid points ``idx`` the cell spread² of Δc (into
+    ``spread_out``) and (Δc, t_stop, t_breakaway) (returned).
+
+    The same operations on the same operands as the numpy formulation it replaces, so the same
+    bits: ``np.clip`` is min(max(x, lo), hi) elementwise; ``np.gradient`` with unit spacing is
+    (f[i+1] − f[i−1])/2 inside and (f[1] − f[0])/1, (f[n−1] − f[n−2])/1 at the edges; the
+    spread is 0 + |g0|·|g0|/12, then + |g1|·|g1|/12."""
+    m = kc.size
+    ks_c = np.empty(m)
+    kc_c = np.empty(m)
+    for i in range(m):
+        k = max(ks[i], 1e-6)
+        k = min(k, ks_hi)
+        ks_c[i] = k
+        c = max(kc[i], 1e-6)
+        kc_c[i] = min(c, k)
+    _table_kernel(dt_u, U, t3, a, kc_c, ks_c, need, dc, t_stop, t_brk)
+    nv = idx.size
+    dc_v, ts_v, tb_v = np.empty(nv), np.empty(nv), np.empty(nv)
+    for j in range(nv):
+        i = idx[j]
+        r, c = i // n, i % n
+        if r == 0:
+            g0 = (dc[i + n] - dc[i]) / 1.0
+        elif r == n - 1:
+            g0 = (dc[i] - dc[i - n]) / 1.0
+        else:
+            g0 = (dc[i + n] - dc[i - n]) / 2.0
+        if c == 0:
+            g1 = (dc[i + 1] - dc[i]) / 1.0
+        elif c == n - 1:
+            g1 = (dc[i] - dc[i - 1]) / 1.0
+        else:
+            g1 = (dc[i + 1] - dc[i - 1]) / 2.0
+        a0, a1 = abs(g0), abs(g1)
+        sp = 0.0
+        sp += a0 * a0 / 12.0
+        sp += a1 * a1 / 12.0
+        spread_out[j] = sp
+        dc_v[j], ts_v[j], tb_v[j] = dc[i], t_stop[i], t_brk[i]
+    return dc_v, ts_v, tb_v
+
+
 def pulse_table(params: PlantParams, dt_u: float, kc: np.ndarray, ks: np.ndarray, need: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Δc [rad], t_stop [s], t_breakaway [s] or −1) of a +u_max pulse for every (k_c, k_s).
@@ -197,6 +244,18 @@ class FrictionGrid:
         """(Δc, t_stop, t_breakaway, spread² of Δc over the cell) at the valid points."""
         key = float(dt_u)
         hit = self._tables.get(key)
+        if hit is None and self.n >= 2:
+            # compiled (:func:`_valid_table_kernel`): the numpy formulation below, bit for bit
+            p, nn = self.params, self.n * self.n
+            spread = np.empty(self._idx.size)
+            dc, ts, tb = _valid_table_kernel(key, p.u_max, p.motor_time_constant, p.alpha, self.kc, self.ks,
+                                             self._need, self._idx, self.n, self.u_max * (1 - 1e-9),
+                                             np.empty(nn), np.empty(nn), np.empty(nn), spread)
+            hit = (dc, ts, tb, spread)
+            if len(self._tables) > 64:
+                self._tables.clear()
+                self._moving.clear()
+            self._tables[key] = hit
         if hit is None:
             # invalid points are evaluated at the nearest valid friction (a continuous
             # extension, for the cell spread of their valid neighbours only)
