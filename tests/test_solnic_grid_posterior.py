@@ -230,3 +230,56 @@ def test_compiled_table_is_the_numpy_table_bit_for_bit(monkeypatch):
             assert all(a.shape == b.shape and a.tobytes() == b.tobytes() for a, b in zip(got, want[i, dtu]))
             moved += int(np.sum(got[2] >= 0))
     assert moved > 0
+
+
+def test_compiled_predictive_is_the_numpy_predictive_bit_for_bit(monkeypatch):
+    """The predictive's quantiles are one compiled call (issue 27): equal by ``float.hex`` to the
+    numpy formulation (the points of weight > 1e-9·p, weights / p, ``_weighted_quantiles`` of
+    Δc and t_stop) on re-fitted lattices with five Δt_u and three noise ratios, on random
+    heavy-tailed weights, and on values with many ties (a stable sort keeps their order); and
+    ``predictive`` no longer calls numpy's argsort."""
+    from controllers.solnic.grid_posterior import _quantiles3, _weighted_quantiles
+
+    def numpy_predictive(g, dt_u, vr, br):
+        mean, var, moves, ts = g.noise_moments(dt_u, vr, br)
+        w = g.w * moves
+        p = float(np.sum(w))
+        keep = np.flatnonzero(w > 1e-9 * p)
+        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
+        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
+        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
+        return [p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2]
+
+    p = PlantParams()
+    rng = np.random.default_rng(12)
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    cases = []
+    for round_ in range(3):
+        for dtu in (0.6e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            for vr, br in ((0.0, 0.0), (2.5, 0.8), (1.3, 0.6)):
+                cases.append((dtu, vr, br, None))
+        cases.append((1.2e-3, 2.5, 0.8, "heavy-tailed"))
+        for _ in range(3):
+            g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
+        want = []
+        for dtu, vr, br, w in cases[-16:]:
+            w0 = g.w
+            if w is not None:                            # random weights on this lattice
+                w = rng.random(g.w.size) ** 8
+                g.w = w / w.sum()
+            want.append(numpy_predictive(g, dtu, vr, br))
+            got = g.predictive(dtu, vr, br)
+            g.w = w0
+            assert [float.hex(v) for v in (got.p_motion, got.dc_mean, got.dc_var, got.t_stop_mean, got.t_stop_var)] \
+                == [float.hex(v) for v in want[-1]]
+    assert g.n_regrids > 0
+    for _ in range(20):                                  # ties: the stable order decides the median's point
+        x = rng.integers(0, 5, 40).astype(float)
+        w = rng.random(40)
+        w /= w.sum()
+        (q, i) = _quantiles3(x, w)
+        qs, i50 = _weighted_quantiles(x, w, (0.16, 0.5, 0.84))
+        assert list(q) == qs and i == i50
+    monkeypatch.setattr(np, "argsort", lambda *a, **k: (_ for _ in ()).throw(AssertionError("np.argsort")))
+    assert g.predictive(1.2e-3, 2.5, 0.8).p_motion > 0

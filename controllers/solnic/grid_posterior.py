@@ -380,12 +380,52 @@ class FrictionGrid:
         p = float(np.sum(w))
         if not p > 0:
             return Predictive(0.0, math.nan, math.nan, math.nan, math.nan)
-        keep = np.flatnonzero(w > 1e-9 * p)         # negligible points cannot move a quantile much
-        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
-        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
-        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
-        # the friction-noise variance at the median point
-        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2)
+        # the points of weight > 1e-9·p (negligible points cannot move a quantile much), their
+        # weights / p, the weighted 16/50/84 % quantiles of Δc and t_stop and the friction-noise
+        # variance at the median point: :func:`_predictive_kernel` (:func:`_weighted_quantiles`'
+        # operations, compiled)
+        q16, q50, q84, var50, t16, t50, t84 = _predictive_kernel(w, p, mean, var, ts)
+        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + var50, t50, (0.5 * (t84 - t16)) ** 2)
+
+
+@njit(cache=True)
+def _predictive_kernel(w, p, mean, var, ts):
+    """(Δc's 16/50/84 % quantiles, VAR at the Δc median's point, t_stop's quantiles) of
+    :meth:`FrictionGrid.predictive` from the weights ``w`` (sum ``p`` > 0): the points with
+    w > 1e-9·p, weights w/p, and :func:`_weighted_quantiles` of each — a stable argsort
+    (mergesort), the running sum, the left-side search of q·(total) clipped to the last index:
+    the same operations on the same operands as the numpy code, so the same bits."""
+    keep = np.flatnonzero(w > 1e-9 * p)
+    m = keep.size
+    wk, mk, tk = np.empty(m), np.empty(m), np.empty(m)
+    for j in range(m):
+        i = keep[j]
+        wk[j], mk[j], tk[j] = w[i] / p, mean[i], ts[i]
+    qm, om = _quantiles3(mk, wk)
+    qt, _ = _quantiles3(tk, wk)
+    return qm[0], qm[1], qm[2], var[keep[om]], qt[0], qt[1], qt[2]
+
+
+@njit(cache=True)
+def _quantiles3(x, w):
+    """The 0.16, 0.5 and 0.84 quantiles of Σ w_i δ(x_i) and the index of the 0.5 one's point,
+    as :func:`_weighted_quantiles` computes them."""
+    order = np.argsort(x, kind="mergesort")
+    n = x.size
+    cw = np.empty(n)
+    acc = 0.0
+    for j in range(n):
+        acc += w[order[j]]
+        cw[j] = acc
+    total = cw[n - 1]
+    q = np.empty(3)
+    mid = 0
+    for k, frac in enumerate((0.16, 0.5, 0.84)):
+        i = min(np.searchsorted(cw, frac * total), n - 1)
+        q[k] = x[order[i]]
+        if k == 1:
+            mid = order[i]
+    return q, mid
 
 
 def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs) -> tuple[list[float], int]:
