@@ -283,3 +283,32 @@ def test_compiled_predictive_is_the_numpy_predictive_bit_for_bit(monkeypatch):
         assert list(q) == qs and i == i50
     monkeypatch.setattr(np, "argsort", lambda *a, **k: (_ for _ in ()).throw(AssertionError("np.argsort")))
     assert g.predictive(1.2e-3, 2.5, 0.8).p_motion > 0
+
+
+def test_compiled_loglik_is_the_numpy_loglik_bit_for_bit(monkeypatch):
+    """A pulse's log-likelihood on the lattice (1) is one compiled call plus numpy's log (issue 27):
+    equal byte for byte to the numpy expression −(m − d)²/(2(R + v)) − ½·log(R + v) with
+    d = sign·mean where the shaft moves, for both signs, with and without the noise ratios, on the
+    first lattice and re-fitted ones; and it no longer calls np.where."""
+    p = PlantParams()
+    rng = np.random.default_rng(13)
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    cases, want = [], []
+    for round_ in range(3):
+        for dtu in (0.6e-3, 1.2e-3, 2.5e-3):
+            for sign in (1, -1):
+                for vr, br in ((0.0, 0.0), (2.5, 0.8), (0.0, 0.7), (1.9, 0.0)):
+                    ob = (dtu, sign, sign * dc * rng.uniform(0.2, 2.0), (dc * rng.uniform(0.01, 0.5)) ** 2, vr, br)
+                    mean, var, moves, _ = g.noise_moments(dtu, vr, br)
+                    d = np.where(moves, sign * mean, 0.0)
+                    var = ob[3] + var
+                    cases.append((g.version, ob))
+                    want.append(-0.5 * (ob[2] - d) ** 2 / var - 0.5 * np.log(var))
+        with monkeypatch.context() as mp:
+            mp.setattr(np, "where", lambda *a, **k: (_ for _ in ()).throw(AssertionError("np.where")))
+            for (version, ob), w in zip(cases[-24:], want[-24:]):
+                assert g.version == version and g._loglik(*ob).tobytes() == w.tobytes()
+        for _ in range(3):
+            g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
+    assert g.n_regrids > 0

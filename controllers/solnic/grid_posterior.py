@@ -325,10 +325,15 @@ class FrictionGrid:
 
     def _loglik(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float,
                 bias_ratio: float) -> np.ndarray:
-        mean, var, moves, _ = self.noise_moments(dt_u, var_ratio, bias_ratio)
-        d = np.where(moves, sign * mean, 0.0)
-        var = R + var
-        return -0.5 * (m - d) ** 2 / var - 0.5 * np.log(var)
+        # −(m − d)²/(2(R + v)) compiled (:func:`_loglik_kernel`, the numpy expression's operations
+        # on the same operands), log(R + v) by numpy's log, the ufunc the expression called
+        dc, ts, tb, spread = self.table(dt_u)
+        moves, f, root_f = self._moving_time(float(dt_u), ts, tb)
+        noisy = f is not None and (var_ratio > 0 or bias_ratio > 0)
+        var, quad = np.empty(dc.size), np.empty(dc.size)
+        _loglik_kernel(dc, spread, moves, root_f if noisy else dc, f if noisy else dc, noisy, float(var_ratio),
+                       float(bias_ratio), float(sign), float(m), float(R), var, quad)
+        return quad - 0.5 * np.log(var)
 
     def update(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float = 0.0,
                bias_ratio: float = 0.0) -> None:
@@ -386,6 +391,26 @@ class FrictionGrid:
         # operations, compiled)
         q16, q50, q84, var50, t16, t50, t84 = _predictive_kernel(w, p, mean, var, ts)
         return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + var50, t50, (0.5 * (t84 - t16)) ** 2)
+
+
+@njit(cache=True)
+def _loglik_kernel(dc, spread, moves, root_f, f, noisy, var_ratio, bias_ratio, sign, m, R, var, quad):
+    """R + v and −½(m − d)²/(R + v) of :meth:`FrictionGrid._loglik` at every valid point, into
+    ``var`` and ``quad``: (Δc + b·√f, spread + r·f) (:meth:`FrictionGrid.noise_moments`; Δc,
+    spread without the ratios), d = sign·mean where the shaft moves, else 0 — the numpy
+    expression's operations in its order ((m − d)² as (m − d)·(m − d), numpy's square)."""
+    for i in range(dc.size):
+        if noisy:
+            mean = dc[i] + bias_ratio * root_f[i]
+            v = spread[i] + var_ratio * f[i]
+        else:
+            mean = dc[i]
+            v = spread[i]
+        d = sign * mean if moves[i] else 0.0
+        v = R + v
+        e = m - d
+        var[i] = v
+        quad[i] = -0.5 * (e * e) / v
 
 
 @njit(cache=True)
