@@ -9,6 +9,8 @@ calls of :func:`plant.randomness.normal` (issue 27).
 :func:`plant.multimode.zero_velocity.bridge_segment`, computing p = exp(e) always (issue 27).
 ``hermite_peak``: :func:`plant.multimode.segments.hermite_peak` with its roots in an array
 (issue 27).
+``grid_table``: :meth:`controllers.solnic.grid_posterior.FrictionGrid.table` in numpy (np.clip,
+:func:`~controllers.solnic.grid_posterior.pulse_table`, np.gradient per lattice axis) (issue 27).
 """
 
 import math
@@ -183,3 +185,22 @@ def hermite_peak(h, ya, da, yb, db):
             if v > best:
                 best = v
     return best
+
+
+def grid_table(grid, dt_u):
+    """(Δc, t_stop, t_breakaway, cell spread²) at the valid points of ``grid`` (a
+    :class:`~controllers.solnic.grid_posterior.FrictionGrid`), as ``FrictionGrid.table``
+    computed them in numpy before its compiled kernel."""
+    from controllers.solnic.grid_posterior import pulse_table
+
+    ks = np.clip(grid.ks, 1e-6, grid.u_max * (1 - 1e-9))
+    kc = np.clip(grid.kc, 1e-6, ks)
+    dc, ts, tb = pulse_table(grid.params, float(dt_u), kc, ks, grid._need)
+    table = dc.reshape(grid.n, grid.n)
+    spread = np.zeros_like(table)
+    for ax in (0, 1):
+        step = np.abs(np.gradient(table, axis=ax))
+        spread += step * step / 12.0
+    spread = spread.ravel()
+    i = grid._idx
+    return dc[i], ts[i], tb[i], spread[i]

@@ -191,3 +191,124 @@ def test_noise_moments_kept_with_the_table_follow_the_lattice():
         dc = pulse_table(p, dtu, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
         g.update(dtu, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
     assert len(versions) > 1 and g.n_regrids > 0
+
+
+def test_compiled_table_is_the_numpy_table_bit_for_bit(monkeypatch):
+    """The lattice table is one compiled call (issue 27): Δc, t_stop, t_breakaway and the cell
+    spread at the valid points equal the numpy formulation (tests/reference_kernels.py:
+    np.clip, the closed form, np.gradient per axis) bit for bit — lattices of 2, 3, 5 and
+    64 points a side (edges everywhere, and the default), five Δt_u each, the first lattice and
+    re-fitted ones — and the table no longer calls np.gradient."""
+    from tests.reference_kernels import grid_table
+
+    p = PlantParams()
+    rng = np.random.default_rng(11)
+    grids = []
+    for n in (2, 3, 5, 64):
+        for _ in range(3):
+            k0 = [rng.uniform(0.3, 1.5) * p.coulomb, rng.uniform(0.5, 1.5) * p.stiction]
+            grids.append(FrictionGrid(p, k0, np.diag(rng.uniform(0.05, 1.0, 2) * np.square(k0)), n=n))
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    while g.n_regrids < 2:
+        g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2)
+    grids.append(g)
+    want = {}
+    for i, grid in enumerate(grids):
+        for dtu in (0.5e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            want[i, dtu] = grid_table(grid, dtu)
+
+    def no_gradient(*a, **k):
+        raise AssertionError("np.gradient called")
+
+    monkeypatch.setattr(np, "gradient", no_gradient)
+    moved = 0
+    for i, grid in enumerate(grids):
+        for dtu in (0.5e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            grid._tables.clear()
+            got = grid.table(dtu)
+            assert all(a.shape == b.shape and a.tobytes() == b.tobytes() for a, b in zip(got, want[i, dtu]))
+            moved += int(np.sum(got[2] >= 0))
+    assert moved > 0
+
+
+def test_compiled_predictive_is_the_numpy_predictive_bit_for_bit(monkeypatch):
+    """The predictive's quantiles are one compiled call (issue 27): equal by ``float.hex`` to the
+    numpy formulation (the points of weight > 1e-9·p, weights / p, ``_weighted_quantiles`` of
+    Δc and t_stop) on re-fitted lattices with five Δt_u and three noise ratios, on random
+    heavy-tailed weights, and on values with many ties (a stable sort keeps their order); and
+    ``predictive`` no longer calls numpy's argsort."""
+    from controllers.solnic.grid_posterior import _quantiles3, _weighted_quantiles
+
+    def numpy_predictive(g, dt_u, vr, br):
+        mean, var, moves, ts = g.noise_moments(dt_u, vr, br)
+        w = g.w * moves
+        p = float(np.sum(w))
+        keep = np.flatnonzero(w > 1e-9 * p)
+        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
+        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
+        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
+        return [p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2]
+
+    p = PlantParams()
+    rng = np.random.default_rng(12)
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    cases = []
+    for round_ in range(3):
+        for dtu in (0.6e-3, 0.95e-3, 1.2e-3, 1.7e-3, 2.5e-3):
+            for vr, br in ((0.0, 0.0), (2.5, 0.8), (1.3, 0.6)):
+                cases.append((dtu, vr, br, None))
+        cases.append((1.2e-3, 2.5, 0.8, "heavy-tailed"))
+        for _ in range(3):
+            g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
+        want = []
+        for dtu, vr, br, w in cases[-16:]:
+            w0 = g.w
+            if w is not None:                            # random weights on this lattice
+                w = rng.random(g.w.size) ** 8
+                g.w = w / w.sum()
+            want.append(numpy_predictive(g, dtu, vr, br))
+            got = g.predictive(dtu, vr, br)
+            g.w = w0
+            assert [float.hex(v) for v in (got.p_motion, got.dc_mean, got.dc_var, got.t_stop_mean, got.t_stop_var)] \
+                == [float.hex(v) for v in want[-1]]
+    assert g.n_regrids > 0
+    for _ in range(20):                                  # ties: the stable order decides the median's point
+        x = rng.integers(0, 5, 40).astype(float)
+        w = rng.random(40)
+        w /= w.sum()
+        (q, i) = _quantiles3(x, w)
+        qs, i50 = _weighted_quantiles(x, w, (0.16, 0.5, 0.84))
+        assert list(q) == qs and i == i50
+    monkeypatch.setattr(np, "argsort", lambda *a, **k: (_ for _ in ()).throw(AssertionError("np.argsort")))
+    assert g.predictive(1.2e-3, 2.5, 0.8).p_motion > 0
+
+
+def test_compiled_loglik_is_the_numpy_loglik_bit_for_bit(monkeypatch):
+    """A pulse's log-likelihood on the lattice (1) is one compiled call plus numpy's log (issue 27):
+    equal byte for byte to the numpy expression −(m − d)²/(2(R + v)) − ½·log(R + v) with
+    d = sign·mean where the shaft moves, for both signs, with and without the noise ratios, on the
+    first lattice and re-fitted ones; and it no longer calls np.where."""
+    p = PlantParams()
+    rng = np.random.default_rng(13)
+    g = FrictionGrid(p, [p.coulomb, p.stiction], np.diag([p.coulomb**2, p.stiction**2]), n=32)
+    dc = pulse_table(p, 1.3e-3, np.array([p.coulomb]), np.array([p.stiction]))[0][0]
+    cases, want = [], []
+    for round_ in range(3):
+        for dtu in (0.6e-3, 1.2e-3, 2.5e-3):
+            for sign in (1, -1):
+                for vr, br in ((0.0, 0.0), (2.5, 0.8), (0.0, 0.7), (1.9, 0.0)):
+                    ob = (dtu, sign, sign * dc * rng.uniform(0.2, 2.0), (dc * rng.uniform(0.01, 0.5)) ** 2, vr, br)
+                    mean, var, moves, _ = g.noise_moments(dtu, vr, br)
+                    d = np.where(moves, sign * mean, 0.0)
+                    var = ob[3] + var
+                    cases.append((g.version, ob))
+                    want.append(-0.5 * (ob[2] - d) ** 2 / var - 0.5 * np.log(var))
+        with monkeypatch.context() as mp:
+            mp.setattr(np, "where", lambda *a, **k: (_ for _ in ()).throw(AssertionError("np.where")))
+            for (version, ob), w in zip(cases[-24:], want[-24:]):
+                assert g.version == version and g._loglik(*ob).tobytes() == w.tobytes()
+        for _ in range(3):
+            g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
+    assert g.n_regrids > 0

@@ -210,3 +210,41 @@ def test_a_sample_given_to_python_keeps_the_steps_filter_updates_and_fired_trigg
     assert n_in > 50 and c.counts["cycles_evaluated"] > 30
     assert n_updates <= 0.1 * n_in                              # the old path: one per Python sample
     assert n_triggers < n_in + 0.25 * c.counts["cycles_evaluated"]   # the old path: + one per evaluation at a trigger
+
+
+_FIRST_CELL = r"""
+import numpy as np
+from numba.core import event
+from bench.runner import run_closed_loop
+from bench.scenarios import builtin_scenarios
+from controllers import make_controller
+from plant.params import PlantParams
+names = ("solnic", "solnic-modern")
+for name in names:                      # what the forkserver's warm-up does: one reset each
+    make_controller(name).reset(PlantParams(), np.random.default_rng(0))
+sc = builtin_scenarios()["thesis"]
+with event.install_recorder("numba:compile") as rec:
+    for name in names:
+        c = make_controller(name)
+        r = run_closed_loop(sc.params, c, duration_s=4.0, warmup_s=1.0, seed=0, family=sc.family, model=sc.model)
+        assert r.status == "ok" and c.counts["pulses"] > 5, (name, r.status, r.message)
+print(sum(1 for _, ev in rec.buffer if ev.is_start))
+"""
+
+
+def test_the_first_reset_in_a_process_compiles_the_in_loop_sample():
+    """numba compiles a step's ``objmode`` block (the Python sample inside the loop) at its first
+    execution in each process and does not cache it (~0.07 s, plus the Python sample's kernels
+    loaded from the cache: a worker process's first solnic-modern cell cost 0.33 s against
+    0.19). The first reset of each idle-step kind in a process now runs a throwaway twin
+    through it (the forkserver's warm-up resets every controller), so in a fresh process whose
+    controllers were reset once, a solnic and a solnic-modern cell compile nothing (before: the
+    two blocks, in the cells)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = subprocess.run([sys.executable, "-c", _FIRST_CELL], cwd=Path(__file__).resolve().parents[1],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert int(out.stdout.split()[-1]) == 0

@@ -69,8 +69,9 @@ from controllers.models.acker import max_on_time
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
-from controllers.solnic import idle_step as _idle
-from controllers.solnic.filter_kernels import joint_condition, joint_launch, joint_moved, joint_valid
+from controllers.solnic import idle_step as _idle, noise_model as _noise
+from controllers.solnic.filter_kernels import (joint_add_motion, joint_condition, joint_launch, joint_moved,
+                                                joint_predict, joint_update, joint_valid, quadratic_form2)
 from controllers.solnic.joint_filter import KS as _KS, JointFilter
 from controllers.solnic.mode2_filter import Mode2Filter
 from controllers.solnic.noise_model import braked_pulse_noise, pulse_bias, pulse_noise
@@ -99,6 +100,78 @@ def _load_joint_kernels() -> None:
     joint_moved(z, P, 1.5, 4.0)
     joint_valid(z, P, 4.0)
     joint_condition(z, P, np.ones(5), 1.0, True)
+
+
+_WARMED_STEPS: set[str] = set()     # the idle step kinds whose in-loop Python sample is compiled here
+
+
+def _warm_in_loop(controller: "SolnicController") -> None:
+    """Once per process and idle-step kind: compile the step's ``objmode`` block and load the
+    Python sample's kernels, so that the first cell of a process does neither (issue 27: a worker
+    process's first solnic-modern cell cost 0.33 s against 0.19 s, solnic's 0.21 s against 0.04 s).
+
+    numba compiles a step's ``objmode`` block (:func:`~controllers.solnic.idle_step._python_sample`)
+    at its first execution in each process and does not cache it (~0.07 s): the step is called
+    once on a state whose filter time lies ahead of the sample (the step gives it to Python at
+    once) with an owner key no controller holds (the Python sample returns 0). The kernels of
+    the Python sample (predictor, noise model, filters, grid) are loaded from numba's cache at
+    their first call (~0.04 s): they are called on fresh objects of the controller's options
+    or on dummy arrays of the run's types. Nothing of ``controller`` is read but its options and
+    plant, nothing it holds is touched, and none of its methods runs; anything raised is dropped.
+    Paid at the first reset in the process (the forkserver's warm-up, bench/warm.py, resets every
+    controller: its cell processes inherit it)."""
+    kind = controller._compiled_kind()
+    if kind is None or kind in _WARMED_STEPS:
+        return
+    _WARMED_STEPS.add(kind)
+    try:
+        joint = kind == "joint"
+        if joint:
+            step, n_s, n_p, key = (_idle.joint_idle_step_address(), _idle.N_JOINT_STATE, _idle.N_JOINT_PARAMS,
+                                   _idle.J_OWNER)
+        else:
+            step, n_s, n_p, key = _idle.idle_step_address(), 2 * _idle.N_STATE, _idle.N_PARAMS, _idle.OWNER
+        state, p = np.zeros(n_s), np.zeros(n_p)
+        state[_idle.FT] = 1.0                   # the filter ahead of sample 0: given to Python at once
+        p[key] = -1.0                           # no controller holds this key: the sample returns 0
+        step(state, p, 0.0, np.empty(4), np.empty(4))
+        _load_sample_kernels(controller.options, controller.params, joint)
+    except Exception:  # noqa: BLE001 — a warm-up never changes an outcome
+        pass
+
+
+def _load_sample_kernels(o: SolnicOptions, params: PlantParams, joint: bool) -> None:
+    """The kernels a Python sample calls, on fresh objects (see :func:`_warm_in_loop`)."""
+    f = o.initial_friction_factor
+    kc, ks = f * params.coulomb, min(f * params.stiction, 0.999 * params.u_max)
+    kc = min(kc, ks)
+    dtu = min(adjusted_increment(params, o.a_c, o.a_ratio)[1], max_on_time(params))
+    brake = o.brake_margin_sigmas if o.braking_pulse else None
+    for margin in ((None, brake) if joint else (None,)):
+        pr = Predictor(params, fd_step=o.fd_step, brake_margin=margin, brake_min_ratio=o.brake_min_ratio)
+        pr.predict(ks, kc, dtu)
+        pred = pr.conditional(ks, kc, dtu)
+    P2 = np.diag([(0.5 * kc) ** 2, (0.5 * ks) ** 2])
+    if not joint:
+        ff = FrictionFilter(kc, ks, P2, params.u_max, a=o.a_cov, max_correction_fraction=o.max_correction_fraction,
+                            constraints=o.friction_constraints)
+        ff.motion_variance(np.asarray(pred.H_b, dtype=float))
+        ff.update(np.asarray(pred.H_b, dtype=float), 1e-7, 1e-12, pred.peak_torque)
+        return
+    if pred.t_breakaway is not None:                # by the module's names (tests replace this one's)
+        _noise.pulse_noise(params, ks, kc, dtu, pred.t_breakaway, pred.t_current_zero, pred.t_nominal)
+        _noise.pulse_bias(params, ks, kc, dtu, pred.t_breakaway, pred.t_current_zero, pred.t_nominal)
+    _noise.braked_pulse_noise(params, 2.0, 1.0, 1.2e-3, 2e-4, 3e-3, 4e-3)
+    z, P = np.array([0.0, 0.0, kc, ks, 0.0]), np.eye(5) * 1e-12
+    joint_predict(z, P, -1e-3, 0.99, 1e-14, 1e-14, 1e-14)
+    joint_update(z, P, 1e-12, 0.0)
+    joint_add_motion(z, P, np.zeros(5), 1e-6, 1e-14, math.inf, 1e-6)
+    quadratic_form2(np.ones(2), P[2:4, 2:4])
+    if o.friction_grid:
+        g = FrictionGrid(params, [kc, ks], P2, n=o.grid_points, memory=o.grid_memory)
+        gp = g.predictive(dtu, 2.5, 0.8)
+        if gp.p_motion > 0:
+            g.update(dtu, 1, gp.dc_mean, (0.1 * gp.dc_mean) ** 2, 2.5, 0.8)
 
 
 @lru_cache(maxsize=32)
@@ -234,6 +307,7 @@ class SolnicController(Controller):
                            undecided_cycles=0, grid_handover_cycle=0, braked_pulses=0)
         self._idle: CompiledLaw | None = None
         self._ready = True
+        _warm_in_loop(self)
 
     # ------------------------------------------------------------------ the compiled idle sample
     def compiled_law(self) -> CompiledLaw | None:
@@ -245,16 +319,13 @@ class SolnicController(Controller):
         imports it first and exports it after (a hand-back is the Python path's sample).
         """
         o = self.options
-        if not self._ready or self._n != 0:
+        kind = self._compiled_kind()
+        if kind is None:
             return None
-        joint = self.joint is not None
+        joint = kind == "joint"
         if joint:
-            if not (type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled):
-                return None
             f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
         else:
-            if self.grid is not None or o.noise_aware_model or type(self.mode2) is not Mode2Filter:
-                return None
             f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, 2 * _idle.N_STATE, _idle.idle_step_address()
         p = np.empty(n_p)
         p[_idle.TS], p[_idle.R] = self.params.sample_period, f.R
@@ -275,6 +346,18 @@ class SolnicController(Controller):
         self._memo_seen = (0, 0)
         self._export_idle()
         return self._idle
+
+    def _compiled_kind(self) -> str | None:
+        """Which idle step :meth:`compiled_law` would give now: ``"joint"`` (the joint EKF with
+        the noise-aware model), ``"mode2"`` (the faithful estimators) or None."""
+        o = self.options
+        if not self._ready or self._n != 0:
+            return None
+        if self.joint is not None:
+            ok = type(self.joint) is JointFilter and o.noise_aware_model and self.predictor._compiled
+            return "joint" if ok else None
+        ok = self.grid is None and not o.noise_aware_model and type(self.mode2) is Mode2Filter
+        return "mode2" if ok else None
 
     def _export_idle(self) -> None:
         """The state into the idle step's array, with the plan of the next sample cached."""

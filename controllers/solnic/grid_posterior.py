@@ -77,6 +77,53 @@ def _table_kernel(dt_u, U, t3, a, kc, ks, need, dc, t_stop, t_brk):
             dc[i], t_stop[i], t_brk[i] = d, ts, tb
 
 
+@njit(cache=True)
+def _valid_table_kernel(dt_u, U, t3, a, kc, ks, need, idx, n, ks_hi, dc, t_stop, t_brk, spread_out):
+    """:meth:`FrictionGrid.table` in one call: the frictions clipped into the valid set,
+    :func:`_table_kernel` on the needed points (``dc``, ``t_stop``, ``t_brk``: scratch of the
+    n × n lattice), and at the valid points ``idx`` the cell spread² of Δc (into
+    ``spread_out``) and (Δc, t_stop, t_breakaway) (returned).
+
+    The same operations on the same operands as the numpy formulation it replaces, so the same
+    bits: ``np.clip`` is min(max(x, lo), hi) elementwise; ``np.gradient`` with unit spacing is
+    (f[i+1] − f[i−1])/2 inside and (f[1] − f[0])/1, (f[n−1] − f[n−2])/1 at the edges; the
+    spread is 0 + |g0|·|g0|/12, then + |g1|·|g1|/12."""
+    m = kc.size
+    ks_c = np.empty(m)
+    kc_c = np.empty(m)
+    for i in range(m):
+        k = max(ks[i], 1e-6)
+        k = min(k, ks_hi)
+        ks_c[i] = k
+        c = max(kc[i], 1e-6)
+        kc_c[i] = min(c, k)
+    _table_kernel(dt_u, U, t3, a, kc_c, ks_c, need, dc, t_stop, t_brk)
+    nv = idx.size
+    dc_v, ts_v, tb_v = np.empty(nv), np.empty(nv), np.empty(nv)
+    for j in range(nv):
+        i = idx[j]
+        r, c = i // n, i % n
+        if r == 0:
+            g0 = (dc[i + n] - dc[i]) / 1.0
+        elif r == n - 1:
+            g0 = (dc[i] - dc[i - n]) / 1.0
+        else:
+            g0 = (dc[i + n] - dc[i - n]) / 2.0
+        if c == 0:
+            g1 = (dc[i + 1] - dc[i]) / 1.0
+        elif c == n - 1:
+            g1 = (dc[i] - dc[i - 1]) / 1.0
+        else:
+            g1 = (dc[i + 1] - dc[i - 1]) / 2.0
+        a0, a1 = abs(g0), abs(g1)
+        sp = 0.0
+        sp += a0 * a0 / 12.0
+        sp += a1 * a1 / 12.0
+        spread_out[j] = sp
+        dc_v[j], ts_v[j], tb_v[j] = dc[i], t_stop[i], t_brk[i]
+    return dc_v, ts_v, tb_v
+
+
 def pulse_table(params: PlantParams, dt_u: float, kc: np.ndarray, ks: np.ndarray, need: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Δc [rad], t_stop [s], t_breakaway [s] or −1) of a +u_max pulse for every (k_c, k_s).
@@ -197,6 +244,18 @@ class FrictionGrid:
         """(Δc, t_stop, t_breakaway, spread² of Δc over the cell) at the valid points."""
         key = float(dt_u)
         hit = self._tables.get(key)
+        if hit is None and self.n >= 2:
+            # compiled (:func:`_valid_table_kernel`): the numpy formulation below, bit for bit
+            p, nn = self.params, self.n * self.n
+            spread = np.empty(self._idx.size)
+            dc, ts, tb = _valid_table_kernel(key, p.u_max, p.motor_time_constant, p.alpha, self.kc, self.ks,
+                                             self._need, self._idx, self.n, self.u_max * (1 - 1e-9),
+                                             np.empty(nn), np.empty(nn), np.empty(nn), spread)
+            hit = (dc, ts, tb, spread)
+            if len(self._tables) > 64:
+                self._tables.clear()
+                self._moving.clear()
+            self._tables[key] = hit
         if hit is None:
             # invalid points are evaluated at the nearest valid friction (a continuous
             # extension, for the cell spread of their valid neighbours only)
@@ -266,10 +325,15 @@ class FrictionGrid:
 
     def _loglik(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float,
                 bias_ratio: float) -> np.ndarray:
-        mean, var, moves, _ = self.noise_moments(dt_u, var_ratio, bias_ratio)
-        d = np.where(moves, sign * mean, 0.0)
-        var = R + var
-        return -0.5 * (m - d) ** 2 / var - 0.5 * np.log(var)
+        # −(m − d)²/(2(R + v)) compiled (:func:`_loglik_kernel`, the numpy expression's operations
+        # on the same operands), log(R + v) by numpy's log, the ufunc the expression called
+        dc, ts, tb, spread = self.table(dt_u)
+        moves, f, root_f = self._moving_time(float(dt_u), ts, tb)
+        noisy = f is not None and (var_ratio > 0 or bias_ratio > 0)
+        var, quad = np.empty(dc.size), np.empty(dc.size)
+        _loglik_kernel(dc, spread, moves, root_f if noisy else dc, f if noisy else dc, noisy, float(var_ratio),
+                       float(bias_ratio), float(sign), float(m), float(R), var, quad)
+        return quad - 0.5 * np.log(var)
 
     def update(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float = 0.0,
                bias_ratio: float = 0.0) -> None:
@@ -321,12 +385,72 @@ class FrictionGrid:
         p = float(np.sum(w))
         if not p > 0:
             return Predictive(0.0, math.nan, math.nan, math.nan, math.nan)
-        keep = np.flatnonzero(w > 1e-9 * p)         # negligible points cannot move a quantile much
-        w, mean, var, ts = w[keep] / p, mean[keep], var[keep], ts[keep]
-        (q16, q50, q84), i50 = _weighted_quantiles(mean, w, (0.16, 0.5, 0.84))
-        (t16, t50, t84), _ = _weighted_quantiles(ts, w, (0.16, 0.5, 0.84))
-        # the friction-noise variance at the median point
-        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + float(var[i50]), t50, (0.5 * (t84 - t16)) ** 2)
+        # the points of weight > 1e-9·p (negligible points cannot move a quantile much), their
+        # weights / p, the weighted 16/50/84 % quantiles of Δc and t_stop and the friction-noise
+        # variance at the median point: :func:`_predictive_kernel` (:func:`_weighted_quantiles`'
+        # operations, compiled)
+        q16, q50, q84, var50, t16, t50, t84 = _predictive_kernel(w, p, mean, var, ts)
+        return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + var50, t50, (0.5 * (t84 - t16)) ** 2)
+
+
+@njit(cache=True)
+def _loglik_kernel(dc, spread, moves, root_f, f, noisy, var_ratio, bias_ratio, sign, m, R, var, quad):
+    """R + v and −½(m − d)²/(R + v) of :meth:`FrictionGrid._loglik` at every valid point, into
+    ``var`` and ``quad``: (Δc + b·√f, spread + r·f) (:meth:`FrictionGrid.noise_moments`; Δc,
+    spread without the ratios), d = sign·mean where the shaft moves, else 0 — the numpy
+    expression's operations in its order ((m − d)² as (m − d)·(m − d), numpy's square)."""
+    for i in range(dc.size):
+        if noisy:
+            mean = dc[i] + bias_ratio * root_f[i]
+            v = spread[i] + var_ratio * f[i]
+        else:
+            mean = dc[i]
+            v = spread[i]
+        d = sign * mean if moves[i] else 0.0
+        v = R + v
+        e = m - d
+        var[i] = v
+        quad[i] = -0.5 * (e * e) / v
+
+
+@njit(cache=True)
+def _predictive_kernel(w, p, mean, var, ts):
+    """(Δc's 16/50/84 % quantiles, VAR at the Δc median's point, t_stop's quantiles) of
+    :meth:`FrictionGrid.predictive` from the weights ``w`` (sum ``p`` > 0): the points with
+    w > 1e-9·p, weights w/p, and :func:`_weighted_quantiles` of each — a stable argsort
+    (mergesort), the running sum, the left-side search of q·(total) clipped to the last index:
+    the same operations on the same operands as the numpy code, so the same bits."""
+    keep = np.flatnonzero(w > 1e-9 * p)
+    m = keep.size
+    wk, mk, tk = np.empty(m), np.empty(m), np.empty(m)
+    for j in range(m):
+        i = keep[j]
+        wk[j], mk[j], tk[j] = w[i] / p, mean[i], ts[i]
+    qm, om = _quantiles3(mk, wk)
+    qt, _ = _quantiles3(tk, wk)
+    return qm[0], qm[1], qm[2], var[keep[om]], qt[0], qt[1], qt[2]
+
+
+@njit(cache=True)
+def _quantiles3(x, w):
+    """The 0.16, 0.5 and 0.84 quantiles of Σ w_i δ(x_i) and the index of the 0.5 one's point,
+    as :func:`_weighted_quantiles` computes them."""
+    order = np.argsort(x, kind="mergesort")
+    n = x.size
+    cw = np.empty(n)
+    acc = 0.0
+    for j in range(n):
+        acc += w[order[j]]
+        cw[j] = acc
+    total = cw[n - 1]
+    q = np.empty(3)
+    mid = 0
+    for k, frac in enumerate((0.16, 0.5, 0.84)):
+        i = min(np.searchsorted(cw, frac * total), n - 1)
+        q[k] = x[order[i]]
+        if k == 1:
+            mid = order[i]
+    return q, mid
 
 
 def _weighted_quantiles(x: np.ndarray, w: np.ndarray, qs) -> tuple[list[float], int]:
