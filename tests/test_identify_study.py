@@ -229,7 +229,10 @@ def _fifth_coverage(family: str, cases) -> float:
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 30 min of CPU: SOLNIC_AXIS_STUDY=1")
 @pytest.mark.xfail(strict=True, reason="measured (2026-11-27, loaded machine) on cases 0-9: 50 of 60 (83 %) — "
-                   "k̄c 8/10, k̄s 8/10, J 9/10, τ3 10/10, v_s 5/10, σ0 10/10; below 90 %")
+                   "k̄c 8/10, k̄s 8/10, J 9/10, τ3 10/10, v_s 5/10, σ0 10/10; below 90 %. Re-run with v_s's "
+                   "calibration interval (eighth session): 50 of 60 again — k̄c 8/10, k̄s 8/10, J 9/10, τ3 8/10, "
+                   "v_s 8/10, σ0 9/10; 8 misses on cases 3 and 8, where the work budget cut the bootstrap below "
+                   "5 replicates")
 def test_fifth_lugre_coverage_all_fields():
     """Random lugre axes at the fresh seed 3907 (draws from ``default_rng([3907, 2])``; named before
     any run): every fitted field inside its stated 95 % interval in ≥ 90 % of the cases, with the
@@ -239,7 +242,10 @@ def test_fifth_lugre_coverage_all_fields():
     CPU per log 77, 327, 137, 302, 129 s: the 60-s goal missed (docs/axis.md, "Fifth session").
     Cases 5–9 (seventh session, on the work-clock budgets; estimator otherwise unchanged): 26 of 30
     — v_s out on cases 5 and 9 (+60 %, −83 %), k̄c and k̄s out on case 8 (+7 %, −19 %); CPU 316,
-    76, 185, 358, 177 s. All ten: 50 of 60 (83 %), a miss."""
+    76, 185, 358, 177 s. All ten: 50 of 60 (83 %), a miss. Re-run with v_s's calibration interval
+    (eighth session, the same point estimates): 50 of 60 again (v_s 8/10, τ3 8/10, σ0 9/10); cases 3
+    and 8 (CPU 320, 338 s) had the bootstrap cut below 5 replicates by the work budget and the
+    cluster-robust covariance stood in (8 of the 10 misses). CPU per log 70–338 s (median 112 s)."""
     assert _fifth_coverage("lugre", range(LUGRE_CASES)) >= 0.90
 
 
