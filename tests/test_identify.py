@@ -519,3 +519,60 @@ def test_two_mass_bootstrap_spreads_the_shaft_truths_and_states_the_calibration(
     lo, hi = fit.interval["shaft_stiffness"]
     assert 4e4 / 30 * (1 - 1e-9) <= lo < hi <= 4e4 * 30 * (1 + 1e-9)
     assert all(fit.interval[k][0] < fit.interval[k][1] for k in CORE)
+
+
+def test_lugre_bootstrap_spreads_the_stribeck_velocity_truths_and_calibrates(monkeypatch):
+    """Lugre's v_s gets the calibration interval (issue 25, eighth session): replicate i is simulated at
+    v_s = the i-th log-even midpoint of 0.5–24 mrad/s (golden-ratio order; the draws' region 4–10 mrad/s
+    inside), its other fields at the estimate. The point fit and the replicates' fits are stand-ins (a
+    known estimator, so the test takes seconds): one whose ln v̂_s follows ln v_s (slope 1, sd 0.05)
+    gives an interval that holds the real log's truth and is much narrower than the span; one that
+    ignores v_s (an estimate that does not follow the truth) gives the fit's bounded range, marked not
+    identified. The core keeps its bias-corrected bootstrap interval; σ0 is not calibrated."""
+    import plant.identification.fit as fitmod
+    import plant.identification.simulate as sim
+
+    plan = design_experiment(ExperimentOptions(repeats=1, holds=1))
+    p = get_family("lugre").Params().replace(coulomb=1.2, stiction=1.6, inertia=0.5, motor_time_constant=0.008,
+                                              bristle_stiffness=2e5, stribeck_velocity=6e-3)
+    log, _ = simulate_log(plan, "lugre", p, 1729)
+    z_hat = np.log([1.2, 0.4, 0.5, 0.008, 6e-3, 2e5])
+    seen, rng = [], np.random.default_rng(1729)
+
+    def spy(plan_, family, params, seed):     # the truth is what matters here, not the replicate's noise
+        seen.append(params.stribeck_velocity)
+        return log, {"coulomb": params.coulomb, "stiction": params.stiction, "x5": 0.0}
+
+    def stand_in(log_, family, base, z0=None, deadline=math.inf, points=None, clock=None):
+        model = fitmod._Model(log_, family, base)
+        n = 4 + 2
+        lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
+        lo[4:], hi[4:] = np.log([4e-3, 1e6]) - math.log(30.0), np.log([4e-3, 1e6]) + math.log(30.0)
+        model.box, model.start_point, model.start_note = (lo, hi), z_hat[4:].copy(), ""
+        model.scale = np.full(model.rows.size, 5e-6)
+        if points is None:        # the real log's point fit
+            return z_hat, model, 5e-6, 100, np.zeros(model.rows.size), np.zeros((model.rows.size, n)), False
+        zb = z_hat + 0.02 * rng.standard_normal(n)
+        zb[4] = (math.log(seen[-1]) if follows else z_hat[4]) + 0.05 * rng.standard_normal()
+        return zb, model, 5e-6, 100, None, None, False
+
+    monkeypatch.setattr(sim, "simulate_log", spy)
+    monkeypatch.setattr(fitmod, "_point_fit", stand_in)
+    expect = np.exp(np.log(5e-4) + (np.arange(8) + 0.5) / 8 * np.log(2.4e-2 / 5e-4))
+    # golden-ratio order: frac(k·0.618…) = 0, .618, .236, .854, .472, .090, .708, .326 for k = 0..7
+    order = [0, 5, 2, 7, 4, 1, 6, 3]
+    for follows in (True, False):
+        seen.clear()
+        fit = fit_log(log, "lugre", bootstrap=8)
+        np.testing.assert_allclose(seen, expect[order], rtol=1e-12)
+        assert "stribeck_velocity: calibration interval" in fit.method
+        assert "bristle_stiffness: calibration" not in fit.method
+        lo, hi = fit.interval["stribeck_velocity"]
+        if follows:
+            assert lo <= 6e-3 <= hi and hi / lo < 1.6
+            assert "stribeck_velocity" not in fit.not_identified
+        else:
+            assert (lo, hi) == pytest.approx((4e-3 / 30, 4e-3 * 30), rel=1e-9)
+            assert "stribeck_velocity" in fit.not_identified
+        for k in CORE:
+            assert fit.interval[k][0] < fit.estimates[k] < fit.interval[k][1]
