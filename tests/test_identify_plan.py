@@ -125,6 +125,42 @@ def test_the_budget_counts_work_not_the_cpu_clock(short_log, monkeypatch):
     assert loaded.estimates == cut.estimates and loaded.budget_note == cut.budget_note
 
 
+def test_a_bootstrap_cut_after_three_replicates_keeps_its_t_interval(short_log, monkeypatch):
+    """A bootstrap the budget cuts after 3 replicates gives the replicates' interval with t(0.975, 2)
+    (half-width = t·sd, sd = the deviations' sd·√(1 + 1/3)), not the optimistic cluster-robust
+    covariance (issue 25, eighth session: 3 or 4 replicates fell back to it before). The budget is
+    set from the work the unbudgeted fit's replicates add: the 4th replicate hits it half-way."""
+    from scipy import stats
+
+    from plant.identification import fit as fit_module
+    from plant.identification import simulate as simulate_module
+
+    spent, starts = [0.0], []
+    add, sim = fit_module._WorkClock.add, simulate_module.simulate_log
+
+    def counting(self, family, *work):
+        add(self, family, *work)
+        spent.append(self.spent)
+
+    def marking(*a, **k):
+        starts.append(spent[-1])       # the clock when a replicate's log is simulated
+        return sim(*a, **k)
+    monkeypatch.setattr(fit_module._WorkClock, "add", counting)
+    monkeypatch.setattr(simulate_module, "simulate_log", marking)
+    full = fit_log(short_log, "multimode", bootstrap=5)
+    monkeypatch.setattr(fit_module._WorkClock, "add", add)
+    monkeypatch.setattr(simulate_module, "simulate_log", sim)
+    assert len(starts) == 5 and not full.budget_note
+    budget = starts[3] + 0.5 * (starts[4] - starts[3])     # replicate 4 of 5 (index 3) runs past it
+    cut = fit_log(short_log, "multimode", bootstrap=5, budget_s=budget)
+    assert "after 3 of 5 replicates" in cut.budget_note and "cluster-robust" not in cut.budget_note
+    assert "parametric bootstrap (3 logs" in cut.method
+    assert cut.estimates == full.estimates
+    for k in ("coulomb", "stiction", "inertia", "motor_time_constant"):
+        lo, hi = cut.interval[k]
+        assert (hi - lo) / 2 == pytest.approx(stats.t.ppf(0.975, 2) * cut.std[k], rel=1e-12)
+
+
 def test_identify_prints_the_budget_and_the_identified_column(short_log, tmp_path):
     write_log(short_log, tmp_path / "log.csv")
     r = CliRunner().invoke(app, ["identify", str(tmp_path / "log.csv"), "--out", str(tmp_path / "a.toml"),

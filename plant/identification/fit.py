@@ -540,6 +540,14 @@ def _refit(model: _Model, z: np.ndarray, scale: np.ndarray, box) -> np.ndarray:
 # point fit's v_s does not follow the truth under Table 2-1 noise (docs/axis.md, "Eighth session"; seed 3907: v_s
 # inside 5 of 10); the span is the designed start grid's (1e-3-1.2e-2 rad/s) widened by 2 each way, 5e-4-2.4e-2 rad/s,
 # which holds the draws' region (4-10 mrad/s, tests/identify_draws.py) with a factor 2.4 to spare on either side.
+# Fewest bootstrap deviations that give the intervals (else the cluster-robust covariance): with n of them
+# the half-width is t(0.975, n−1)·sd·√(1+1/n), so the sd's own uncertainty is in the quantile (t = 4.3 at
+# n = 3). Five until issue 25's eighth session: a bootstrap the work budget cut after 3 or 4 replicates then
+# fell back to the cluster-robust covariance, which is optimistic (1.5–2.8 % sd stated where the estimates
+# spread 14 %, "Uncertainty" in docs/axis.md): 5 of the 8 misses of the lugre study on seed 8191 and 8 of
+# the 10 on seed 3907 were such logs (half-widths 0.5–3 %).
+_MIN_REPLICATES = 3
+
 _CALIBRATED = {"two-mass": {"shaft_stiffness": (2.5e3, 2e5)}, "lugre": {"stribeck_velocity": (5e-4, 2.4e-2)}}
 
 
@@ -597,7 +605,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
         simulations' samples, events and integrator steps counted and priced per family, so the
         same log gives the same fit on every machine and under any load; the CPU time it takes
         varies with the machine). Past it: during the point fit, its best point so far stands;
-        during the bootstrap, the replicates done so far give the sd (at least 5), else the
+        during the bootstrap, the replicates done so far give the sd (at least 3), else the
         cluster-robust covariance does. Either is stated in ``budget_note`` and ``method``.
 
     Raises
@@ -691,14 +699,14 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
             devs.append(vb - tb)
         if failed:
             notes.append(f"{failed} of {bootstrap} simulated replicate logs left ok (diverged past 1 rad): left out"
-                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
+                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < _MIN_REPLICATES else ""))
         if stuck:
             notes.append(f"{stuck} of {bootstrap} replicate refits never left the estimate: left out"
-                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < 5 else ""))
+                         + ("; the cluster-robust covariance (optimistic) instead" if len(devs) < _MIN_REPLICATES else ""))
         if len(devs) + failed + stuck < bootstrap:
             notes.append(f"work budget {budget_s:g} s hit in the bootstrap after {len(devs)} of {bootstrap} replicates"
-                         + ("" if len(devs) >= 5 else "; the cluster-robust covariance (optimistic) instead"))
-    if len(devs) >= 5:
+                         + ("" if len(devs) >= _MIN_REPLICATES else "; the cluster-robust covariance (optimistic) instead"))
+    if len(devs) >= _MIN_REPLICATES:
         devs = np.array(devs)
         # a replicate whose refit lands far in another minimum (beyond 10 robust sd, 1.4826·MAD)
         # must not decide the interval; the others' standard deviation does (heavy tails count)
@@ -740,11 +748,15 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
     sd = {n: float(x) for n, x in zip(names, sd_v)}
     centre = {n: float(x) for n, x in zip(names, values - bias_v)}
     interval = {n: (centre[n] - quant * sd[n], centre[n] + quant * sd[n]) for n in names}
-    if len(devs) >= 5 and spans:
+    if len(devs) >= _MIN_REPLICATES and spans:
         truths, ests = np.array(calib_truth)[keep], devs[keep] + np.array(calib_truth)[keep]
         for c, (lo, hi) in spans.items():
-            a, b, note = _calibration_interval(np.log(truths[:, c]), np.log(ests[:, c]), math.log(values[c]),
-                                               lo, hi, (model.box[0][c], model.box[1][c]))
+            if n_keep < 3:      # a line through two points has no residual sd: nothing is calibrated
+                a, b = model.box[0][c], model.box[1][c]
+                note = f"{n_keep} replicates kept, too few for the regression: the fit's bounded range"
+            else:
+                a, b, note = _calibration_interval(np.log(truths[:, c]), np.log(ests[:, c]), math.log(values[c]),
+                                                   lo, hi, (model.box[0][c], model.box[1][c]))
             interval[names[c]] = (math.exp(a), math.exp(b))
             sd[names[c]] = (math.exp(b) - math.exp(a)) / (2.0 * quant)     # the interval's half-width / t
             at_bound[c] = False       # the calibration interval already goes on to the bound where it reaches it
@@ -752,7 +764,7 @@ def fit_log(log: AxisLog, family: str = "multimode", base=None, *, bootstrap: in
                        f"{math.exp(lo):.3g}–{math.exp(hi):.3g}, ln estimate regressed on ln truth ({note}); the "
                        f"truths whose 95 % prediction band holds the estimate, to the fit's bound where they reach "
                        f"the span's end)")
-    if len(devs) >= 5 and at_bound.any():
+    if len(devs) >= _MIN_REPLICATES and at_bound.any():
         # an extra at its bound (factor 30 from its start) in the estimate or in a replicate: the
         # replicates' spread is censored there, so the interval is the whole bounded range
         # (it reaches down to start/30: marked not identified unless the estimate is near the top)
