@@ -944,7 +944,7 @@ class FamilyChoice:
     seconds : float
         Wall-clock time of the held-out fits.
     cpu : dict
-        CPU time [s] of each family's two fold fits (this process).
+        CPU time [s] of each family's two fold fits (summed over the processes that ran the folds).
     per_move : dict
         Per family, the held-out score of every move (the numbers the rule averages).
     per_move_output_error : dict
@@ -1458,69 +1458,34 @@ def _held_out(log: AxisLog, family: str, base, z: np.ndarray, test: list[int]) -
     return np.log(np.maximum(np.bincount(model.groups, weights=r * r) / np.bincount(model.groups), 1e-300))
 
 
-def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int = 0,
-                  budget_s: float = DEFAULT_BUDGET_S, criterion: str = "predictive",
-                  final_fit: bool = True) -> tuple[AxisFit | None, FamilyChoice]:
-    """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
+@dataclass(frozen=True, eq=False)
+class _FoldFits:
+    """:func:`choose_family`'s fits on one fold: ``_FoldFits(…)(k)`` fits every family on the moves
+    of the other fold and scores it on fold k's. A picklable callable, so that a process pool's
+    ``map`` runs the two folds at once. The folds are independent: each fit keeps its work on its
+    own model's :class:`_WorkClock` (every budget here is relative to it), each noisy simulation
+    draws from its own ``SeedSequence([seed, move, i])``, and neither fold reads what the other
+    computes — so running them at once, in any order, changes no number.
 
-    Rule (:data:`RULE`): the moves are split into two folds, each kind of move evenly
-    (:func:`_folds`), so both folds hold ramps, every hold level and every pulse width in both
-    directions. Each family is fitted on one fold and predicts the other.
+    Returns (fold k's moves, per family their predictive scores, their output-error scores,
+    (family, k) → fold fit, per family the CPU seconds of this fold's fits in the process that ran
+    them)."""
 
-    **Criterion** ``"predictive"`` (default; issue 25, fourth session): a move is summarised by
-    its features (:func:`_windows`: window means of y while the command is on, just after, and
-    at rest), and a family's prediction of a held-out move is the *law* of those features under
-    its own friction noise — mean and covariance of 24 noisy simulations from rest, plus
-    σ1²/window — scored by −2 ln p of the measured features under the posterior predictive t of
-    those replicates (:func:`_score_features`, fifth session). The fold fit maximises a
-    synthetic likelihood with a Student-t loss on the training moves (:func:`_feature_fit`;
-    multimode multi-started from its output-error fit and a grid around it, and refitted from
-    the richer fits' k̄c, k̄s, J, τ3 too; a richer family at the best point of a grid around
-    multimode's core, stribeck from four k̄c shifts). A family is separably worse than the best by
-    Wilcoxon's paired signed-rank test over moves (:func:`_signed_rank`). Under Table 2-1 friction noise a pulse's net motion
-    has a CV near 0.8: the output-error fit and score of a noise-free model (``"output-error"``,
-    the rule until the third session) treat that spread as model error, and on dev logs (seed
-    4242) they put a wrong τ3 and k̄s ahead of the truth, while the predictive score put the truth
-    13 per move in −2 ln p (6.5 nats) ahead of every output-error fit.
+    log: AxisLog
+    fams: list
+    bases: dict
+    fold: np.ndarray
+    sigma1: float
+    seed: int
+    criterion: str
 
-    The families are nested or nearly so around multimode (v_s → 0, b → 0: stribeck; σ0 → ∞:
-    lugre; k_sh → ∞: two-mass): among the families the signed-rank test cannot separate from the best
-    (with ``criterion="output-error"``: whose mean paired excess is within 2 standard errors over
-    moves), the one with the fewest fitted parameters is chosen (not separable → simpler), and
-    among equally many (stribeck and lugre, six each) the lower score. Each richer family's fit
-    keeps its parameters within a factor 30 of its start
-    (lugre's σ0 ≤ 1e6, :data:`_FEATURE_CAP`) and has 8 nominal CPU seconds of work per fold for its least
-    squares (:data:`_FEATURE_BUDGET_S`); past them its best point so far stands.
-
-    Returns
-    -------
-    (AxisFit, FamilyChoice)
-        The chosen family's fit (:func:`fit_log`, with ``bootstrap`` and ``budget_s``) and how it
-        was chosen.
-    """
-    fams = [f for f in _SIMPLER if f in (families or FAMILY_FREE)]
-    if not fams or any(f not in FAMILY_FREE for f in (families or ())):
-        raise ValueError(f"families must be among {sorted(FAMILY_FREE)}, got {families!r}")
-    if log.y is None:
-        raise ValueError("the log has no y column")
-    if criterion not in ("predictive", "output-error"):
-        raise ValueError(f"criterion must be 'predictive' or 'output-error', got {criterion!r}")
-    t0 = time.perf_counter()
-    bases = {}
-    for f in fams:
-        fam = get_family(f)
-        u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max), fam.Params().u_max)
-        bases[f] = fam.Params().replace(u_max=u_max, sample_period=log.sample_period)
-    G = len(moves(log))
-    if G < 8:
-        raise ValueError(f"the log has {G} moves; choosing a family by held-out moves needs at least 8")
-    fold = _folds(log)
-    per_move = {f: np.empty(G) for f in fams}
-    per_move_oe = {f: np.empty(G) for f in fams}
-    sigma1 = max(_sigma1(log, moves(log))[0], 1e-12)
-    cpu = dict.fromkeys(fams, 0.0)
-    fold_fits = {}
-    for k in (0, 1):
+    def __call__(self, k: int):
+        log, fams, bases, fold, sigma1, seed, criterion = (self.log, self.fams, self.bases, self.fold, self.sigma1,
+                                                           self.seed, self.criterion)
+        per_move = {f: np.empty(fold.size) for f in fams}
+        per_move_oe = {f: np.empty(fold.size) for f in fams}
+        cpu = dict.fromkeys(fams, 0.0)
+        fold_fits = {}
         train, test = list(np.flatnonzero(fold != k)), list(np.flatnonzero(fold == k))
         mm_base = bases.get("multimode") or get_family("multimode").Params().replace(
             u_max=bases[fams[0]].u_max, sample_period=log.sample_period)
@@ -1581,6 +1546,85 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
             per_move_oe["multimode"][test] = _held_out(log, "multimode", bases["multimode"], z, test)
             per_move["multimode"][test] = _predictive_scores(log, "multimode", bases["multimode"], z, test, sigma1, seed)
             cpu["multimode"] += time.process_time() - c0
+        return (test, {f: v[test] for f, v in per_move.items()}, {f: v[test] for f, v in per_move_oe.items()},
+                fold_fits, cpu)
+
+
+def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int = 0,
+                  budget_s: float = DEFAULT_BUDGET_S, criterion: str = "predictive",
+                  final_fit: bool = True, mapper=map) -> tuple[AxisFit | None, FamilyChoice]:
+    """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
+
+    Rule (:data:`RULE`): the moves are split into two folds, each kind of move evenly
+    (:func:`_folds`), so both folds hold ramps, every hold level and every pulse width in both
+    directions. Each family is fitted on one fold and predicts the other.
+
+    **Criterion** ``"predictive"`` (default; issue 25, fourth session): a move is summarised by
+    its features (:func:`_windows`: window means of y while the command is on, just after, and
+    at rest), and a family's prediction of a held-out move is the *law* of those features under
+    its own friction noise — mean and covariance of 24 noisy simulations from rest, plus
+    σ1²/window — scored by −2 ln p of the measured features under the posterior predictive t of
+    those replicates (:func:`_score_features`, fifth session). The fold fit maximises a
+    synthetic likelihood with a Student-t loss on the training moves (:func:`_feature_fit`;
+    multimode multi-started from its output-error fit and a grid around it, and refitted from
+    the richer fits' k̄c, k̄s, J, τ3 too; a richer family at the best point of a grid around
+    multimode's core, stribeck from four k̄c shifts). A family is separably worse than the best by
+    Wilcoxon's paired signed-rank test over moves (:func:`_signed_rank`). Under Table 2-1 friction noise a pulse's net motion
+    has a CV near 0.8: the output-error fit and score of a noise-free model (``"output-error"``,
+    the rule until the third session) treat that spread as model error, and on dev logs (seed
+    4242) they put a wrong τ3 and k̄s ahead of the truth, while the predictive score put the truth
+    13 per move in −2 ln p (6.5 nats) ahead of every output-error fit.
+
+    The families are nested or nearly so around multimode (v_s → 0, b → 0: stribeck; σ0 → ∞:
+    lugre; k_sh → ∞: two-mass): among the families the signed-rank test cannot separate from the best
+    (with ``criterion="output-error"``: whose mean paired excess is within 2 standard errors over
+    moves), the one with the fewest fitted parameters is chosen (not separable → simpler), and
+    among equally many (stribeck and lugre, six each) the lower score. Each richer family's fit
+    keeps its parameters within a factor 30 of its start
+    (lugre's σ0 ≤ 1e6, :data:`_FEATURE_CAP`) and has 8 nominal CPU seconds of work per fold for its least
+    squares (:data:`_FEATURE_BUDGET_S`); past them its best point so far stands.
+
+    ``mapper`` (like the builtin ``map``, the default; or a process pool's ``map``) runs the two
+    folds (:class:`_FoldFits`: independent, so the choice, scores and fold fits are the same, bit
+    for bit, either way; ``FamilyChoice.cpu`` then sums the CPU of the processes that ran them)
+    and the final fit's bootstrap (:func:`fit_log`).
+
+    Returns
+    -------
+    (AxisFit, FamilyChoice)
+        The chosen family's fit (:func:`fit_log`, with ``bootstrap``, ``budget_s`` and ``mapper``)
+        and how it was chosen.
+    """
+    fams = [f for f in _SIMPLER if f in (families or FAMILY_FREE)]
+    if not fams or any(f not in FAMILY_FREE for f in (families or ())):
+        raise ValueError(f"families must be among {sorted(FAMILY_FREE)}, got {families!r}")
+    if log.y is None:
+        raise ValueError("the log has no y column")
+    if criterion not in ("predictive", "output-error"):
+        raise ValueError(f"criterion must be 'predictive' or 'output-error', got {criterion!r}")
+    if not callable(mapper):
+        raise ValueError(f"mapper must be callable like map, got {mapper!r}")
+    t0 = time.perf_counter()
+    bases = {}
+    for f in fams:
+        fam = get_family(f)
+        u_max = float(log.u_max) if log.drive == "bridge" else max(float(log.u_max), fam.Params().u_max)
+        bases[f] = fam.Params().replace(u_max=u_max, sample_period=log.sample_period)
+    G = len(moves(log))
+    if G < 8:
+        raise ValueError(f"the log has {G} moves; choosing a family by held-out moves needs at least 8")
+    fold = _folds(log)
+    per_move = {f: np.empty(G) for f in fams}
+    per_move_oe = {f: np.empty(G) for f in fams}
+    sigma1 = max(_sigma1(log, moves(log))[0], 1e-12)
+    cpu = dict.fromkeys(fams, 0.0)
+    fold_fits = {}
+    # the two folds through ``mapper`` (a process pool's map: at once), merged in fold order
+    for test, per_k, oe_k, fits_k, cpu_k in mapper(_FoldFits(log, fams, bases, fold, sigma1, seed, criterion), (0, 1)):
+        for f in fams:
+            per_move[f][test], per_move_oe[f][test] = per_k[f], oe_k[f]
+            cpu[f] += cpu_k[f]
+        fold_fits.update(fits_k)
     if criterion != "predictive":
         per_move = per_move_oe
     score = {f: float(np.mean(v)) for f, v in per_move.items()}
@@ -1602,4 +1646,5 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
                           time.perf_counter() - t0, cpu, {f: v.copy() for f, v in per_move.items()},
                           {f: v.copy() for f, v in per_move_oe.items()}, fold_fits, criterion, signs,
                           ranks if criterion == "predictive" else {})
-    return (fit_log(log, chosen, bootstrap=bootstrap, seed=seed, budget_s=budget_s) if final_fit else None), choice
+    return (fit_log(log, chosen, bootstrap=bootstrap, seed=seed, budget_s=budget_s, mapper=mapper) if final_fit
+            else None), choice
