@@ -657,6 +657,11 @@ def _replicate_traced(job) -> tuple[tuple, np.ndarray, int | None]:
     return outcome, np.array(clock.trace, dtype=float), clock.first_past
 
 
+# A worker's budget beyond the sequential one, as a fraction of the deadline (:func:`_replayed`): far above
+# the relative rounding of < 1e9 float additions (1e9 · 2⁻⁵³ ≈ 1e-7).
+_REPLAY_MARGIN = 1e-6
+
+
 def _replayed(jobs, clock: _WorkClock, deadline: float, mapper):
     """The bootstrap's replicates run by ``mapper`` (e.g. a process pool's ``map``), yielding
     exactly what :func:`_sequential` yields — the same outcomes, bit for bit, and the shared
@@ -693,7 +698,7 @@ def _replayed(jobs, clock: _WorkClock, deadline: float, mapper):
     if clock.spent > deadline:
         return
     s0 = clock.spent
-    worker_deadline = (deadline - s0) + 1e-6 * deadline
+    worker_deadline = (deadline - s0) + _REPLAY_MARGIN * deadline
     results = mapper(_replicate_traced, [(args, worker_deadline) for _, _, args in jobs])
     try:
         for (i, at, args), (outcome, trace, first_past) in zip(jobs, results):
