@@ -201,7 +201,7 @@ _OUTER_CHECK, _NESTED_CHECK = -1.0, -2.0
 
 class _TraceClock(_WorkClock):
     """A :class:`_WorkClock` that records, in order, every increment it adds (the same float the
-    shared clock would add) and every deadline check (:data:`_OUTER_CHECK`, :data:`_NESTED_CHECK`);
+    shared clock would add) and every check of a finite deadline (:data:`_OUTER_CHECK`, :data:`_NESTED_CHECK`);
     ``first_past`` is the trace index of the first check it answered True. A bootstrap replicate
     run in a worker process keeps its work on one (:func:`_replicate_traced`), so that the
     sequential loop's shared clock can be replayed from the trace (:func:`_replayed`)."""
@@ -221,6 +221,8 @@ class _TraceClock(_WorkClock):
         self.trace.append(float(work))
 
     def past(self, deadline: float, family: str) -> bool:
+        if deadline == math.inf:      # a model without a budget (e.g. a start search before it is set): no check
+            return False
         self.trace.append(_OUTER_CHECK if family == self.family else _NESTED_CHECK)
         out = self.spent > deadline
         if out and self.first_past is None:
@@ -673,7 +675,7 @@ def _replayed(jobs, clock: _WorkClock, deadline: float, mapper):
     by its increments, each the float its simulation adds, in run order. So each replicate runs in
     a worker on its own :class:`_TraceClock` from 0 with the largest budget it could have — the
     deadline minus the clock after the point fit, S0 (every increment is ≥ 0, so no replicate
-    starts below S0), plus 1e-6 of the deadline for rounding — and returns its outcome, its trace
+    starts below S0), plus :data:`_REPLAY_MARGIN` of the deadline for rounding — and returns its outcome, its trace
     (increments and checks, in order) and its first check past its own budget (if any). The
     replicates are then replayed in run order on the shared clock, as the sequential loop runs
     them: before each, the loop's rule (``clock.spent > deadline``: stop); then the same float
