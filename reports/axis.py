@@ -8,7 +8,9 @@ plus an HTML page with measured against simulated y (plotly, offline).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import tomllib
 from html import escape
 from pathlib import Path
@@ -29,7 +31,8 @@ from plant.identification.experiment import WHY
 if TYPE_CHECKING:
     from plant.identification.fit import AxisFit, FamilyChoice
 
-__all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page", "choice_lines"]
+__all__ = ["experiment_command", "identify_command", "fitted_matrix_toml", "fit_page", "choice_lines", "fit_workers",
+           "fit_map", "FIT_PRELOAD"]
 
 _UNITS = {"coulomb": "ozf·in", "stiction": "ozf·in", "inertia": "ozf·in·s²", "motor_time_constant": "s",
           "measurement_noise_std": "rad", "stribeck_velocity": "rad/s", "viscous": "ozf·in·s/rad",
@@ -151,6 +154,39 @@ def fit_page(fit: AxisFit, log, log_name: str, choice: FamilyChoice | None) -> s
             f"{fig.to_html(full_html=False, include_plotlyjs=False)}</body></html>")
 
 
+# What the forkserver of identify's worker pool imports once (each worker is forked with the fit's
+# modules loaded; the numba kernels load from numba's cache at their first call in a worker).
+FIT_PRELOAD = ["plant.identification.fit"]
+
+
+def fit_workers(requested: int | None, family: str, bootstrap: int) -> int:
+    """Worker processes for ``identify``: ``requested``, or the cores this process may run on
+    (``os.sched_getaffinity``), capped at the work there is to share — the bootstrap's replicates,
+    and for ``auto`` also the two held-out folds (at least 1)."""
+    cores = requested if requested is not None else len(os.sched_getaffinity(0))
+    tasks = max(bootstrap, 2) if family == "auto" else bootstrap
+    return max(1, min(cores, tasks))
+
+
+@contextlib.contextmanager
+def fit_map(workers: int):
+    """The ``mapper`` of :func:`~plant.identification.fit.fit_log` and ``choose_family``: the builtin
+    ``map`` for one worker (everything in this process, the sequential code path), else the ``map``
+    of a process pool of ``workers`` processes forked from a forkserver (the start method of the
+    cell processes, :mod:`bench.isolation`; preloading :data:`FIT_PRELOAD`). The forkserver is one
+    per process and keeps the preload of whoever starts it first."""
+    if workers <= 1:
+        yield map
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(FIT_PRELOAD)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        yield pool.map
+
+
 @user_errors
 def identify_command(
     log_path: Path = typer.Argument(..., metavar="LOG", help="The recorded log (CSV or Parquet, SPEC §11)."),
@@ -166,6 +202,10 @@ def identify_command(
                                  help="Nominal CPU seconds of simulation work for the final fit (point fit + "
                                       "bootstrap), counted, so the fit is the same on every machine; "
                                       "when hit, the output says what was cut short."),
+    workers: int = typer.Option(None, "--workers", show_default=False,
+                                help="Processes for the bootstrap's replicates and auto's two folds (default: the "
+                                     "cores available, capped at that work; 1: all in this process). The "
+                                     "results are the same, bit for bit, for any N."),
 ) -> None:
     """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
     from plant.identification.fit import choose_family, fit_log
@@ -179,16 +219,19 @@ def identify_command(
         raise UserError(f"--bootstrap: must be 0 or in [5, 1000], got {bootstrap}")
     if not (math.isfinite(budget) and budget > 0):
         raise UserError(f"--budget: must be > 0 nominal CPU seconds, got {budget}")
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers: must be an integer >= 1, got {workers}")
     try:
         log = read_log(log_path)
     except LogError as exc:
         raise UserError(str(exc)) from None
     choice = None
     try:
-        if family == "auto":
-            fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget)
-        else:
-            fit = fit_log(log, family, bootstrap=bootstrap, seed=seed, budget_s=budget)
+        with fit_map(fit_workers(workers, family, bootstrap)) as mapper:
+            if family == "auto":
+                fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper)
+            else:
+                fit = fit_log(log, family, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper)
     except (ValueError, RuntimeError) as exc:
         raise UserError(f"{log_path}: {exc}") from None
     table = Table(title=f"{log_path.name}: {fit.family} ({fit.method})")
