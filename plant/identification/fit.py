@@ -1014,18 +1014,30 @@ def _rule(fams, score: dict, excess: dict, se: dict) -> str:
 
 
 
-def _windows(model: _Model) -> list[list[np.ndarray]]:
+# The feature windows of a move (:func:`_windows`): (pieces the command-on span is split into,
+# lengths of the consecutive windows after it, length of the move's last window).
+_WINDOW_SPEC = (2, (5,), 10)
+
+
+def _windows(model: _Model, spec: tuple | None = None) -> list[list[np.ndarray]]:
     """The feature windows of each move of ``model`` (positions in the move's rows, y[s+1 …]):
     the response while the command is on (two halves when it lasts ≥ 2 samples, else its one
     sample), the 5 samples after it (the slide to rest) and the move's last 10 (where it
-    stuck). A window's mean of y is one feature."""
+    stuck). A window's mean of y is one feature. ``spec`` (default :data:`_WINDOW_SPEC`):
+    (pieces of the on-span, lengths of the windows after it, length of the last window)."""
+    pieces, after, last = _WINDOW_SPEC if spec is None else spec
     out = []
     for (s, e), idx in zip(model.segs, model.index):
         cmds = model.log.commands[s:e]
         a = 1 + max(i for i, c in enumerate(cmds) if any(v != 0.0 for _, v in c.segments))
         n = idx.size
-        bounds = [(0, a // 2), (a // 2, a)] if a >= 2 else [(0, 1)]
-        bounds += [(a, a + 5), (n - 10, n)]
+        cuts = sorted({a * k // pieces for k in range(pieces + 1)})
+        bounds = [(lo, hi) for lo, hi in zip(cuts, cuts[1:]) if hi > lo]
+        lo = a
+        for w in after:
+            bounds.append((lo, lo + w))
+            lo += w
+        bounds.append((n - last, n))
         wins, seen = [], set()
         for lo, hi in bounds:
             lo, hi = max(lo, 0), min(hi, n)
