@@ -33,16 +33,19 @@ SPECS = {
 }
 
 
-def dev_log(family: str, case: int, seed: int):
+def dev_log(family: str, case: int, seed: int, options=None):
     """The ``case``-th axis of ``default_rng([seed, f])`` (tests/identify_draws.py), its log (log
-    seed seed·1000 + 100·f + case, default plan, Table 2-1 noise), the base params and the true z."""
+    seed seed·1000 + 100·f + case, the plan of ``options`` — default: the default plan —, Table
+    2-1 noise), the base params and the true z."""
+    from plant.identification import ExperimentOptions
+
     from tests.identify_draws import draw
 
     f = list(FAMILY_FREE).index(family)
     rng = np.random.default_rng([seed, f])
     for _ in range(case + 1):
         p = draw(family, rng)
-    log, truth = simulate_log(design_experiment(), family, p, seed * 1000 + 100 * f + case)
+    log, truth = simulate_log(design_experiment(options or ExperimentOptions()), family, p, seed * 1000 + 100 * f + case)
     fam = get_family(family)
     base = fam.Params().replace(u_max=max(float(log.u_max), fam.Params().u_max), sample_period=log.sample_period)
     z = [math.log(truth["coulomb"]), math.log(truth["stiction"] - truth["coulomb"]), math.log(p.inertia),
@@ -77,10 +80,10 @@ def scores(log, model, sims, spec, sigma1):
     return F._score_features(feats, sigma1, F._NU)
 
 
-def ceiling(family: str, case: int, seed: int, specs=SPECS, mm_spec=None):
+def ceiling(family: str, case: int, seed: int, specs=SPECS, mm_spec=None, options=None):
     """Per feature set: (mean excess of multimode over the truth per move, signed-rank z, moves
     worse / better), multimode at its fold fits under ``mm_spec`` (default: today's)."""
-    log, base, z = dev_log(family, case, seed)
+    log, base, z = dev_log(family, case, seed, options)
     sigma1 = max(F._sigma1(log, F.moves(log))[0], 1e-12)
     keep = F._WINDOW_SPEC
     if mm_spec is not None:
