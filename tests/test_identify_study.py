@@ -3,7 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 9393, 2 logs per family (test_auto_picks_the_generating_family; 6262 was the
+* the auto pick: seed 5757, 2 logs per family (test_eighth_auto_picks_the_generating_family, the
+  eighth session's features); seed 9393 (test_auto_picks_the_generating_family; 6262 was the
   fourth session's, 6161 the third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
@@ -150,7 +151,10 @@ def test_auto_picks_the_generating_family():
     one process per log, loaded machine). The fourth session's rule: 3 of 7 on seed 6262; the
     third session's output-error rule: 3 of 8 on seed 6161. Measured with the fold fits stopping at
     CPU-clock budgets (a rerun under another load could differ by a fit); since the seventh session
-    the budgets count work (docs/axis.md, "Budgets"), so a rerun gives the same picks anywhere."""
+    the budgets count work (docs/axis.md, "Budgets"), so a rerun gives the same picks anywhere.
+    Measured with the fifth session's score features; since the eighth session the held-out score
+    reads each sample after the command (not re-run on this seed: see
+    :func:`test_eighth_auto_picks_the_generating_family`)."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):
@@ -166,12 +170,17 @@ EIGHTH_AUTO_SEED = 5757
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 15 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 11 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, eighth session: held-out score on each sample after "
+                   "the command, fold fits unchanged) on the 8 logs of the fresh seed 5757: 6 of 8 — multimode 2/2, "
+                   "lugre 2/2, stribeck 1/2 (k=1: multimode, signed-rank z = 1.44, not > 2), two-mass 1/2 (k=0: "
+                   "multimode, the shaft not seen); below the must-show of ≥ 90 % (docs/axis.md)")
 def test_eighth_auto_picks_the_generating_family():
     """``--family auto`` with the eighth session's features (each of the 5 samples after the
-    command a feature, :data:`plant.identification.fit._WINDOW_SPEC`) on 2 fresh logs per family
-    (seed 5757, cases 0–1, :func:`auto_case`, default plan): the generating family picked in ≥ 90 %
-    of the 8 logs (docs/axis.md, "Eighth session: auto")."""
+    command a feature of the held-out score, :data:`plant.identification.fit._WINDOW_SPEC`) on 2
+    fresh logs per family (seed 5757, cases 0–1, :func:`auto_case`, default plan): the generating
+    family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Eighth session: auto"). Measured: 6 of
+    8, CPU 36–158 s per log (median 67 s; one process per log, two at a time, loaded machine)."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):

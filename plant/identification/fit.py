@@ -1347,8 +1347,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     directions. Each family is fitted on one fold and predicts the other.
 
     **Criterion** ``"predictive"`` (default; issue 25, fourth session): a move is summarised by
-    its features (:func:`_windows`: window means of y while the command is on, just after, and
-    at rest), and a family's prediction of a held-out move is the *law* of those features under
+    its features (:func:`_windows`: window means of y while the command is on, each sample just
+    after it, and at rest; the fold fits use the 5 samples after it as one mean), and a family's prediction of a held-out move is the *law* of those features under
     its own friction noise — mean and covariance of 24 noisy simulations from rest, plus
     σ1²/window — scored by −2 ln p of the measured features under the posterior predictive t of
     those replicates (:func:`_score_features`, fifth session). The fold fit maximises a
