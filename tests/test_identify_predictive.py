@@ -15,8 +15,8 @@ import pytest
 from scipy import stats
 
 from plant.identification import ExperimentOptions, design_experiment, simulate_log
-from plant.identification.fit import (_FeatureModel, _Model, _feature_fit, _folds, _predictive_features,
-                                      _score_features, _sigma1, _windows, moves)
+from plant.identification.fit import (_FINER_WINDOW_SPEC, _FIT_WINDOW_SPEC, _WINDOW_SPEC, _FeatureModel, _Model, _feature_fit, _folds,
+                                      _predictive_features, _score_features, _sigma1, _windows, moves)
 from plant.protocol import get_family
 
 
@@ -213,3 +213,28 @@ def test_feature_fit_with_groups_keeps_the_first_round_end_of_least_cost(stribec
     assert not np.allclose(np.exp(alone[:4]), np.exp(truth[:4]), rtol=0.01)
     z, _ = _feature_fit(fm, [], frame, s1, 0, budget_s=60.0, groups=[[nested], [near]])
     assert np.allclose(np.exp(z[:4]), np.exp(truth[:4]), rtol=0.01), np.exp(z)
+
+
+def test_feature_windows_follow_the_spec_on_the_default_plans_moves():
+    """The windows of each kind of move, counted from the plan's commands alone (a = the samples
+    while the command is on): the finer set of the eighth session — the on-span in two halves,
+    each of the 5 samples after it, the last 10 — and the default set, the held-out score's and the
+    fold fit's (the fifth session's: the 5 after it as one mean)."""
+    plan = design_experiment(ExperimentOptions(repeats=1, holds=1))
+    log = plan.with_y(np.zeros(plan.n))
+    model = _Model(log, "multimode", get_family("multimode").Params(), only=None)
+    kinds = set()
+    for (s, e), idx, score_w, fit_w in zip(model.segs, model.index, _windows(model, _FINER_WINDOW_SPEC), _windows(model)):
+        on = [any(v != 0.0 for _, v in c.segments) for c in log.commands[s:e]]
+        a = len(on) - on[::-1].index(True)
+        n = idx.size
+        assert n == min(e + 1, log.n) - (s + 1) and n >= a + 15
+        halves = [range(0, a // 2), range(a // 2, a)] if a > 1 else [range(0, 1)]
+        want_score = halves + [range(a + k, a + k + 1) for k in range(5)] + [range(n - 10, n)]
+        want_fit = halves + [range(a, a + 5), range(n - 10, n)]
+        assert [list(w) for w in score_w] == [list(r) for r in want_score]
+        assert [list(w) for w in fit_w] == [list(r) for r in want_fit]
+        kinds.add(a)
+    assert kinds == {1, 15}       # pulses (one sample on), holds and ramps (15 samples on)
+    # the finer set is the default with the 5-sample window split into its samples
+    assert _FINER_WINDOW_SPEC == (2, (1, 1, 1, 1, 1), 10) and _WINDOW_SPEC == _FIT_WINDOW_SPEC == (2, (5,), 10)

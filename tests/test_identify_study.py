@@ -3,7 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 9393, 2 logs per family (test_auto_picks_the_generating_family; 6262 was the
+* the auto pick: seed 5757, 2 logs per family (test_eighth_auto_picks_the_generating_family, the
+  eighth session's features); seed 9393 (test_auto_picks_the_generating_family; 6262 was the
   fourth session's, 6161 the third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
 """
@@ -47,10 +48,12 @@ def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10)
     return out, cpu
 
 
-def auto_case(family: str, case: int, seed: int = AUTO_SEED):
+def auto_case(family: str, case: int, seed: int = AUTO_SEED, options=None):
     """``choose_family`` (bootstrap 0) on one log of ``family`` at the ``case``-th random axis of
     tests/identify_draws.py (draws from ``default_rng([seed, f])``, log seed seed·1000 + 100·f +
-    case, f the family's index in FAMILY_FREE): (choice, CPU seconds)."""
+    case, f the family's index in FAMILY_FREE; the plan of ``options``, default the default
+    plan): (choice, CPU seconds)."""
+    from plant.identification import ExperimentOptions
     from plant.identification.fit import choose_family
     from tests.identify_draws import draw
 
@@ -58,7 +61,7 @@ def auto_case(family: str, case: int, seed: int = AUTO_SEED):
     rng = np.random.default_rng([seed, f])
     for _ in range(case + 1):
         p = draw(family, rng)
-    log, _ = simulate_log(design_experiment(), family, p, seed * 1000 + 100 * f + case)
+    log, _ = simulate_log(design_experiment(options or ExperimentOptions()), family, p, seed * 1000 + 100 * f + case)
     t0 = time.process_time()
     _, choice = choose_family(log, bootstrap=0)
     return choice, time.process_time() - t0
@@ -148,11 +151,43 @@ def test_auto_picks_the_generating_family():
     one process per log, loaded machine). The fourth session's rule: 3 of 7 on seed 6262; the
     third session's output-error rule: 3 of 8 on seed 6161. Measured with the fold fits stopping at
     CPU-clock budgets (a rerun under another load could differ by a fit); since the seventh session
-    the budgets count work (docs/axis.md, "Budgets"), so a rerun gives the same picks anywhere."""
+    the budgets count work (docs/axis.md, "Budgets"), so a rerun gives the same picks anywhere.
+    Measured with the fifth session's score features; since the eighth session the held-out score
+    reads each sample after the command (not re-run on this seed: see
+    :func:`test_eighth_auto_picks_the_generating_family`)."""
     picked = {}
     for family in FAMILY_FREE:
         for case in (0, 1):
             choice, cpu = auto_case(family, case, seed=FRESH_AUTO_SEED)
+            picked[family, case] = choice.family
+            print(family, case, choice.family, f"cpu {cpu:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+
+
+# the auto study of issue 25's eighth session (features: each sample after the command, dev seed
+# 8484): named before it ran, never used while choosing the features
+EIGHTH_AUTO_SEED = 5757
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 11 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, eighth session) on the 8 logs of the fresh seed 5757 "
+                   "with the default features (the fifth session's): 7 of 8 — two-mass k=0 picked multimode (the "
+                   "shaft not seen); below the must-show of ≥ 90 % (docs/axis.md)")
+def test_eighth_auto_picks_the_generating_family():
+    """``--family auto`` (default features, :data:`plant.identification.fit._WINDOW_SPEC`) on 2
+    fresh logs per family (seed 5757, cases 0–1, :func:`auto_case`, default plan): the generating
+    family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Eighth session: auto"). Measured: the
+    study ran with the finer set (each of the 5 samples after the command a feature of the held-out
+    score, :data:`~plant.identification.fit._FINER_WINDOW_SPEC`) and picked 6 of 8 (stribeck k=1:
+    multimode, z = 1.44; two-mass k=0: multimode); its fold fits — the same under both sets —
+    scored with the default set picked 7 of 8. The default was kept at the merge (the finer set
+    had no held-out evidence for it); 7 of 8 is that choice's number, made after seeing this seed.
+    CPU 36–158 s per log (median 67 s; one process per log, two at a time, loaded machine)."""
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            choice, cpu = auto_case(family, case, seed=EIGHTH_AUTO_SEED)
             picked[family, case] = choice.family
             print(family, case, choice.family, f"cpu {cpu:.1f}")
     assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
