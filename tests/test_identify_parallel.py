@@ -98,8 +98,8 @@ def _cut_before(checks, k):
 def test_parallel_bootstrap_equals_the_sequential_loop(mm_log, monkeypatch):
     """Multimode (each replicate a refit from the estimate): the same AxisFit, bit for bit, with
     the replicates computed out of order or lazily, with no budget cut and with budgets that cut
-    the bootstrap after ≥ 5 of its 10 replicates (the sd from those done) or after < 5 (the
-    cluster-robust covariance instead)."""
+    the bootstrap after ≥ 3 of its 10 replicates (the sd from those done) or after < 3 (the
+    cluster-robust covariance instead; ``fit._MIN_REPLICATES``)."""
     ref = fit_log(mm_log, "multimode", bootstrap=10)
     assert not ref.budget_note and "10 logs simulated" in ref.method
     assert _fields(fit_log(mm_log, "multimode", bootstrap=10, mapper=_reversed_eager)) == _fields(ref)
@@ -111,7 +111,7 @@ def test_parallel_bootstrap_equals_the_sequential_loop(mm_log, monkeypatch):
         assert "hit in the bootstrap after" in seq.budget_note
         done.append(int(seq.budget_note.split("after ")[1].split(" of")[0]))
         assert _fields(fit_log(mm_log, "multimode", bootstrap=10, budget_s=budget, mapper=mapper)) == _fields(seq)
-    assert done[0] < 5 <= done[1] < 10
+    assert done[0] < fit_module._MIN_REPLICATES <= done[1] < 10
     # a worker budget *below* the sequential one (a wrong rounding margin; here half a replicate's
     # mean work): the replay meets a worker's cut before its own and re-runs that replicate on
     # the shared clock — still exact
