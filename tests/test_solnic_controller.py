@@ -38,6 +38,7 @@ def test_registered_on_the_bridge():
     (dict(no_motion_power=1.0), "no_motion_power"),
     (dict(friction_grid=True), "friction_grid"),                   # needs the joint filter
     (dict(friction_estimator="joint-ekf", grid_points=0), "grid_points"),
+    (dict(friction_estimator="joint-ekf", grid_points=1), "grid_points"),   # no neighbour for the cell spread
     (dict(grid_memory=0.0), "grid_memory"),
     (dict(grid_memory=math.nan), "grid_memory"),
     (dict(grid_model_error=-0.1), "grid_model_error"),

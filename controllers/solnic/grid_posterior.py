@@ -188,6 +188,8 @@ class FrictionGrid:
         self.P0 = np.asarray(P0, dtype=float).reshape(2, 2)
         self.P0inv = np.linalg.inv(self.P0)
         self.n = int(n)
+        if self.n < 2:      # the cell spread is a difference between neighbouring lattice points
+            raise ValueError(f"n must be an integer >= 2 lattice points per axis, got {n!r}")
         self.width_sigmas = float(width_sigmas)
         if not memory > 0:
             raise ValueError(f"memory must be > 0 pulses, got {memory!r}")
@@ -244,33 +246,15 @@ class FrictionGrid:
         """(Δc, t_stop, t_breakaway, spread² of Δc over the cell) at the valid points."""
         key = float(dt_u)
         hit = self._tables.get(key)
-        if hit is None and self.n >= 2:
-            # compiled (:func:`_valid_table_kernel`): the numpy formulation below, bit for bit
+        if hit is None:
+            # compiled (:func:`_valid_table_kernel`): the numpy formulation (np.clip, pulse_table,
+            # np.gradient's cell spread; tests/reference_kernels.grid_table), bit for bit
             p, nn = self.params, self.n * self.n
             spread = np.empty(self._idx.size)
             dc, ts, tb = _valid_table_kernel(key, p.u_max, p.motor_time_constant, p.alpha, self.kc, self.ks,
                                              self._need, self._idx, self.n, self.u_max * (1 - 1e-9),
                                              np.empty(nn), np.empty(nn), np.empty(nn), spread)
             hit = (dc, ts, tb, spread)
-            if len(self._tables) > 64:
-                self._tables.clear()
-                self._moving.clear()
-            self._tables[key] = hit
-        if hit is None:
-            # invalid points are evaluated at the nearest valid friction (a continuous
-            # extension, for the cell spread of their valid neighbours only)
-            ks = np.clip(self.ks, 1e-6, self.u_max * (1 - 1e-9))
-            kc = np.clip(self.kc, 1e-6, ks)
-            dc, ts, tb = pulse_table(self.params, key, kc, ks, self._need)
-            grid = dc.reshape(self.n, self.n)
-            spread = np.zeros_like(grid)
-            for ax in (0, 1):
-                # |∂D/∂u|·(2/n) is the change over one cell along lattice axis ax
-                step = np.abs(np.gradient(grid, axis=ax))
-                spread += step * step / 12.0
-            spread = spread.ravel()
-            i = self._idx
-            hit = (dc[i], ts[i], tb[i], spread[i])
             if len(self._tables) > 64:
                 self._tables.clear()
                 self._moving.clear()

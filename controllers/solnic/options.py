@@ -127,7 +127,7 @@ class SolnicOptions:
         filter keeps (x1, x4, d) with the grid's moments as its k block. Tuning (seeds 0–4)
         in :mod:`controllers.solnic.modern`.
     grid_points : int
-        Lattice points per axis of ``friction_grid``; ≥ 1 (64).
+        Lattice points per axis of ``friction_grid``; ≥ 2 (64): the cell spread is a difference of neighbours.
     braking_pulse : bool
         Follow each forward pulse with a reverse drive (bridge, −sign·u_max) timed from the
         model to end the motion early (:mod:`controllers.solnic.braking`); the predictor's Δc,
@@ -246,10 +246,10 @@ class SolnicOptions:
             raise _bad("friction_estimator", "'modified-kalman' or 'joint-ekf'", self.friction_estimator)
         if self.friction_grid and self.friction_estimator != "joint-ekf":
             raise _bad("friction_grid", "false unless friction_estimator is 'joint-ekf'", self.friction_grid)
-        for name in ("evaluation_samples", "max_undecided_cycles", "grid_points"):
+        for name, least in (("evaluation_samples", 1), ("max_undecided_cycles", 1), ("grid_points", 2)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise _bad(name, "an integer >= 1", v)
+            if isinstance(v, bool) or not isinstance(v, int) or v < least:
+                raise _bad(name, f"an integer >= {least}", v)
 
 
 _DEFAULT = SolnicOptions()
