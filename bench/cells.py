@@ -36,6 +36,7 @@ from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Any
 
+from bench.kernels import KERNEL_COLUMN, numeric_kernel
 from bench.metrics import METRIC_COLUMNS
 from bench.scenarios import Scenario
 
@@ -49,7 +50,8 @@ SIZE_PEAK_COLUMNS = ("peak_error_small_rad", "peak_error_medium_rad", "peak_erro
 LEADING_COLUMNS = ("cell", "controller", "scenario", "seed", "status", "message", "controller_base",
                    "controller_family", "scenario_base", "duration_s", "warmup_s", *METRIC_COLUMNS, "n_corrections",
                    "runtime_s", "realtime_factor", "simulated_s", *SIZE_PEAK_COLUMNS, "config_hash",
-                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash", "privileged")
+                   "code_version", "cell_wall_s", "error_kind", "time_limit_s", "definition_hash", "privileged",
+                   KERNEL_COLUMN)
 # Why a cell has status "error": "run" (the controller or the plant failed: a result of the
 # configuration), "time_limit" (over its wall-clock limit), "crash" (its process died),
 # "artifact" (its trace or series could not be written). Only "run" errors are final; the
@@ -263,6 +265,7 @@ def _base_row(cell: Cell) -> dict[str, Any]:
     row["time_limit_s"] = math.nan if cell.time_limit_s is None else float(cell.time_limit_s)
     row["definition_hash"] = cell.definition_hash
     row["privileged"] = cell.controller.privileged   # a bound, told apart without importing its plugin
+    row[KERNEL_COLUMN] = ""                           # filled by the process that computes the cell
     return row
 
 
@@ -282,7 +285,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool, series: bool = True)
     Only a cell that writes its series is recorded; otherwise a controller with a compiled step
     takes the compiled loop, keeping t and x1 for its phase peaks (:func:`bench.series.logs_x1`),
     with the same row. The row has the columns of
-    :data:`LEADING_COLUMNS` plus the controller's scalar summary, prefixed ``ctl_``. A row whose
+    :data:`LEADING_COLUMNS` (``numeric_kernel``: :func:`bench.kernels.numeric_kernel`) plus the controller's scalar summary, prefixed ``ctl_``. A row whose
     status is not ``ok`` has NaN metrics.
     """
     from bench.runner import MemoryRecorder, run_closed_loop
@@ -297,6 +300,7 @@ def run_cell(cell: Cell, out_dir: str | Path, traces: bool, series: bool = True)
     trace = None
     try:
         check_cell_id(cell.cell_id)     # its artifacts' file names: never a path outside out_dir
+        row[KERNEL_COLUMN] = numeric_kernel()
         load_plugins(cell.plugins, cell.plugin_dirs)
         controller = cell.controller.build()
         row["controller_family"] = type(controller).family

@@ -98,6 +98,7 @@ def make_run_command(build_report: ReportBuilder) -> Callable[..., None]:
                                    TimeRemainingColumn)
 
         from bench.driver import run_matrix
+        from bench.kernels import mixed_kernels_note
 
         progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                             TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(),
@@ -139,6 +140,9 @@ def make_run_command(build_report: ReportBuilder) -> Callable[..., None]:
                           f"{len(outcome.computed)} computed, {outcome.skipped} resumed) in {outcome.elapsed_s:.1f} s")
         for cell, why in outcome.lost:
             err_console.print(f"{escape(cell)}: not run: {escape(why)}", soft_wrap=True)
+        mixed = mixed_kernels_note(results)
+        if mixed:
+            err_console.print(f"note: {escape(mixed)}", soft_wrap=True)
         if outcome.interrupted:
             import signal as _signal
             what = _signal.Signals(outcome.signal).name if outcome.signal else "interrupted"

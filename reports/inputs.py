@@ -92,6 +92,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from bench.kernels import mixed_kernels_note
 from reports.selection import Selection, plain
 
 __all__ = [
@@ -412,6 +413,9 @@ def load_inputs(out_dir: Path | str) -> ReportInputs:
                else None)
     speed = _read_json(out_dir / "speed.json") if (out_dir / "speed.json").exists() else None
     meta = _read_json(out_dir / "meta.json") if (out_dir / "meta.json").exists() else {}
+    mixed = mixed_kernels_note(results)
+    if mixed:
+        notes.append(mixed[0].upper() + mixed[1:] + ".")
     if not (out_dir / "config.json").exists():
         notes.append("No config.json: the configuration of this run is unknown.")
     if not (out_dir / "meta.json").exists():
