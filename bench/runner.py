@@ -268,6 +268,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     wall0 = time.perf_counter()
     privileged = controller.privileged
     truth = TruePlant(fam, params) if privileged else None
+    in_compiled = arithmetic_in_compiled = False
     try:
         controller.reset(model, loop.streams["controller"])
         n, law, claw, cloop, done = 0, None, None, None, False
@@ -277,8 +278,10 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 cloop = None                 # a family loop that cannot keep the x1 log: Python
             law = controller.linear_law() if (fast or cloop) and not privileged else None
             if law is not None and fast and log is None:
+                in_compiled = True
                 state, sums, window, status, message = fast(law, params, opts, state, loop.sensor, n_warm,
                                                             loop.plant_noise, deadline)
+                in_compiled = False
                 totals = WindowTotals(**sums)
                 n_window = window.shape[0]
                 x1_window[:n_window] = window
@@ -298,9 +301,11 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
                 if pending is not None and pending.drive is not claw.drive:
                     claw = None              # the Python path's delay raises at the next sample
                     continue
+                in_compiled = True
                 run = cloop(claw, params, opts, state, loop.sensor, n_warm, loop.plant_noise, deadline, n0=n,
                             sums=vars(totals).copy(), x1_window=x1_window,
                             pending=None if pending is None else pending.arrays(), **({} if log is None else {"log": log}))
+                in_compiled = False
                 state = loop.state = run.state
                 n = loop.n = run.n_done
                 loop.pending = None if run.pending is None else DriveCommand(tuple(zip(*run.pending)), claw.drive)
@@ -348,6 +353,7 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
         status = Status.DIVERGED
         message = f"controller diverged: {exc}"
     except Exception as exc:  # a failing controller is a result, not a crash (STYLE §8)
+        arithmetic_in_compiled = in_compiled and isinstance(exc, ArithmeticError)
         status = Status.ERROR
         message = f"{type(exc).__name__}: {exc}"
         tb = traceback.extract_tb(exc.__traceback__)
@@ -356,6 +362,22 @@ def run_closed_loop(params: PlantParams, controller: Controller, *, duration_s: 
     finally:
         if rec is not None:
             rec.close()
+    if arithmetic_in_compiled:
+        # A division by zero in a compiled loop cannot say where (the plant's law, a controller's
+        # step): the Python path, bit-identical up to that point, stops on the same sample with a
+        # message naming the cause. Only failing cells pay for the second run.
+        left = None if time_limit_s is None else max(deadline - time.perf_counter(), 1e-3)
+        again = run_closed_loop(params, controller, duration_s=duration_s, warmup_s=warmup_s, seed=seed,
+                                noise=noise, options=options, x5_initial=x5_initial, time_limit_s=left,
+                                recorder=recorder, compiled=False, family=family, model=model, x1_log=x1_log)
+        if again.status != str(Status.OK):
+            wall = time.perf_counter() - wall0     # both runs
+            return dataclasses.replace(again, runtime_s=wall, metrics={
+                **again.metrics, "runtime_s": wall,
+                "realtime_factor": again.simulated_s / wall if wall > 0 else math.inf})
+        # the Python path ran through: keep the compiled path's own message (cannot happen if the
+        # two paths agree; kept so that a disagreement is visible rather than hidden)
+        message += " (the Python path ran through this cell)"
     wall = time.perf_counter() - wall0
     metrics = run_metrics(totals, x1_window[:n_window])
     if status is Status.OK and (why := unphysical(state.x, metrics, params.u_max)) is not None:

@@ -470,11 +470,11 @@ def test_list_shows_the_passivity_caveat():
 def test_vanished_friction_level_is_a_clear_status_not_a_crash():
     """Where both friction levels are clamped at 0 (x5 ≤ −k̄s·m), g(v) = 0 and ż = v − σ0·|v|·z/g
     has no value: the step (plain and disturbed) ends with status ``error`` and a message naming
-    it, never a ZeroDivisionError escaping the kernel, and so does a closed loop run by the
-    runner's Python loop; through the compiled law loop the cell is an ``error`` result too (the
-    runner's message of the kernel's ZeroDivisionError, which the loop cannot tell from one in a
-    controller's compiled step). Found on an identify study log (seed 4242, lugre case 0:
-    x5 = −0.962 against k̄c = 0.963 ozf·in while sliding at 0.88 rad/s)."""
+    it, never a ZeroDivisionError escaping the kernel, and so does a closed loop, on the runner's
+    Python loop and on the compiled loops too (whose ZeroDivisionError cannot say where it arose:
+    the runner re-runs such a cell on the Python path, which names the cause). Found on an
+    identify study log (seed 4242, lugre case 0: x5 = −0.962 against k̄c = 0.963 ozf·in while
+    sliding at 0.88 rad/s)."""
     fam = get_family("lugre")
     p = LuGreParams()
     state = fam.initial_state(p, -2.0 * p.stiction)
@@ -491,5 +491,19 @@ def test_vanished_friction_level_is_a_clear_status_not_a_crash():
                                 compiled=compiled) for s in range(6)]
         bad = [r for r in runs if r.status != "ok"]
         assert bad and all(r.status == "error" for r in bad), [(r.status, r.message) for r in runs]
-        if not compiled:
-            assert all(r.message.startswith("LuGre law undefined") for r in bad), [r.message for r in bad]
+        assert all(r.message.startswith("LuGre law undefined") for r in bad), [r.message for r in bad]
+
+
+@pytest.mark.parametrize("controller", ["linear", "reset-pid"])   # the linear-law loop; the compiled-step loop
+def test_compiled_loops_name_a_vanishing_friction_level_mid_run_as_the_python_loop_does(controller):
+    """x5(0) = −1.8 ozf·in on the built-in scenario (k̄c = 1.4): the level clamps at 0 some seconds
+    in, while the shaft slides. Through either compiled loop the cell ends as the Python loop does:
+    the same sample, the same message (the instant, k̄c, x5 and x2 named)."""
+    from bench.scenarios import builtin_scenarios
+    s = builtin_scenarios()["lugre"]
+    runs = [run_closed_loop(s.params, make_controller(controller), duration_s=20.0, seed=0, family=s.family,
+                            model=s.model, x5_initial=-1.8, compiled=compiled) for compiled in (True, False)]
+    (fast, slow) = runs
+    assert slow.status == "error" and slow.message.startswith("LuGre law undefined in the interval from t="), slow.message
+    assert 1.0 < slow.simulated_s < 19.0, slow.simulated_s     # mid-run, not at the start
+    assert (fast.status, fast.message, fast.simulated_s) == (slow.status, slow.message, slow.simulated_s)
