@@ -1,6 +1,6 @@
 """Lag-compensated linear controller, ``linear`` (SPEC §4, section 2.2).
 
-A sampled-data lead/lag design made with python-control on the *discretized* loop. The plant
+A sampled-data lead/lag design on the *discretized* loop. The plant
 from drive level u [ozf·in] to shaft angle c [rad] is
 
     G(s) = 1/(τ3·s + 1) · 1/(J·s²)
@@ -24,10 +24,17 @@ The default crossover is the highest ωc that :func:`highest_crossover` finds fe
 margin ≥ target, gain margin ≥ 6 dB, at most two lead stages, no negative-real (sign-alternating)
 compensator pole, and an RMS drive noise from w1 ≤ 5 % of u_max. For Table 2-1 the gain margin
 — that is, the sample rate — is the binding limit; the measurement noise is far from it.
+
+Every number of a design (the ZOH plant, the Tustin sections, K, the margins) is computed by
+:mod:`controllers.discrete_tf` in closed forms and fixed-order float sums, not by python-control
+or BLAS/LAPACK, so a design has the same bits on every machine (python-control only holds the
+transfer functions; ``np.roots`` decides the stability flag alone). The H2 noise figures are
+integrated on a grid with numpy.
 """
 
 from __future__ import annotations
 
+import cmath
 import dataclasses
 import functools
 import math
@@ -39,6 +46,7 @@ import numpy as np
 import scipy.integrate
 
 from controllers.base import Controller, register
+from controllers.discrete_tf import margins, poly_add, poly_eval, poly_mul, tustin_first_order, zoh_gimbal
 from controllers.law import LinearLaw
 from plant.drive import DriveCommand, DriveType
 from plant.linear_drive import compensator_step as _compensate
@@ -180,26 +188,38 @@ class LinearDesign:
 
 
 def _eval_tf(sys: ct.TransferFunction, z: complex | np.ndarray) -> complex | np.ndarray:
+    """H(z): Horner in Python complex for a scalar z (the bits every design number depends on,
+    :func:`controllers.discrete_tf.poly_eval`), numpy's polyval on an array (the H2 grid)."""
     num, den = sys.num[0][0], sys.den[0][0]
+    if np.ndim(z) == 0:
+        z = complex(z)
+        return poly_eval(num, z) / poly_eval(den, z)
     return np.polyval(num, z) / np.polyval(den, z)
+
+
+def _tf(num, den, tau_s: float) -> ct.TransferFunction:
+    return ct.tf(list(num), list(den), tau_s)
 
 
 @functools.lru_cache(maxsize=64)
 def _discrete_plant(params: PlantParams) -> ct.TransferFunction:
-    # G(s) = 1/((τ3 s + 1)·J s²), motor lag then pure inertia (figure 2-1)
-    plant = ct.tf([1.0], [params.motor_time_constant * params.inertia, params.inertia, 0.0, 0.0])
-    return ct.sample_system(plant, params.sample_period, method="zoh")
+    """Pd(z): G(s) = 1/((τ3 s + 1)·J s²), motor lag then pure inertia (figure 2-1), behind a
+    zero-order hold, in closed form (:func:`controllers.discrete_tf.zoh_gimbal`)."""
+    return _tf(*zoh_gimbal(params.inertia, params.motor_time_constant, params.sample_period), params.sample_period)
 
 
 def _plant_phase(plant: ct.TransferFunction, omega: float, tau_s: float) -> float:
-    """Unwrapped phase of Pd(e^{jωτs}) [rad], on the branch that starts at −π at low ω."""
+    """Unwrapped phase of Pd(e^{jωτs}) [rad], on the branch that starts at −π at low ω: the
+    branch counted on a grid, the value from the scalar response at ω."""
     w = np.linspace(omega * 1e-3, omega, 2048)
     ph = np.unwrap(np.angle(_eval_tf(plant, np.exp(1j * w * tau_s))))
-    return float(ph[-1] - 2 * np.pi * np.round((ph[0] + np.pi) / (2 * np.pi)))
+    end = cmath.phase(_eval_tf(plant, cmath.exp(1j * omega * tau_s)))
+    turns = round((float(ph[-1]) - end) / (2 * math.pi)) - round((float(ph[0]) + math.pi) / (2 * math.pi))
+    return end + 2 * math.pi * turns
 
 
 def _tustin(num: list[float], den: list[float], tau_s: float, omega: float) -> ct.TransferFunction:
-    return ct.sample_system(ct.tf(num, den), tau_s, method="tustin", prewarp_frequency=omega)
+    return _tf(*tustin_first_order(num, den, tau_s, omega), tau_s)
 
 
 def _cascade_ss(gain: float, sections: tuple) -> tuple[np.ndarray, ...]:
@@ -224,8 +244,8 @@ def _margins(open_loop: ct.TransferFunction) -> dict[str, float]:
     below −180° under ωc, so reducing the gain also destabilises it. python-control's default
     reports the smallest gain ratio, which is that lower margin; both are reported here.
     """
-    gm, pm, _, w_pc, w_gc, _ = ct.stability_margins(open_loop, method="poly", returnall=True)
-    gm, pm, w_pc, w_gc = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (gm, pm, w_pc, w_gc))
+    gm, pm, w_pc, w_gc = (np.asarray(a, dtype=float) for a in
+                          margins(open_loop.num[0][0], open_loop.den[0][0], open_loop.dt))
     if pm.size == 0:
         return dict(crossover_rad_s=math.nan, phase_margin_deg=math.nan, gain_margin_db=math.nan,
                     phase_crossover_rad_s=math.nan, gain_reduction_margin_db=math.nan)
@@ -307,7 +327,7 @@ def design_linear(params: PlantParams, crossover: float | None = None,
 def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: bool,
             pm_deg: float, lag_corner_fraction: float, max_lead_phase_deg: float) -> LinearDesign:
     tau_s = params.sample_period
-    z_c = np.exp(1j * omega_c * tau_s)
+    z_c = cmath.exp(1j * omega_c * tau_s)
     plant = _discrete_plant(params)
 
     omega_z = lag_corner_fraction * omega_c
@@ -316,7 +336,7 @@ def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: boo
 
     # lead phase that puts ∠(C·Pd) = −180° + PM at ωc
     need = (-math.pi + math.radians(pm_deg) - _plant_phase(plant, omega_c, tau_s)
-            - float(np.angle(_eval_tf(lag, z_c))))
+            - cmath.phase(_eval_tf(lag, z_c)))
     stages = max(1, math.ceil(need / math.radians(max_lead_phase_deg) - 1e-12))
     if need <= 0 or stages > 4:
         raise ValueError(f"crossover {omega_c!r} rad/s needs {math.degrees(need):.1f}° of lead; "
@@ -327,22 +347,25 @@ def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: boo
                    tau_s, omega_c)
     sections = (lag,) + (lead,) * stages
 
-    shape = ct.tf([1.0], [1.0], tau_s)
+    shape_num, shape_den = (1.0,), (1.0,)
     for sec in sections:
-        shape = shape * sec
-    gain = float(1.0 / abs(_eval_tf(shape, z_c) * _eval_tf(plant, z_c)))
-    comp = ct.tf(gain * shape.num[0][0], shape.den[0][0], tau_s)
-    open_loop = comp * plant
+        shape_num, shape_den = poly_mul(shape_num, sec.num[0][0]), poly_mul(shape_den, sec.den[0][0])
+    pd_c = _eval_tf(plant, z_c)
+    gain = 1.0 / abs((poly_eval(shape_num, z_c) / poly_eval(shape_den, z_c)) * pd_c)
+    comp_num = tuple(gain * c for c in shape_num)
+    comp = _tf(comp_num, shape_den, tau_s)
+    p_num, p_den = plant.num[0][0], plant.den[0][0]
+    ol_num, ol_den = poly_mul(comp_num, p_num), poly_mul(shape_den, p_den)
+    open_loop = _tf(ol_num, ol_den, tau_s)
 
-    margins = _margins(open_loop)
-    char = np.polyadd(np.polymul(comp.den[0][0], plant.den[0][0]),
-                      np.polymul(comp.num[0][0], plant.num[0][0]))
-    poles = np.roots(char)
+    loop_margins = _margins(open_loop)
+    char = poly_add(ol_den, ol_num)                    # 1 + C·Pd = 0
+    poles = np.roots(char)                             # only the stability flag reads them
     stable = bool(np.all(np.abs(poles) < 1.0))
     stiffness = math.inf if integral else float(abs(_eval_tf(comp, 1.0)))
-    if stable:
-        drive_rms = params.measurement_noise_std * _h2_norm(ct.feedback(comp, plant))
-        error_rms = params.measurement_noise_std * _h2_norm(ct.feedback(open_loop, 1))
+    if stable:   # w1 → u: C/(1 + C·Pd); w1 → c: C·Pd/(1 + C·Pd)
+        drive_rms = params.measurement_noise_std * _h2_norm(_tf(poly_mul(comp_num, p_den), char, tau_s))
+        error_rms = params.measurement_noise_std * _h2_norm(_tf(ol_num, char, tau_s))
     else:
         drive_rms = error_rms = math.inf
     return LinearDesign(
@@ -350,7 +373,7 @@ def _design(params: PlantParams, omega_c: float, lag_ratio: float, integral: boo
         lag_corner_rad_s=omega_z, phase_margin_target_deg=pm_deg, lead_stages=stages,
         lead_ratio=a, gain=gain, plant=plant, sections=sections, compensator=comp,
         open_loop=open_loop,
-        **margins,
+        **loop_margins,
         static_stiffness=stiffness, closed_loop_poles=poles, stable=stable,
         noise_drive_rms=drive_rms, noise_error_rms=error_rms)
 
@@ -384,7 +407,7 @@ def highest_crossover(params: PlantParams, lag_ratio: float | None = None, *,
                       min_gain_margin_db: float = _MIN_GAIN_MARGIN_DB) -> float:
     """Highest feasible ωc [rad/s], to 0.1 rad/s (see the module docstring for the criteria).
 
-    The search (~0.3 s: some 24 designs with python-control's margins) reads only the fields
+    The search (~0.1–0.2 s: some 24 designs) reads only the fields
     :data:`_CROSSOVER_FIELDS` of ``params``; it runs on a :class:`PlantParams` with those fields
     (the rest at their defaults) and is cached on it, so plants that differ elsewhere (friction
     noise, x4, quantization, another family's own fields) share one search per process — the

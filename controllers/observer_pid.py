@@ -13,7 +13,7 @@ nominal J, τ3 only — no friction model):
     ÿ = (x3 − d)/J,   ẋ3 = (u − x3)/τ3,   ḋ = 0
 
 (ẋ4 ≈ 0, so the error obeys the shaft's equation; d [ozf·in] is the friction torque plus all
-other disturbances). Discretized exactly with a zero-order hold (expm), x3 is a known state
+other disturbances). Discretized exactly with a zero-order hold (closed form), x3 is a known state
 driven by u; the observer on (y, ẏ, d) is
 
     ẑ(n+1) = Φ ẑ(n) + Γ u(n) + L·(y(n) − ŷ(n))
@@ -52,13 +52,14 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from controllers.base import register
+from controllers.discrete_tf import poly_mul
 from controllers.pid import P_NWIN, P_STICK, S_V, S_X4, pid_hold, pid_observe, pid_proportional, py_max
 from controllers.reset_pid import PidFrictionOptions, _PidFrictionBase, _positive
 from plant.drive import DriveCommand
+from plant.expfun import e1, e2, e3
 from plant.params import PlantParams
 
 __all__ = ["ObserverPidOptions", "ObserverPidController", "DisturbanceObserver"]
@@ -112,27 +113,19 @@ class DisturbanceObserver:
 @functools.lru_cache(maxsize=64)
 def _observer_design(J: float, tau3: float, ts: float, bandwidth: float,
                      fast_factors: tuple[float, float]) -> tuple:
-    """(Φ, Γ, L, poles, A − L·C, step) of :class:`DisturbanceObserver` (cached: the expm and
-    Ackermann design cost ~8 ms, a 100 s run ~0.1 s; the arrays are read-only)."""
-    # state (y, ẏ, x3, d), input u:  ÿ = (x3 − d)/J, ẋ3 = (u − x3)/τ3, ḋ = 0
-    F = np.array([[0.0, 1.0, 0.0, 0.0],
-                  [0.0, 0.0, 1.0 / J, -1.0 / J],
-                  [0.0, 0.0, -1.0 / tau3, 0.0],
-                  [0.0, 0.0, 0.0, 0.0]])
-    G = np.array([0.0, 0.0, 1.0 / tau3, 0.0])
-    M = np.zeros((5, 5))
-    M[:4, :4], M[:4, 4] = F * ts, G * ts
-    E = scipy.linalg.expm(M)                     # ZOH: [Φ Γ; 0 1] = expm([F G; 0 0]·τs)
-    Phi, Gamma = E[:4, :4], E[:4, 4]
+    """(Φ, Γ, L, poles, A − L·C, step) of :class:`DisturbanceObserver` (cached; the arrays are
+    read-only). Φ, Γ in closed form (:func:`_zoh`), L by Ackermann's formula in fixed-order float
+    arithmetic (:func:`_ackermann`): no BLAS or LAPACK, so the same bits on every machine."""
+    Phi, Gamma = _zoh(J, tau3, ts)
     idx = [0, 1, 3]                              # observed (y, ẏ, d); x3 is known
     A = Phi[np.ix_(idx, idx)]
     C = np.array([1.0, 0.0, 0.0])
-    poles = np.exp(-np.array([1.0, *fast_factors]) * bandwidth * ts)
+    poles = np.array([math.exp(-f * bandwidth * ts) for f in (1.0, *fast_factors)])
     L3 = _ackermann(A, C, poles)
     L = np.zeros(4)
     L[idx] = L3
-    error_matrix = A - np.outer(L3, C)           # ε(n+1) = (A − L·C)·ε(n)
-    for a in (E, Phi, Gamma, L, poles, error_matrix):
+    error_matrix = A - np.outer(L3, C)           # ε(n+1) = (A − L·C)·ε(n): single products
+    for a in (Phi, Gamma, L, poles, error_matrix):
         a.flags.writeable = False
     return Phi, Gamma, L, poles, error_matrix, _observer_step(Phi, Gamma, L)
 
@@ -184,13 +177,69 @@ def _observer_step(Phi: np.ndarray, Gamma: np.ndarray, L: np.ndarray):
     return scope["step"]
 
 
+def _zoh(J: float, tau3: float, ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ, Γ) of the state (y, ẏ, x3, d) under ÿ = (x3 − d)/J, ẋ3 = (u − x3)/τ3, ḋ = 0 over one
+    sample τs with u held: [Φ Γ; 0 1] = expm([F G; 0 0]·τs), in closed form. With x = τs/τ3 and
+    the remainders e1..e3 of :mod:`plant.expfun`: x3' = e^(−x)·x3 + e1·u;
+    ẏ' = ẏ + (τ3·e1·x3 + τ3·e2·u − τs·d)/J; y' = y + τs·ẏ + (τ3²·e2·x3 + τ3²·e3·u − τs²/2·d)/J."""
+    x = ts / tau3
+    a1, a2, a3 = e1(x), e2(x), e3(x)
+    Phi = np.array([[1.0, ts, tau3 * tau3 * a2 / J, -0.5 * ts * ts / J],
+                    [0.0, 1.0, tau3 * a1 / J, -ts / J],
+                    [0.0, 0.0, math.exp(-x), 0.0],
+                    [0.0, 0.0, 0.0, 1.0]])
+    Gamma = np.array([tau3 * tau3 * a3 / J, tau3 * a2 / J, a1, 0.0])
+    return Phi, Gamma
+
+
+def _dot(xs, ys) -> float:
+    """Σ x·y summed left to right (not ``sum``, which compensates from Python 3.12 on)."""
+    acc = 0.0
+    for x, y in zip(xs, ys):
+        acc += x * y
+    return acc
+
+
+def _matmul(a: list[list[float]], b: list[list[float]]) -> list[list[float]]:
+    """a·b of small row lists, each entry summed left to right."""
+    cols = [[row[j] for row in b] for j in range(len(b[0]))]
+    return [[_dot(a_row, col) for col in cols] for a_row in a]
+
+
+def _solve(m: list[list[float]], rhs: list[float]) -> list[float]:
+    """m⁻¹·rhs by Gaussian elimination with partial pivoting (a few rows)."""
+    n = len(m)
+    a = [list(row) + [r] for row, r in zip(m, rhs)]
+    for c in range(n):
+        piv = max(range(c, n), key=lambda r: abs(a[r][c]))
+        if a[piv][c] == 0.0:
+            raise ValueError("observer design: the pair (A, C) is not observable")
+        a[c], a[piv] = a[piv], a[c]
+        for r in range(c + 1, n):
+            f = a[r][c] / a[c][c]
+            a[r] = [v - f * w for v, w in zip(a[r], a[c])]
+    out = [0.0] * n
+    for r in range(n - 1, -1, -1):
+        out[r] = (a[r][n] - _dot(a[r][r + 1:n], out[r + 1:n])) / a[r][r]
+    return out
+
+
 def _ackermann(A: np.ndarray, C: np.ndarray, poles: np.ndarray) -> np.ndarray:
-    """Observer gain L with eig(A − L·C) = poles (Ackermann's formula on the dual system)."""
+    """Observer gain L with eig(A − L·C) = poles (Ackermann's formula on the dual system):
+    L = φ(A)·O⁻¹·eₙ, φ(s) = Π (s − pᵢ), O = [C; C·A; …; C·Aⁿ⁻¹], in fixed-order float arithmetic."""
     n = A.shape[0]
-    coeffs = np.real(np.poly(poles))                 # s^n + a1 s^(n−1) + … + an
-    phi = sum(c * np.linalg.matrix_power(A, n - k) for k, c in enumerate(coeffs))
-    obs = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(n)])
-    return phi @ np.linalg.solve(obs, np.eye(n)[:, -1])
+    a = [[float(v) for v in row] for row in A]
+    coeffs = (1.0,)
+    for p in poles:                                  # s^n + c1 s^(n−1) + … + cn
+        coeffs = poly_mul(coeffs, (1.0, -float(p)))
+    powers = [[[float(i == j) for j in range(n)] for i in range(n)]]
+    for _ in range(n):
+        powers.append(_matmul(powers[-1], a))
+    phi = [[_dot(coeffs, [powers[n - k][i][j] for k in range(n + 1)]) for j in range(n)] for i in range(n)]
+    c_row = [[float(v) for v in C]]
+    obs = [_matmul(c_row, powers[k])[0] for k in range(n)]
+    w = _solve(obs, [float(k == n - 1) for k in range(n)])
+    return np.array(_matmul(phi, [[v] for v in w])).ravel()
 
 
 # observer-pid's own entries of s and p (after controllers.pid.PidLayout's shared ones)
