@@ -312,3 +312,27 @@ def test_compiled_loglik_is_the_numpy_loglik_bit_for_bit(monkeypatch):
         for _ in range(3):
             g.update(1.3e-3, 1, dc * (1 + 0.05 * rng.standard_normal()), (0.05 * dc) ** 2, 2.5, 0.8)
     assert g.n_regrids > 0
+
+
+def test_two_by_two_algebra_is_numpys_without_lapack():
+    """The lattice's eigen-decomposition, inverse and determinant (plain float arithmetic, so the
+    same bits under every BLAS kernel) against numpy's LAPACK: A·v = λ·v, orthonormal v, λ
+    ascending, to 4 ulp of the largest |λ|; diagonal matrices included."""
+    from controllers.solnic.grid_posterior import _det2, _eigh2, _inv2
+    rng = np.random.default_rng(11)
+    for k in range(500):
+        a = rng.normal(size=(2, 2))
+        m = a @ a.T * 10.0 ** rng.uniform(-6, 3)
+        if k % 5 == 0:
+            m[0, 1] = m[1, 0] = 0.0
+        lam, vec = _eigh2(m)
+        ref = np.linalg.eigh(m)[0]
+        scale = np.max(np.abs(ref))
+        assert lam[0] <= lam[1]
+        np.testing.assert_allclose(lam, ref, rtol=0, atol=8e-16 * scale)
+        np.testing.assert_allclose(m @ vec, vec * lam, rtol=0, atol=8e-16 * scale)
+        np.testing.assert_allclose(vec.T @ vec, np.eye(2), rtol=0, atol=8e-16)
+        assert abs(_det2(m) - np.linalg.det(m)) <= 4e-15 * scale * scale   # LAPACK: LU, a few roundings
+        np.testing.assert_allclose(_inv2(m) @ m, np.eye(2), rtol=0, atol=8e-16 * np.linalg.cond(m))
+    with pytest.raises(ValueError, match="invertible"):
+        _inv2(np.zeros((2, 2)))

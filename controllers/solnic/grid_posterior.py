@@ -186,7 +186,7 @@ class FrictionGrid:
         self.u_max = float(params.u_max)
         self.k0 = np.asarray(k0, dtype=float).reshape(2)
         self.P0 = np.asarray(P0, dtype=float).reshape(2, 2)
-        self.P0inv = np.linalg.inv(self.P0)
+        self.P0inv = _inv2(self.P0)
         self.n = int(n)
         if self.n < 2:      # the cell spread is a difference between neighbouring lattice points
             raise ValueError(f"n must be an integer >= 2 lattice points per axis, got {n!r}")
@@ -206,7 +206,9 @@ class FrictionGrid:
         g = (np.arange(n) + 0.5) / n * 2.0 - 1.0                  # cell centres in [−1, 1]
         U, V = np.meshgrid(g, g, indexing="ij")
         self.centre, self.axes = np.asarray(centre, float), np.asarray(axes, float)
-        pts = self.centre[:, None] + self.axes @ np.vstack([U.ravel(), V.ravel()])
+        u, v, a = U.ravel(), V.ravel(), self.axes
+        pts = np.vstack([self.centre[0] + (a[0, 0] * u + a[0, 1] * v),
+                         self.centre[1] + (a[1, 0] * u + a[1, 1] * v)])      # c + A·(u, v)
         self.kc, self.ks = pts[0], pts[1]
         self.valid = (self.kc > 0) & (self.kc <= self.ks) & (self.ks < self.u_max)
         # the points a valid point's Δc and cell spread read: itself and its lattice neighbours
@@ -220,7 +222,9 @@ class FrictionGrid:
         self._need = need.ravel()
         self._idx = np.flatnonzero(self.valid)
         e = pts[:, self._idx] - self.k0[:, None]
-        self._log_prior = -0.5 * np.einsum("in,ij,jn->n", e, self.P0inv, e)
+        q = self.P0inv
+        self._log_prior = -0.5 * ((q[0, 0] * e[0] * e[0] + q[0, 1] * e[0] * e[1])
+                                  + (q[1, 0] * e[1] * e[0] + q[1, 1] * e[1] * e[1]))     # e'·P0⁻¹·e
         self._tables: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._moving: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._kc_valid, self._ks_valid = self.kc[self._idx], self.ks[self._idx]
@@ -236,11 +240,15 @@ class FrictionGrid:
         w = np.exp(logw - np.max(logw))
         self.w = w / np.sum(w)
         kc, ks = self._kc_valid, self._ks_valid
-        self._mean = np.array([np.dot(self.w, kc), np.dot(self.w, ks)])
-        dk = np.vstack([kc - self._mean[0], ks - self._mean[1]])
+        w = self.w
+        self._mean = np.array([np.sum(w * kc), np.sum(w * ks)])
+        d0, d1 = kc - self._mean[0], ks - self._mean[1]
         # a cell is the parallelogram of edges axes·(2/n): uniform within it, COV = Σ e e'/12
-        cell = self.axes * (2.0 / self.n)
-        self._cov = (dk * self.w) @ dk.T + cell @ cell.T / 12.0
+        c = self.axes * (2.0 / self.n)
+        c00, c01, c11 = c[0, 0] * c[0, 0] + c[0, 1] * c[0, 1], c[0, 0] * c[1, 0] + c[0, 1] * c[1, 1], \
+            c[1, 0] * c[1, 0] + c[1, 1] * c[1, 1]
+        s01 = np.sum(w * d0 * d1) + c01 / 12.0
+        self._cov = np.array([[np.sum(w * d0 * d0) + c00 / 12.0, s01], [s01, np.sum(w * d1 * d1) + c11 / 12.0]])
 
     def table(self, dt_u: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Δc, t_stop, t_breakaway, spread² of Δc over the cell) at the valid points."""
@@ -339,11 +347,11 @@ class FrictionGrid:
         return float(full[0].sum() + full[-1].sum() + full[1:-1, 0].sum() + full[1:-1, -1].sum())
 
     def _maybe_regrid(self) -> None:
-        lam, vec = np.linalg.eigh(self._cov)
+        lam, vec = _eigh2(self._cov)
         lam = np.maximum(lam, 1e-10)
         new_axes = vec * (self.width_sigmas * np.sqrt(lam))
-        area_new = abs(np.linalg.det(new_axes))
-        area_now = abs(np.linalg.det(self.axes))
+        area_new = abs(_det2(new_axes))
+        area_now = abs(_det2(self.axes))
         edge = self._edge_mass()
         if area_new < 0.25 * area_now or edge > 1e-4:
             if not area_new < 0.25 * area_now:
@@ -375,6 +383,39 @@ class FrictionGrid:
         # operations, compiled)
         q16, q50, q84, var50, t16, t50, t84 = _predictive_kernel(w, p, mean, var, ts)
         return Predictive(p, q50, (0.5 * (q84 - q16)) ** 2 + var50, t50, (0.5 * (t84 - t16)) ** 2)
+
+
+def _inv2(m: np.ndarray) -> np.ndarray:
+    """The inverse of a 2 × 2 matrix, [[d, −b], [−c, a]]/(a·d − b·c)."""
+    det = _det2(m)
+    if det == 0.0 or not math.isfinite(det):
+        raise ValueError(f"the prior covariance must be invertible, got {m.tolist()!r}")
+    return np.array([[m[1, 1] / det, -m[0, 1] / det], [-m[1, 0] / det, m[0, 0] / det]])
+
+
+def _det2(m: np.ndarray) -> float:
+    """a·d − b·c of a 2 × 2 matrix."""
+    return float(m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0])
+
+
+def _eigh2(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(eigenvalues ascending, eigenvectors as columns) of a symmetric 2 × 2 matrix by one Jacobi
+    rotation (Golub & Van Loan, Matrix Computations, 4th ed., Algorithm 8.5.1 sym.schur2): the
+    rotation with tangent t = sign(τ)/(|τ| + √(1 + τ²)), τ = (c − a)/(2b), zeros b; plain float
+    arithmetic, so the same bits on every machine (LAPACK's would follow the BLAS kernel)."""
+    a, b, c = float(m[0, 0]), float(0.5 * (m[0, 1] + m[1, 0])), float(m[1, 1])
+    if b == 0.0:
+        cs, sn, l0, l1 = 1.0, 0.0, a, c
+    else:
+        tau = (c - a) / (2.0 * b)
+        t = (1.0 if tau >= 0 else -1.0) / (abs(tau) + math.sqrt(1.0 + tau * tau))
+        cs = 1.0 / math.sqrt(1.0 + t * t)
+        sn = t * cs
+        l0, l1 = a - t * b, c + t * b
+    vec = np.array([[cs, sn], [-sn, cs]])              # columns: the eigenvectors of l0, l1
+    if l1 < l0:
+        return np.array([l1, l0]), vec[:, ::-1].copy()
+    return np.array([l0, l1]), vec
 
 
 @njit(cache=True)
