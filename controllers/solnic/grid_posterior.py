@@ -356,7 +356,7 @@ class FrictionGrid:
         if area_new < 0.25 * area_now or edge > 1e-4:
             if not area_new < 0.25 * area_now:
                 # mass on the edge: re-centre, and do not shrink below half the current box
-                half = 0.5 * np.linalg.norm(self.axes, axis=0).min()
+                half = 0.5 * np.sqrt(np.sum(self.axes * self.axes, axis=0)).min()
                 new_axes = vec * np.maximum(self.width_sigmas * np.sqrt(lam), half)
             self.n_regrids += 1
             self._set_lattice(self._mean, new_axes)
