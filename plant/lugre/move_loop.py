@@ -11,13 +11,20 @@ loop over ``advance`` (tests/test_identify_speed.py). Additive: nothing else cal
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-from plant.lugre.interval import (N_STATE, NO_EVENTS, SHEET_EVENTS, SHEET_FLYBACK, SHEET_MODE, SHEET_SIZE,
-                                  SHEET_STATUS, SHEET_SUBSTEPS, SHEET_T, STATUS_OK, interval_kernel)
+from plant.dopri import A as _A, B as _B, C as _C, E as _E
+from plant.lugre.integrate import _H0, A1, A2, A3, A4, A5, AKC, ATH, AU, AZ
+from plant.lugre.interval import (_CHATTER, _DIVERGED, _MAX_STEPS, N_STATE, NO_EVENTS, SHEET_EVENTS, SHEET_FLYBACK,
+                                  SHEET_MODE, SHEET_SIZE, SHEET_STATUS, SHEET_SUBSTEPS, SHEET_T, STATUS_OK,
+                                  VELOCITY_THRESHOLD, interval_kernel)
+from plant.lugre.law import (C_P0, C_TH0, C_U, C_X30, C_X50, L_ALPHA, L_BETA3, L_BETA4, L_BETA5, L_KC, L_KS, L_PHASE,
+                             L_PULL, L_RIPPLE, L_S0, L_S1, L_S2, L_SPRING, L_VS, L_WAVENUMBER)
 
-__all__ = ["play_move", "prepare"]
+__all__ = ["play_move", "prepare", "WholePlan", "play_all"]
 
 _BAD_LEVEL = 3    # plant.lugre.interval's status code of a bad bridge level
 
@@ -93,3 +100,297 @@ def play_move(x0, prepared, params, options, tolerances, last: int, ring: float,
     if code == _BAD_LEVEL:
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max})")
     return (x1 if code == STATUS_OK else None), (k + (code != STATUS_OK), int(n_ev), int(n_sub))
+
+
+# --- a whole noise-free prediction in one compiled call (issue 25, lugrefast) ----------------------
+# The arithmetic of plant.lugre.interval.interval_kernel on its noise-free path (integrate.segment with
+# eps = inf, integrate._step, law.rhs), the operations that feed the state kept in the same order, so
+# the angles are bit-identical (tests/test_identify_speed.py). Left out, as the fit reads none of them:
+# the peak of |x1| (hermite_peak: 2 exp, 2 expm1 per Dormand–Prince step), the torque integrals and the
+# event record; x5(t) = x5₀·e^(−β5·t) is x5₀ itself where x5₀ = 0 (the fit's plant: 0·e^(…) = x5₀
+# exactly, sign of zero included), which saves one exp of three per right-hand side.
+
+@njit(cache=True)
+def _rhs(t, v, z, D, C, L):
+    """law.rhs's (v̇, ż, Ḋ), the same operations (F not returned)."""
+    alpha, s0, s1, s2 = L[L_ALPHA], L[L_S0], L[L_S1], L[L_S2]
+    x3 = C[C_U] + (C[C_X30] - C[C_U]) * math.exp(-L[L_BETA3] * t)
+    x50 = C[C_X50]
+    x5 = x50 if x50 == 0.0 else x50 * math.exp(-L[L_BETA5] * t)
+    a = L[L_RIPPLE]
+    m = 1.0 + a * math.sin(L[L_WAVENUMBER] * (C[C_TH0] + D) + L[L_PHASE]) if a != 0.0 else 1.0
+    kc = max(L[L_KC] * m + x5, 0.0)
+    ks = max(L[L_KS] * m + x5, 0.0)
+    r = v / L[L_VS]
+    g = kc + (ks - kc) * math.exp(-r * r)
+    zdot = v - s0 * abs(v) * z / g
+    F = s0 * z + s1 * zdot + s2 * v
+    vdot = alpha * (x3 + C[C_P0] + L[L_SPRING] * (L[L_PULL] * t - D) - F)
+    return vdot, zdot, v
+
+
+@njit(cache=True)
+def _dp_step(t, y, f1, h, C, L, K, yn, tmp):
+    """integrate._step with :func:`_rhs`."""
+    K[0, 0], K[0, 1], K[0, 2] = f1[0], f1[1], f1[2]
+    for i in range(1, 6):
+        for c in range(3):
+            acc = 0.0
+            for j in range(i):
+                acc += _A[i, j] * K[j, c]
+            tmp[c] = y[c] + h * acc
+        K[i, 0], K[i, 1], K[i, 2] = _rhs(t + _C[i] * h, tmp[0], tmp[1], tmp[2], C, L)
+    for c in range(3):
+        acc = 0.0
+        for i in range(6):
+            acc += _B[i] * K[i, c]
+        yn[c] = y[c] + h * acc
+    K[6, 0], K[6, 1], K[6, 2] = _rhs(t + h, yn[0], yn[1], yn[2], C, L)
+    for c in range(3):
+        acc = 0.0
+        for i in range(7):
+            acc += _E[i] * K[i, c]
+        K[7, c] = h * acc
+
+
+@njit(cache=True)
+def _segment(X, H, L, hbox, vth, mode, tol, W, K):
+    """integrate.segment, noise-free (eps = inf), without the peak: (advanced, new mode, steps)."""
+    u, x30, x40, x50, th0, x10 = X[AU], X[A3], X[A4], X[A5], X[ATH], X[A1]
+    C = W[0:5]
+    C[C_U], C[C_X30], C[C_X50], C[C_TH0], C[C_P0] = u, x30, x50, th0, 0.0
+    y = W[5:8]
+    y[0], y[1], y[2] = X[A2], X[AZ], 0.0
+    yn = W[8:11]
+    f1 = W[11:14]
+    tmp = W[14:17]
+    f1[0], f1[1], f1[2] = _rhs(0.0, y[0], y[1], y[2], C, L)
+    b4 = L[L_BETA4]
+    t = 0.0
+    h = hbox[0] if hbox[0] > 0.0 else _H0
+    steps = 0
+    new_mode = mode
+    while t < H:
+        last = h >= H - t
+        hh = H - t if last else h
+        _dp_step(t, y, f1, hh, C, L, K, yn, tmp)
+        steps += 1
+        acc = 0.0
+        for c in range(3):
+            if c < 2:
+                sc = tol[1 + c] + tol[0] * max(abs(y[c]), abs(yn[c]))
+            else:
+                sc = tol[3] + tol[0] * hh * max(abs(y[0]), abs(yn[0]))
+            acc += (K[7, c] / sc) ** 2
+        err = math.sqrt(acc / 3.0)
+        if not err <= 1.0:
+            h = hh * max(0.2, 0.9 * err ** -0.2) if math.isfinite(err) else 0.2 * hh
+            if steps > 5_000_000:
+                break
+            continue
+        t = H if last else t + hh
+        y[0], y[1], y[2] = yn[0], yn[1], yn[2]
+        f1[0], f1[1], f1[2] = K[6, 0], K[6, 1], K[6, 2]
+        if not last:
+            h = hh * (5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2)))
+        new_mode = 3 if y[0] > vth else (1 if y[0] < -vth else 2)
+        if new_mode != mode:
+            break
+    W[17] = 0.0
+    hbox[0] = h
+    X[A1] = x10 + y[2] - x40 * (-math.expm1(-b4 * t)) / b4
+    X[A2] = y[0]
+    X[AZ] = y[1]
+    X[A3] = u + (x30 - u) * math.exp(-L[L_BETA3] * t)
+    X[A4] = x40 * math.exp(-b4 * t)
+    X[A5] = x50 * math.exp(-L[L_BETA5] * t)
+    X[ATH] = th0 + y[2]
+    return t, new_mode, steps
+
+
+@njit(cache=True)
+def _interval(X, S, t0, duration, offsets, levels, lo, hi, bridge, umax, tau3, L, maxev, diverge, tol, W, K, hbox):
+    """interval_kernel's noise-free path on the 9-slot state X over segments lo ≤ seg < hi of
+    (offsets, levels); S = [t, mode, flyback, events, substeps, status, event count] updated as its
+    sheet (events and sub-steps summed over the interval, the event count reset per interval)."""
+    hbox[0] = 0.0
+    S[3] = 0.0
+    S[4] = 0.0
+    S[6] = 0.0
+    k = hi - lo
+    stop = False
+    for seg in range(k):
+        t_seg_end = t0 + (offsets[lo + seg + 1] if seg + 1 < k else duration)
+        level = levels[lo + seg]
+        if not bridge:                                   # interval._apply_level
+            X[AU] = min(max(level, -umax), umax)
+            S[2] = 0.0
+        elif level != 0.0 and abs(abs(level) - umax) > 1e-9 * umax:
+            S[5] = _BAD_LEVEL
+            break
+        elif level > 0:
+            X[AU], S[2] = umax, 0.0
+        elif level < 0:
+            X[AU], S[2] = -umax, 0.0
+        elif X[A3] != 0.0:
+            X[AU], S[2] = -math.copysign(umax, X[A3]), 1.0
+        else:
+            X[AU], S[2] = 0.0, 0.0
+        if seg > 0:                                      # a level event (interval._event)
+            S[3] += 1.0
+            S[6] += 1.0
+            if S[6] > maxev:
+                S[5] = _CHATTER
+                break
+        while S[0] < t_seg_end:
+            h_end = t_seg_end - S[0]
+            h_fb = tau3 * math.log1p(abs(X[A3]) / umax) if S[2] != 0.0 else math.inf
+            h = min(h_end, h_fb)
+            old = int(S[1])
+            advanced, new, steps = _segment(X, h, L, hbox, VELOCITY_THRESHOLD, old, tol, W, K)
+            S[4] += steps
+            if S[4] > _MAX_STEPS:
+                S[5] = _CHATTER
+                stop = True
+                break
+            full = advanced >= h
+            if full and h == h_end:
+                S[0] = t_seg_end
+            else:
+                S[0] += advanced
+            if full and h == h_fb and h != h_end:
+                X[A3] = 0.0
+                X[AU] = 0.0
+                S[2] = 0.0
+                S[3] += 1.0
+                S[6] += 1.0
+                if S[6] > maxev:
+                    S[5] = _CHATTER
+                    stop = True
+                    break
+            if new != old:
+                S[1] = float(new)
+                S[3] += 1.0
+                S[6] += 1.0
+                if S[6] > maxev:
+                    S[5] = _CHATTER
+                    stop = True
+                    break
+            if not (abs(X[A1]) <= diverge):
+                S[5] = _DIVERGED
+                stop = True
+                break
+        if stop:
+            break
+    if S[5] == STATUS_OK:
+        S[0] = t0 + duration
+
+
+@njit(cache=True)
+def _move(x0, tau, offs, levs, starts, s0, n, bridge, umax, tau3, L, maxev, diverge, tol, last, sigma0, ring, settled,
+          x1, W, K, hbox, X, S):
+    """:func:`_play` on the trimmed interval for samples starts[s0 : s0 + n]: x1[0:n] the angles;
+    returns (status code, samples done, events, integrator steps)."""
+    X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU], X[ATH], X[AZ] = \
+        x0[0], x0[1], x0[2], x0[3], x0[4], 0.0, x0[5], x0[6], x0[7]
+    S[0], S[1], S[2], S[5] = 0.0, 2.0, 0.0, 0.0
+    n_ev, n_sub = 0.0, 0.0
+    k = 0
+    while k < n:
+        t = S[0]
+        _interval(X, S, t, tau, offs, levs, starts[s0 + k], starts[s0 + k + 1], bridge, umax, tau3, L, maxev,
+                  diverge, tol, W, K, hbox)
+        n_ev += S[3]
+        n_sub += S[4]
+        code = int(S[5])
+        if code != STATUS_OK:
+            return code, k, n_ev, n_sub
+        x1[k] = X[A1]
+        k += 1
+        if k <= last:
+            continue
+        if abs(X[AZ]) + abs(X[A3]) / sigma0 + abs(X[A2]) * ring <= settled:
+            x1[k:n] = X[A1]
+            break
+    return STATUS_OK, k, n_ev, n_sub
+
+
+@njit(cache=True)
+def _play_all(x0, tau, offs, levs, starts, first, count, lasts, bridge, umax, tau3, L, maxev, diverge, tol, sigma0,
+              ring, settled, prices, spent, deadline, x1, work):
+    """Moves j = 0, 1, … (samples starts[first[j]] … of the concatenated commands, ``count[j]`` of them,
+    their angles into x1[first[j] : first[j] + count[j]]), each as :func:`_play` plays it, stopping before
+    move j once ``spent`` (the work clock) is past ``deadline`` — the check ``_Model.predict`` makes — with
+    each move's work priced as ``_WorkClock.add`` does; work[j] = (samples, events, steps). Returns
+    (moves played, status code of the last, 1 if it raised ZeroDivisionError: g(v) = 0)."""
+    W, K = np.empty(18), np.empty((8, 3))
+    hbox, X, S = np.zeros(1), np.empty(9), np.zeros(7)
+    a, b, c = prices[0], prices[1], prices[2]
+    for j in range(first.shape[0]):
+        if spent > deadline:
+            return j, STATUS_OK, 0
+        try:
+            code, k, n_ev, n_sub = _move(x0, tau, offs, levs, starts, first[j], count[j], bridge, umax, tau3, L,
+                                         maxev, diverge, tol, lasts[j], sigma0, ring, settled,
+                                         x1[first[j]:first[j] + count[j]], W, K, hbox, X, S)
+        except Exception:      # only ZeroDivisionError can arise here (numba catches Exception alone)
+            work[j, 0], work[j, 1], work[j, 2] = 0.0, 0.0, 0.0
+            return j + 1, STATUS_OK, 1
+        samples = k + 1 if code != STATUS_OK else k
+        work[j, 0], work[j, 1], work[j, 2] = samples, n_ev, n_sub
+        spent += a * samples + b * int(n_ev) + c * int(n_sub)
+        if code != STATUS_OK:
+            return j + 1, code, 0
+    return first.shape[0], STATUS_OK, 0
+
+
+class WholePlan:
+    """A log's noise-free lugre prediction as one compiled call (:func:`_play_all`): which moves are
+    simulated, in ``_Model.predict``'s order, and where each move's predicted rows come from.
+
+    ``sims``: the simulated moves (g), in order; ``rows``: per predicted row, its source in the angle
+    buffer (indexed by the log's sample: a simulated move's angles sit at its own samples), its sign
+    (a mirror kind's response is the negated one) and its move's offset."""
+
+    def __init__(self, commands, segs, lasts, sims, src, offsets, n_out) -> None:
+        self.offs = np.concatenate([c.arrays()[0] for c in commands])
+        self.levs = np.concatenate([c.arrays()[1] for c in commands])
+        self.starts = np.cumsum([0] + [len(c.segments) for c in commands]).astype(np.int64)
+        self.bridge = commands[0].drive.value == "bridge"
+        self.first = np.array([segs[g][0] for g in sims], dtype=np.int64)
+        self.count = np.array([segs[g][1] - segs[g][0] for g in sims], dtype=np.int64)
+        self.lasts = np.array([lasts[g] for g in sims], dtype=np.int64)
+        self.sims = list(sims)
+        idx, sign, off = [], [], []
+        for g, (j, s) in enumerate(src):
+            idx.append(self.first[j] + np.arange(n_out[g]))
+            sign.append(np.full(n_out[g], s))
+            off.append(np.full(n_out[g], offsets[g]))
+        self.src = np.concatenate(idx).astype(np.int64)
+        self.sign = np.concatenate(sign)
+        self.off = np.concatenate(off)
+        self.n = len(commands)
+
+
+def play_all(plan: WholePlan, x1: np.ndarray, x0, params, options, tolerances, ring: float, settled: float, prices,
+             spent: float, deadline: float, j0: int = 0):
+    """The moves ``plan.sims[j0:]`` played by :func:`_play_all` from the state ``x0``, their angles
+    into ``x1`` (a buffer over the log's samples): (work per move played (samples, events, steps),
+    status code of the last move played, whether it raised ZeroDivisionError: g(v) = 0). Stops before a move once
+    ``spent`` plus the priced work is past ``deadline``, as ``_Model.predict``'s check does.
+
+    Raises
+    ------
+    ValueError
+        A bridge level other than 0 and ±u_max (as ``advance``).
+    """
+    o = options.kernel_vector()
+    work = np.zeros((plan.first.shape[0] - j0, 3))
+    played, code, zero_div = _play_all(np.asarray(x0, dtype=np.float64), params.sample_period, plan.offs, plan.levs,
+                                       plan.starts, plan.first[j0:], plan.count[j0:], plan.lasts[j0:], plan.bridge,
+                                       params.u_max, params.motor_time_constant, params.law_vector(), o[5], o[6],
+                                       tolerances, params.bristle_stiffness, ring, settled,
+                                       np.asarray(prices, dtype=np.float64), spent, deadline, x1, work)
+    if code == _BAD_LEVEL:
+        raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max})")
+    return work[:played].astype(np.int64), code, bool(zero_div)
