@@ -209,6 +209,142 @@ def _segment(X, H, L, hbox, vth, mode, tol, W, K):
 
 
 @njit(cache=True)
+def _rhs_s(t, v, z, D, u, x30, x50, th0, L):
+    """:func:`_rhs` with the segment constants as scalars (C_P0 = 0)."""
+    alpha, s0, s1, s2 = L[L_ALPHA], L[L_S0], L[L_S1], L[L_S2]
+    x3 = u + (x30 - u) * math.exp(-L[L_BETA3] * t)
+    x5 = x50 if x50 == 0.0 else x50 * math.exp(-L[L_BETA5] * t)
+    a = L[L_RIPPLE]
+    m = 1.0 + a * math.sin(L[L_WAVENUMBER] * (th0 + D) + L[L_PHASE]) if a != 0.0 else 1.0
+    kc = max(L[L_KC] * m + x5, 0.0)
+    ks = max(L[L_KS] * m + x5, 0.0)
+    r = v / L[L_VS]
+    g = kc + (ks - kc) * math.exp(-r * r)
+    zdot = v - s0 * abs(v) * z / g
+    F = s0 * z + s1 * zdot + s2 * v
+    vdot = alpha * (x3 + 0.0 + L[L_SPRING] * (L[L_PULL] * t - D) - F)
+    return vdot, zdot, v
+
+
+# the Dormand–Prince tableau (plant.dopri) as compile-time constants of the scalar step
+_A10 = float(_A[1, 0])
+_A20 = float(_A[2, 0])
+_A21 = float(_A[2, 1])
+_A30 = float(_A[3, 0])
+_A31 = float(_A[3, 1])
+_A32 = float(_A[3, 2])
+_A40 = float(_A[4, 0])
+_A41 = float(_A[4, 1])
+_A42 = float(_A[4, 2])
+_A43 = float(_A[4, 3])
+_A50 = float(_A[5, 0])
+_A51 = float(_A[5, 1])
+_A52 = float(_A[5, 2])
+_A53 = float(_A[5, 3])
+_A54 = float(_A[5, 4])
+_C1 = float(_C[1])
+_C2 = float(_C[2])
+_C3 = float(_C[3])
+_C4 = float(_C[4])
+_C5 = float(_C[5])
+_B0 = float(_B[0])
+_B1 = float(_B[1])
+_B2 = float(_B[2])
+_B3 = float(_B[3])
+_B4 = float(_B[4])
+_B5 = float(_B[5])
+_E0 = float(_E[0])
+_E1 = float(_E[1])
+_E2 = float(_E[2])
+_E3 = float(_E[3])
+_E4 = float(_E[4])
+_E5 = float(_E[5])
+_E6 = float(_E[6])
+
+
+@njit(cache=True)
+def _dp_step_s(t, y0, y1, y2, f0, f1, f2, h, u, x30, x50, th0, L):
+    """integrate._step on scalars (stage slopes in locals, the same sums in the same order):
+    (yn0, yn1, yn2, K6 = the slopes at yn (3), the error vector (3))."""
+    s0 = y0 + h * (0.0 + _A10 * f0)
+    s1 = y1 + h * (0.0 + _A10 * f1)
+    s2 = y2 + h * (0.0 + _A10 * f2)
+    k10, k11, k12 = _rhs_s(t + _C1 * h, s0, s1, s2, u, x30, x50, th0, L)
+    s0 = y0 + h * (0.0 + _A20 * f0 + _A21 * k10)
+    s1 = y1 + h * (0.0 + _A20 * f1 + _A21 * k11)
+    s2 = y2 + h * (0.0 + _A20 * f2 + _A21 * k12)
+    k20, k21, k22 = _rhs_s(t + _C2 * h, s0, s1, s2, u, x30, x50, th0, L)
+    s0 = y0 + h * (0.0 + _A30 * f0 + _A31 * k10 + _A32 * k20)
+    s1 = y1 + h * (0.0 + _A30 * f1 + _A31 * k11 + _A32 * k21)
+    s2 = y2 + h * (0.0 + _A30 * f2 + _A31 * k12 + _A32 * k22)
+    k30, k31, k32 = _rhs_s(t + _C3 * h, s0, s1, s2, u, x30, x50, th0, L)
+    s0 = y0 + h * (0.0 + _A40 * f0 + _A41 * k10 + _A42 * k20 + _A43 * k30)
+    s1 = y1 + h * (0.0 + _A40 * f1 + _A41 * k11 + _A42 * k21 + _A43 * k31)
+    s2 = y2 + h * (0.0 + _A40 * f2 + _A41 * k12 + _A42 * k22 + _A43 * k32)
+    k40, k41, k42 = _rhs_s(t + _C4 * h, s0, s1, s2, u, x30, x50, th0, L)
+    s0 = y0 + h * (0.0 + _A50 * f0 + _A51 * k10 + _A52 * k20 + _A53 * k30 + _A54 * k40)
+    s1 = y1 + h * (0.0 + _A50 * f1 + _A51 * k11 + _A52 * k21 + _A53 * k31 + _A54 * k41)
+    s2 = y2 + h * (0.0 + _A50 * f2 + _A51 * k12 + _A52 * k22 + _A53 * k32 + _A54 * k42)
+    k50, k51, k52 = _rhs_s(t + _C5 * h, s0, s1, s2, u, x30, x50, th0, L)
+    yn0 = y0 + h * (0.0 + _B0 * f0 + _B1 * k10 + _B2 * k20 + _B3 * k30 + _B4 * k40 + _B5 * k50)
+    yn1 = y1 + h * (0.0 + _B0 * f1 + _B1 * k11 + _B2 * k21 + _B3 * k31 + _B4 * k41 + _B5 * k51)
+    yn2 = y2 + h * (0.0 + _B0 * f2 + _B1 * k12 + _B2 * k22 + _B3 * k32 + _B4 * k42 + _B5 * k52)
+    k60, k61, k62 = _rhs_s(t + h, yn0, yn1, yn2, u, x30, x50, th0, L)
+    e0 = h * (0.0 + _E0 * f0 + _E1 * k10 + _E2 * k20 + _E3 * k30 + _E4 * k40 + _E5 * k50 + _E6 * k60)
+    e1 = h * (0.0 + _E0 * f1 + _E1 * k11 + _E2 * k21 + _E3 * k31 + _E4 * k41 + _E5 * k51 + _E6 * k61)
+    e2 = h * (0.0 + _E0 * f2 + _E1 * k12 + _E2 * k22 + _E3 * k32 + _E4 * k42 + _E5 * k52 + _E6 * k62)
+    return yn0, yn1, yn2, k60, k61, k62, e0, e1, e2
+
+
+@njit(cache=True)
+def _segment_s(X, H, L, hbox, vth, mode, tol):
+    """:func:`_segment` on scalars (:func:`_dp_step_s`): the same arithmetic, bit for bit."""
+    u, x30, x40, x50, th0, x10 = X[AU], X[A3], X[A4], X[A5], X[ATH], X[A1]
+    y0, y1, y2 = X[A2], X[AZ], 0.0
+    f0, f1, f2 = _rhs_s(0.0, y0, y1, y2, u, x30, x50, th0, L)
+    b4 = L[L_BETA4]
+    rtol, atol0, atol1, atol2 = tol[0], tol[1], tol[2], tol[3]
+    t = 0.0
+    h = hbox[0] if hbox[0] > 0.0 else _H0
+    steps = 0
+    new_mode = mode
+    while t < H:
+        last = h >= H - t
+        hh = H - t if last else h
+        yn0, yn1, yn2, k0, k1, k2, e0, e1, e2 = _dp_step_s(t, y0, y1, y2, f0, f1, f2, hh, u, x30, x50, th0, L)
+        steps += 1
+        sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
+        sc1 = atol1 + rtol * max(abs(y1), abs(yn1))
+        sc2 = atol2 + rtol * hh * max(abs(y0), abs(yn0))
+        acc = 0.0 + (e0 / sc0) ** 2
+        acc += (e1 / sc1) ** 2
+        acc += (e2 / sc2) ** 2
+        err = math.sqrt(acc / 3.0)
+        if not err <= 1.0:
+            h = hh * max(0.2, 0.9 * err ** -0.2) if math.isfinite(err) else 0.2 * hh
+            if steps > 5_000_000:
+                break
+            continue
+        t = H if last else t + hh
+        y0, y1, y2 = yn0, yn1, yn2
+        f0, f1, f2 = k0, k1, k2
+        if not last:
+            h = hh * (5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2)))
+        new_mode = 3 if y0 > vth else (1 if y0 < -vth else 2)
+        if new_mode != mode:
+            break
+    hbox[0] = h
+    X[A1] = x10 + y2 - x40 * (-math.expm1(-b4 * t)) / b4
+    X[A2] = y0
+    X[AZ] = y1
+    X[A3] = u + (x30 - u) * math.exp(-L[L_BETA3] * t)
+    X[A4] = x40 * math.exp(-b4 * t)
+    X[A5] = x50 * math.exp(-L[L_BETA5] * t)
+    X[ATH] = th0 + y2
+    return t, new_mode, steps
+
+
+@njit(cache=True)
 def _interval(X, S, t0, duration, offsets, levels, lo, hi, bridge, umax, tau3, L, maxev, diverge, tol, W, K, hbox):
     """interval_kernel's noise-free path on the 9-slot state X over segments lo ≤ seg < hi of
     (offsets, levels); S = [t, mode, flyback, events, substeps, status, event count] updated as its
@@ -247,7 +383,8 @@ def _interval(X, S, t0, duration, offsets, levels, lo, hi, bridge, umax, tau3, L
             h_fb = tau3 * math.log1p(abs(X[A3]) / umax) if S[2] != 0.0 else math.inf
             h = min(h_end, h_fb)
             old = int(S[1])
-            advanced, new, steps = _segment(X, h, L, hbox, VELOCITY_THRESHOLD, old, tol, W, K)
+            advanced, new, steps = (_segment(X, h, L, hbox, VELOCITY_THRESHOLD, old, tol, W, K) if W.shape[0] > 0
+                                     else _segment_s(X, h, L, hbox, VELOCITY_THRESHOLD, old, tol))
             S[4] += steps
             if S[4] > _MAX_STEPS:
                 S[5] = _CHATTER
@@ -323,7 +460,7 @@ def _play_all(x0, tau, offs, levs, starts, first, count, lasts, bridge, umax, ta
     move j once ``spent`` (the work clock) is past ``deadline`` — the check ``_Model.predict`` makes — with
     each move's work priced as ``_WorkClock.add`` does; work[j] = (samples, events, steps). Returns
     (moves played, status code of the last, 1 if it raised ZeroDivisionError: g(v) = 0)."""
-    W, K = np.empty(18), np.empty((8, 3))
+    W, K = np.empty(0), np.empty((8, 3))
     hbox, X, S = np.zeros(1), np.empty(9), np.zeros(7)
     a, b, c = prices[0], prices[1], prices[2]
     for j in range(first.shape[0]):
