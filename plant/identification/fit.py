@@ -51,6 +51,7 @@ from plant.identification.families import DEFAULT_BUDGET_S, FAMILY_FREE, NOT_IDE
 from plant.identification.log import AxisLog
 from plant.identification.simulate import axis_params
 from plant.lugre import move_loop
+from plant.multimode import move_loop as mm_move_loop
 from plant.lugre.integrate import TOLERANCES as lugre_tolerances
 from plant.protocol import get_family
 from plant.state import SimOptions, Status
@@ -237,7 +238,7 @@ class _Model:
 
     deadline: float = math.inf
     share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
-    compiled_moves: bool = True   # lugre: a move in one compiled call (False: the Python loop, for tests)
+    compiled_moves: bool = True   # lugre, multimode: a move in one compiled call (False: the Python loop, for tests)
     whole_moves: bool = True      # lugre: a whole prediction in one compiled call (False: a call per move, for tests)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
@@ -274,7 +275,7 @@ class _Model:
             self.mirror.append((flipped, -1.0) if first < 0.0 else (key, 1.0))
         self.groups = np.concatenate([[g] * len(i) for g, i in enumerate(self.index)])
         self.rows = np.concatenate(self.index)
-        self._prepared: dict = {}     # lugre: a move's commands as its compiled loop reads them
+        self._prepared: dict = {}     # lugre, multimode: a move's commands as its compiled loop reads them
         self._whole: dict = {}        # lugre: symmetric? -> the log as one compiled call reads it (or None)
         self.clock = _WorkClock()     # a fit may replace it by a clock its other models share
 
@@ -323,12 +324,18 @@ class _Model:
             if self.clock.past(self.deadline, self.family):
                 raise _OutOfTime
             state = fam.initial_state(p, 0.0)
-            if lugre and streams is None and self.compiled_moves and p.disturbance_torque_std == 0.0:
-                # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop)
+            if ((lugre or self.family == "multimode") and streams is None and self.compiled_moves
+                    and p.disturbance_torque_std == 0.0):
+                # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop,
+                # plant.multimode.move_loop)
+                loop = move_loop if lugre else mm_move_loop
                 if g not in self._prepared:
-                    self._prepared[g] = move_loop.prepare(self.log.commands[s:e])
-                x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
-                                               _SETTLED)
+                    self._prepared[g] = loop.prepare(self.log.commands[s:e])
+                if lugre:
+                    x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
+                                                   _SETTLED)
+                else:
+                    x1, work = mm_move_loop.play_move(state.x, self._prepared[g], p, opts, last)
                 self.clock.add(self.family, *work)
                 if x1 is None:
                     return None
