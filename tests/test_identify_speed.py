@@ -3,7 +3,11 @@
 * a move and its mirror (nonzero levels negated) share one simulation: predictions bit-identical to
   simulating each kind of move (the path before), on all four families at points near and far from
   the truth, and equal to an independent per-move simulation through the family's step (no sharing,
-  no settle freeze) to 1e-9 rad.
+  no settle freeze) to 1e-9 rad;
+* a move in one compiled call (lugre since the fifth session, multimode since the ninth) and a whole
+  lugre prediction in one compiled call (ninth session, plant.lugre.move_loop.play_all): the same
+  predictions and the same work-clock counts, checks and budget cuts, bit for bit, as the Python loop
+  over the family's step or a call per move.
 """
 
 from __future__ import annotations
