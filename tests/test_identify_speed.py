@@ -3,17 +3,23 @@
 * a move and its mirror (nonzero levels negated) share one simulation: predictions bit-identical to
   simulating each kind of move (the path before), on all four families at points near and far from
   the truth, and equal to an independent per-move simulation through the family's step (no sharing,
-  no settle freeze) to 1e-9 rad.
+  no settle freeze) to 1e-9 rad;
+* a move in one compiled call (lugre since the fifth session, multimode since the ninth) and a whole
+  lugre prediction in one compiled call (ninth session, plant.lugre.move_loop.play_all): the same
+  predictions and the same work-clock counts, checks and budget cuts, bit for bit, as the Python loop
+  over the family's step or a call per move.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
 from plant.identification import design_experiment
 from plant.identification.families import FAMILY_FREE
-from plant.identification.fit import _OPTS, _Model
+from plant.identification.fit import _OPTS, _Model, _OutOfTime, _TraceClock
 from plant.protocol import get_family
 
 
@@ -80,11 +86,14 @@ def test_designed_starts_recover_a_noise_free_two_mass_log():
     assert "designed points" in fit.method
 
 
-def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop():
-    """plant.lugre.move_loop against the Python loop over the family's step (and no mirror
-    sharing: the path before issue 25's fifth session), at the truth, a stiffer and slower
-    bristle point, one of long slides (k̄c small) and one where the plant leaves ok (both None)."""
+@pytest.mark.parametrize("whole", [False, True])
+def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop(whole):
+    """plant.lugre.move_loop (a call per move, or the whole prediction in one call) against the
+    Python loop over the family's step (and no mirror sharing: the path before issue 25's fifth
+    session), at the truth, a stiffer and slower bristle point, one of long slides (k̄c small) and
+    one where the plant leaves ok (both None)."""
     model, params = _model("lugre")
+    model.whole_moves = whole
     old = _Model(model.log, "lugre", model.base)
     old.share_mirror = old.compiled_moves = False
     for point in ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
@@ -95,7 +104,10 @@ def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop():
         assert np.array_equal(a, b)
     z = np.log([0.3, 1.2, 0.8, 0.011, 0.002, 3e5])     # wanders past 1 rad
     assert model.predict(z) is None and old.predict(z) is None
-    assert len(model._prepared) > 0      # the compiled path ran
+    if whole:
+        assert model._whole[True] is not None and not model._prepared     # the whole-prediction path ran
+    else:
+        assert len(model._prepared) > 0 and not model._whole              # the per-move compiled path ran
 
 
 def test_compiled_lugre_moves_count_the_work_the_python_loop_counts():
@@ -121,3 +133,87 @@ def test_compiled_lugre_moves_count_the_work_the_python_loop_counts():
     compiled, loop = model.clock.seen, python.clock.seen
     assert compiled == loop and len(compiled) > 10
     assert all(s > 0 and sub > s for s, _, sub in compiled)     # LuGre: several integrator steps per sample
+
+
+def _traced(model, points, deadline=math.inf):
+    """Each point's prediction (or "out of time") on a fresh _TraceClock with ``deadline``, and the
+    clock's trace (every increment and every deadline check, in order) and total."""
+    out = []
+    for point in points:
+        model.clock, model.deadline = _TraceClock("lugre"), deadline
+        try:
+            out.append(model.predict(np.log(point)))
+        except _OutOfTime:
+            out.append("out of time")
+        out.append((model.clock.trace, model.clock.spent, model.clock.first_past))
+    return out
+
+
+def _same(a, b):
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            assert isinstance(x, np.ndarray) and isinstance(y, np.ndarray) and np.array_equal(x, y)
+        else:
+            assert x == y
+
+
+@pytest.mark.parametrize("drive", ["linear", "bridge"])
+def test_whole_lugre_prediction_replays_the_work_clock_of_the_per_move_path(drive):
+    """The whole prediction in one compiled call (plant.lugre.move_loop.play_all) against a call
+    per move: the same predictions, bit for bit, and the same work-clock trace (every increment and
+    every deadline check, in order: what fit._replayed and the budget read) — without a budget, and
+    with deadlines that cut a prediction after its first, a middle and its last but one simulated move
+    (both paths raise _OutOfTime at the same check: before the second, a middle and the last move).
+    Linear drive and the bridge's flyback."""
+    from plant.identification import ExperimentOptions
+
+    plan = design_experiment(ExperimentOptions(drive=drive, repeats=1))
+    log = plan.with_y(np.zeros(plan.n))
+    fam = get_family("lugre")
+    base = fam.Params().replace(u_max=max(float(log.u_max), fam.Params().u_max) if drive == "linear" else log.u_max,
+                                sample_period=log.sample_period)
+    whole, per_move = _Model(log, "lugre", base), _Model(log, "lugre", base)
+    per_move.whole_moves = False
+    points = ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
+              [0.3, 1.2, 0.8, 0.011, 0.002, 3e5])          # the last leaves ok (None)
+    free = _traced(per_move, points)
+    _same(_traced(whole, points), free)
+    assert free[0] is not None and free[-2] is None
+    increments = [w for w in free[1][0] if w >= 0.0]
+    assert len(increments) > 5
+    for cut in (0.5 * increments[0], 0.5 * sum(increments), sum(increments[:-1]) - 0.5 * increments[-2]):
+        a, b = _traced(whole, points[:1], cut), _traced(per_move, points[:1], cut)
+        _same(a, b)
+        assert a[0] == "out of time"
+
+
+def test_compiled_multimode_moves_are_bit_identical_to_the_python_loop():
+    """plant.multimode.move_loop (the nested multimode fit of lugre and two-mass, and every multimode
+    fit) against the Python loop over the family's step: the same predictions, bit for bit, and the
+    same work counts per move (fit._WorkClock: samples, events, sub-steps), at the truth, a heavy
+    slow shaft, a light fast one and a stiction-dominated one; both paths on the bridge plan too."""
+    from plant.identification import ExperimentOptions
+    from plant.identification.fit import _WorkClock
+
+    class Recording(_WorkClock):
+        __slots__ = ("seen",)
+
+        def add(self, family, *work):
+            self.seen.append(work)
+    for drive in ("linear", "bridge"):
+        plan = design_experiment(ExperimentOptions(drive=drive, repeats=1))
+        log = plan.with_y(np.zeros(plan.n))
+        fam = get_family("multimode")
+        base = fam.Params().replace(u_max=log.u_max, sample_period=log.sample_period)
+        compiled, python = _Model(log, "multimode", base), _Model(log, "multimode", base)
+        python.compiled_moves = False
+        for m in (compiled, python):
+            m.clock = Recording()
+            m.clock.seen = []
+        for point in ([1.2, 0.5, 0.5, 0.008], [0.9, 0.8, 1.5, 0.011], [1.5, 0.3, 0.2, 0.006], [0.4, 1.6, 0.6, 0.009]):
+            a, b = compiled.predict(np.log(point)), python.predict(np.log(point))
+            assert a is not None and b is not None
+            assert np.array_equal(a, b)
+        assert compiled.clock.seen == python.clock.seen and len(compiled.clock.seen) > 10
+        assert len(compiled._prepared) > 0 and not python._prepared     # the compiled path ran

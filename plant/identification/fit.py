@@ -51,6 +51,7 @@ from plant.identification.families import DEFAULT_BUDGET_S, FAMILY_FREE, NOT_IDE
 from plant.identification.log import AxisLog
 from plant.identification.simulate import axis_params
 from plant.lugre import move_loop
+from plant.multimode import move_loop as mm_move_loop
 from plant.lugre.integrate import TOLERANCES as lugre_tolerances
 from plant.protocol import get_family
 from plant.state import SimOptions, Status
@@ -237,7 +238,8 @@ class _Model:
 
     deadline: float = math.inf
     share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
-    compiled_moves: bool = True   # lugre: a move in one compiled call (False: the Python loop, for tests)
+    compiled_moves: bool = True   # lugre, multimode: a move in one compiled call (False: the Python loop, for tests)
+    whole_moves: bool = True      # lugre: a whole prediction in one compiled call (False: a call per move, for tests)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -273,7 +275,8 @@ class _Model:
             self.mirror.append((flipped, -1.0) if first < 0.0 else (key, 1.0))
         self.groups = np.concatenate([[g] * len(i) for g, i in enumerate(self.index)])
         self.rows = np.concatenate(self.index)
-        self._prepared: dict = {}     # lugre: a move's commands as its compiled loop reads them
+        self._prepared: dict = {}     # lugre, multimode: a move's commands as its compiled loop reads them
+        self._whole: dict = {}        # lugre: symmetric? -> the log as one compiled call reads it (or None)
         self.clock = _WorkClock()     # a fit may replace it by a clock its other models share
 
     def params(self, z: np.ndarray):
@@ -300,6 +303,12 @@ class _Model:
         done: dict = {}     # noise-free: a kind of move's response, simulated once
         symmetric = (self.share_mirror and streams is None and getattr(p, "friction_ripple", 0.0) == 0.0
                      and getattr(p, "disturbance_torque_std", 0.0) == 0.0)
+        if (lugre and streams is None and self.compiled_moves and self.whole_moves
+                and p.disturbance_torque_std == 0.0):
+            if symmetric not in self._whole:
+                self._whole[symmetric] = self._whole_plan(symmetric)
+            if self._whole[symmetric] is not None:
+                return self._predict_whole(self._whole[symmetric], p, ring)
         for g, ((s, e), off, last, key) in enumerate(zip(self.segs, self.offsets, self.last, self.keys)):
             n_out = len(range(s + 1, min(e + 1, self.log.n)))
             if streams is None and key in done:
@@ -315,12 +324,18 @@ class _Model:
             if self.clock.past(self.deadline, self.family):
                 raise _OutOfTime
             state = fam.initial_state(p, 0.0)
-            if lugre and streams is None and self.compiled_moves and p.disturbance_torque_std == 0.0:
-                # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop)
+            if ((lugre or self.family == "multimode") and streams is None and self.compiled_moves
+                    and p.disturbance_torque_std == 0.0):
+                # the same kernel, the whole move in one compiled call (bit-identical, plant.lugre.move_loop,
+                # plant.multimode.move_loop)
+                loop = move_loop if lugre else mm_move_loop
                 if g not in self._prepared:
-                    self._prepared[g] = move_loop.prepare(self.log.commands[s:e])
-                x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
-                                               _SETTLED)
+                    self._prepared[g] = loop.prepare(self.log.commands[s:e])
+                if lugre:
+                    x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
+                                                   _SETTLED)
+                else:
+                    x1, work = mm_move_loop.play_move(state.x, self._prepared[g], p, opts, last)
                 self.clock.add(self.family, *work)
                 if x1 is None:
                     return None
@@ -363,6 +378,59 @@ class _Model:
                     done[canon] = x1 if sign > 0.0 else -x1
             out.append(off + x1[:n_out])
         return np.concatenate(out)
+
+    def _whole_plan(self, symmetric: bool):
+        """The moves :meth:`predict` simulates (in its order) and each move's source, as
+        :class:`plant.lugre.move_loop.WholePlan`; None when the log mixes drives."""
+        commands = self.log.commands
+        if any(c.drive is not commands[0].drive for c in commands):
+            return None
+        done: dict = {}
+        sims, src = [], []
+        for g, key in enumerate(self.keys):
+            if key in done:
+                src.append(done[key])
+                continue
+            if symmetric:
+                canon, sign = self.mirror[g]
+                if canon in done:
+                    j, s0 = done[canon]
+                    done[key] = (j, s0 if sign > 0.0 else -s0)
+                    src.append(done[key])
+                    continue
+            j = len(sims)
+            sims.append(g)
+            done[key] = (j, 1.0)
+            if symmetric:
+                canon, sign = self.mirror[g]
+                done[canon] = (j, 1.0 if sign > 0.0 else -1.0)
+            src.append((j, 1.0))
+        return move_loop.WholePlan(commands, self.segs, self.last, sims, src, self.offsets,
+                                   [i.size for i in self.index])
+
+    def _predict_whole(self, plan, p, ring: float) -> np.ndarray | None:
+        """:meth:`predict`'s noise-free lugre path with every simulated move in one compiled call
+        (plant.lugre.move_loop.play_all: the same kernel arithmetic, bit-identical angles); the work
+        clock is then given, move by move, the same checks and additions as the per-move loop."""
+        x0 = self.fam.initial_state(p, 0.0).x
+        x1 = np.empty(plan.n)
+        j, checked, deadline = 0, False, self.deadline
+        while j < len(plan.sims):
+            work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, lugre_tolerances, ring, _SETTLED,
+                                                      _UNIT_COST_S[self.family], self.clock.spent, deadline, j)
+            for w in work.tolist():
+                if not checked and self.clock.past(self.deadline, self.family):
+                    raise _OutOfTime
+                checked = False
+                self.clock.add(self.family, *w)
+                j += 1
+            if code != move_loop.STATUS_OK or zero_div:
+                return None
+            if j < len(plan.sims):      # the compiled loop's own check stopped it before move j
+                if self.clock.past(self.deadline, self.family):
+                    raise _OutOfTime
+                checked, deadline = True, math.inf    # (not expected: the same additions) play on, unchecked
+        return plan.off + plan.sign * x1[plan.src]
 
     def residual(self, z: np.ndarray, scale: np.ndarray) -> np.ndarray:
         pred = self.predict(z)

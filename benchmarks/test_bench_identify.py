@@ -1,0 +1,70 @@
+"""The identification's noise-free model (issue 25): one prediction of the default plan's 120 moves.
+
+``_Model.predict`` is what every least-squares evaluation and every finite-difference Jacobian
+column of ``fit_log`` and ``choose_family`` costs. Lugre: the whole prediction in one compiled call
+(``plant.lugre.move_loop.play_all``) against a compiled call per move (the path before); multimode
+(lugre's and two-mass's nested fit, and every multimode fit): a compiled call per move
+(``plant.multimode.move_loop``) against the Python loop over ``advance``. Both paths give the same
+numbers, bit for bit (tests/test_identify_speed.py). ``make test`` runs each body once;
+``test_prediction_speedup`` (``make benchmark`` only) asserts the ratio, both paths timed
+alternately in this process (the machine may be loaded: a ratio, not a time).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from plant.identification import design_experiment
+from plant.identification.fit import _Model
+from plant.protocol import get_family
+
+_POINTS = {"lugre": [1.2, 0.5, 0.5, 0.008, 0.004, 2e5], "multimode": [1.2, 0.5, 0.5, 0.008]}
+
+
+def _model(family: str, fast: bool) -> tuple[_Model, np.ndarray]:
+    plan = design_experiment()
+    log = plan.with_y(np.zeros(plan.n))
+    fam = get_family(family)
+    base = fam.Params().replace(u_max=max(float(log.u_max), fam.Params().u_max), sample_period=log.sample_period)
+    model = _Model(log, family, base)
+    if family == "lugre":
+        model.whole_moves = fast
+    else:
+        model.compiled_moves = fast
+    z = np.log(_POINTS[family])
+    model.predict(z)          # compiled code loaded, the move tables built
+    return model, z
+
+
+@pytest.mark.parametrize("family", ["lugre", "multimode"])
+@pytest.mark.parametrize("fast", [True, False], ids=["fast", "before"])
+def test_prediction(benchmark, family, fast):
+    model, z = _model(family, fast)
+    pred = benchmark(model.predict, z)
+    assert pred is not None and pred.shape == model.rows.shape
+
+
+# lugre: measured 1.45–1.7× (2026-11-27, loaded 2-core machine); multimode 1.4–1.6×
+_GOAL = {"lugre": 1.3, "multimode": 1.2}
+
+
+@pytest.mark.parametrize("family", ["lugre", "multimode"])
+def test_prediction_speedup(benchmark, family):
+    if benchmark.disabled:
+        pytest.skip("a timing only (make benchmark)")
+    fast, z = _model(family, True)
+    before, _ = _model(family, False)
+    spent = {True: [], False: []}
+    for _ in range(7):
+        for flag, m in ((True, fast), (False, before)):
+            t0 = time.process_time()
+            for _ in range(3):
+                m.predict(z)
+            spent[flag].append(time.process_time() - t0)
+    ratio = float(np.median(spent[False]) / np.median(spent[True]))
+    benchmark.extra_info["speedup"] = ratio
+    benchmark.pedantic(fast.predict, args=(z,), rounds=1, iterations=1)
+    assert ratio >= _GOAL[family], f"{family}: {ratio:.2f}x"
