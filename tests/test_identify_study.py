@@ -343,3 +343,87 @@ def test_eighth_lugre_coverage_all_fields():
     by it (5 or more replicates each). The strict xfail is removed."""
     inside = _fresh_coverage("lugre", range(EIGHTH_LUGRE_CASES), EIGHTH_SEED)
     assert np.mean([x for v in inside.values() for x in v]) >= 0.90
+
+
+NINTH_SEED = 6571     # issue 25's ninth session (helper lugre9): named and committed before any run, to confirm
+                      # lugre (and two-mass) coverage on held-out logs with fit._MIN_REPLICATES = 3 (chosen in
+                      # the eighth session after seeing seeds 8191 and 3907); never used while writing the fit
+NINTH_CASES = 10
+
+
+def _ninth_coverage(family: str, cases=range(NINTH_CASES)) -> float:
+    """Share of the fitted fields inside their stated 95 % intervals over ``cases`` at
+    :data:`NINTH_SEED` (:func:`coverage_case`, 10-replicate bootstrap, as :func:`_fresh_coverage`).
+    A log whose fit raises states no interval: its fields count as outside (the error printed)."""
+    inside, n_fields = [], 4 + len(FAMILY_FREE[family])
+    for case in cases:
+        try:
+            res, cpu = coverage_case(family, case, seed=NINTH_SEED, bootstrap=10)
+        except (ValueError, RuntimeError) as exc:
+            print(family, case, "the fit raised:", exc)
+            inside += [False] * n_fields
+            continue
+        print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
+        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
+    return float(np.mean(inside))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 30 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, ninth session, held-out seed 6571, cases 0-9): 51 of 60 "
+                   "(85 %), a miss: case 9's fit raised ValueError (a bootstrap replicate truth at a v_s of the "
+                   "calibration span fails LuGreParams' dissipativity check), its 6 fields counted outside; the "
+                   "nine fits that ran 51 of 54 (94 %)")
+def test_ninth_lugre_coverage_all_fields():
+    """Random lugre axes at the held-out seed 6571 (:data:`NINTH_SEED`, draws from ``default_rng([6571, 2])``,
+    log seed 6571·1000 + k; named and committed before any run): every fitted field (k̄c, k̄s, J, τ3, v_s, σ0)
+    inside its stated 95 % interval in ≥ 90 % of the 60 cases, on the code with v_s's calibration
+    interval and ``fit._MIN_REPLICATES`` = 3 (both chosen in the eighth session; nothing tuned on this
+    seed). Measured (one log per process, `nice 10`, load 7–14): case 9 raised (no interval); the
+    other nine 51 of 54 — k̄c 9/9, k̄s 8/9, J 7/9, τ3 9/9, v_s 9/9 (not identified on 8), σ0 9/9
+    (not identified on 6). Misses: J on case 1 (+92 %), J on case 4 (−8.7 %: the budget cut the
+    bootstrap after 1 replicate, the cluster-robust covariance stood in), k̄s on case 5 (+14 %).
+    CPU per log 40–329 s (median 147 s), ≤ 60 s on 2 of 9. docs/axis.md, "Ninth session"."""
+    assert _ninth_coverage("lugre") >= 0.90
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"),
+                    reason="about 7 min of CPU for 9 logs, but case 8 ran past 481 CPU s unfinished: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-27, ninth session, held-out seed 6571): case 1's fit "
+                   "raised ValueError (test_identify_start_below_u_max), its 5 fields counted outside, so at "
+                   "most 45 of 50; the eight logs that ran to the end 37 of 40 (92.5 %); case 8 stopped by hand "
+                   "after 481 CPU s, not finished (the work clock under-prices it ~20x: point fit 150.8 CPU s for 7.5 "
+                   "nominal s)")
+def test_ninth_two_mass_coverage_all_fields():
+    """Random two-mass axes at the held-out seed 6571 (:data:`NINTH_SEED`, draws from ``default_rng([6571, 3])``,
+    log seed 6571·1000 + k; named before any run): every fitted field (k̄c, k̄s, J, τ3, k_sh) inside its
+    stated 95 % interval in ≥ 90 % of the 50 cases, with k_sh's calibration interval (seventh session;
+    confirmed before on seed 2718 only). Measured: case 1 raised (no fit: see
+    :func:`test_identify_start_below_u_max`); case 8 ran past 481 CPU s (the 300-s work budget had not
+    stopped it) and was stopped; the other eight 37 of 40 — k̄c 6/8 (case 3 −19 %, case 4 −5.1 %),
+    k̄s 8/8, J 7/8 (case 3 +113 %), τ3 8/8, k_sh 8/8 (not identified on all 8; median |error| 269 %).
+    CPU per log 17–155 s (median 24 s), ≤ 60 s on 6 of 8. docs/axis.md, "Ninth session"."""
+    assert _ninth_coverage("two-mass") >= 0.90
+
+
+@pytest.mark.xfail(strict=True, raises=ValueError,
+                   reason="found in the ninth session (held-out seed 6571, two-mass case 1): fit._start takes k̄s from "
+                          "the first move that moves the shaft; when no ramp breaks it away (effective k̄s 3.010 "
+                          "above the ramp peak 3.0) that is a full-torque pulse, k̄s = u_max, an invalid start "
+                          "(PlantParams needs k̄s < u_max) where every residual is the constant penalty, so the fit "
+                          "never moves and fit_log raises 'u_max must be > stiction'; every family alike")
+def test_identify_start_below_u_max():
+    """A log whose ramps never break the shaft away (NINTH_SEED's two-mass case 1: effective k̄s 3.010 ozf·in
+    against the default plan's ramp peak 0.15·20 = 3.0) still gets a fit whose k̄s lies below u_max
+    (≈ 0.5 CPU s). It need not be accurate: the plan is outside its design (docs/axis.md: set the peak to
+    1.2–1.5× the stiction you expect)."""
+    from tests.identify_draws import draw
+
+    rng = np.random.default_rng([NINTH_SEED, list(FAMILY_FREE).index("two-mass")])
+    for _ in range(2):
+        p = draw("two-mass", rng)
+    log, truth = simulate_log(design_experiment(), "two-mass", p, NINTH_SEED * 1000 + 1)
+    assert truth["stiction"] > 0.15 * log.u_max       # the case this test is about: no ramp breaks away
+    fit = fit_log(log, "multimode", bootstrap=0)
+    assert math.isfinite(fit.estimates["stiction"]) and fit.estimates["stiction"] < log.u_max
