@@ -452,9 +452,11 @@ def _start(model: _Model, sigma1: float) -> np.ndarray:
     log = model.log
     tau3 = 8e-3
     ks = None
+    quiet = 0.0                                   # the largest level of a move that did not move the shaft
     for g, (s, e) in enumerate(model.segs):
         moved = np.flatnonzero(np.abs(log.y[s:e] - model.offsets[g]) > 10 * sigma1)
         if not moved.size:
+            quiet = max(quiet, max((abs(level) for c in log.commands[s:e] for _, level in c.segments), default=0.0))
             continue
         c = log.commands[s]
         if log.drive == DriveType.LINEAR.value:   # a ramp: the level a few samples before motion shows
@@ -465,6 +467,10 @@ def _start(model: _Model, sigma1: float) -> np.ndarray:
         break
     if not ks:
         ks = 0.1 * log.u_max
+    elif ks >= log.u_max:
+        # no ramp broke the shaft away and a full-torque pulse did: k̄s lies between the largest level
+        # that moved nothing and u_max (an invalid start, k̄s < u_max, otherwise); start just above the former
+        ks = min(1.05 * quiet, 0.5 * log.u_max) if quiet > 0 else 0.1 * log.u_max
     ones = np.full(model.rows.size, sigma1)
     extras = [math.log(getattr(model.base, f)) for f in FAMILY_FREE[model.family]]
     best, best_cost = None, math.inf
