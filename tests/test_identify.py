@@ -576,3 +576,32 @@ def test_lugre_bootstrap_spreads_the_stribeck_velocity_truths_and_calibrates(mon
             assert "stribeck_velocity" in fit.not_identified
         for k in CORE:
             assert fit.interval[k][0] < fit.estimates[k] < fit.interval[k][1]
+
+
+def test_a_calibration_point_the_family_rejects_gets_no_replicate():
+    """Held-out seed 6571, lugre case 9: with its fitted k̄c = 0.626, k̄s = 1.255 ozf·in,
+    σ0 = 3.83e5 ozf·in/rad (σ1 = 707, σ2 = 0.2 as given), the lowest v_s points of the calibration
+    span break LuGre's dissipativity condition
+    σ1²·|v| ≤ 4·(σ1 + σ2)·g(v), so building their truth raised out of fit_log. They are left out
+    (and named); every other point keeps its replicate index and its log-even v_s."""
+    from plant.identification.fit import _CALIBRATED, _replicate_truths
+    from plant.lugre.params import LuGreParams
+
+    fitted = LuGreParams(coulomb=0.6256531847821101, stiction=1.254659659212424, inertia=0.34528064361533545,
+                         motor_time_constant=0.004174423627541125, stribeck_velocity=1.4897748e-02,
+                         bristle_stiffness=3.8277147e+05)
+    lo, hi = (math.log(v) for v in _CALIBRATED["lugre"]["stribeck_velocity"])
+    truths, invalid = _replicate_truths(fitted, {"stribeck_velocity": (lo, hi)}, 10, range(10))
+    points = [math.exp(lo + (i + 0.5) / 10 * (hi - lo)) for i in range(10)]
+    rejected = []
+    for v in points:            # the truth: which points the family itself refuses
+        try:
+            fitted.replace(stribeck_velocity=v)
+        except ValueError:
+            rejected.append(v)
+    assert rejected and len(rejected) < 10                      # the case this test is about
+    assert [at["stribeck_velocity"] for at in invalid] == rejected
+    assert [i for i, _, _ in truths] == [i for i, v in enumerate(points) if v not in rejected]
+    assert all(p.stribeck_velocity == points[i] == at["stribeck_velocity"] and p.bristle_stiffness == 3.8277147e+05
+               for i, at, p in truths)
+    assert _replicate_truths(fitted, {}, 3, range(3)) == ([(0, {}, fitted), (1, {}, fitted), (2, {}, fitted)], [])
