@@ -18,7 +18,7 @@ import pytest
 from scipy.special import log_ndtr
 
 from plant.multimode.bridge_loop import bridge_run
-from plant.multimode.crossing import GRID_MIN, GRID_STEP, LOG_PHI_HI, LOG_PHI_LO, crossed
+from plant.multimode.crossing import GRID_MIN, GRID_STEP, LOG_PHI_HI, LOG_PHI_LO, crossed, exp_below
 from plant.multimode.interval import _tables
 from plant.multimode.zero_velocity import _cross_prob, bridge_segment
 from plant.params import PlantParams
@@ -85,6 +85,24 @@ def test_crossing_decision_matches_where_only_exp_and_erfc_decide():
               -math.log(2.0), -1e-17, 0.0):
         for x in (-40.0, -16.0, -11.0, -10.99, -1e-300, -0.0, 0.0, 1e-300, 0.5, 8.0):
             _check(float(e), float(x))
+
+
+def test_exp_below_is_uniform_below_of_exp_down_to_underflow():
+    # the disturbed kernel's moving crossing (plant.multimode.disturbed_jit._decide) decides
+    # exponents from −745 to −1e-6 with it
+    rng = np.random.default_rng(11)
+    es = np.concatenate((-np.geomspace(1e-6, 745.0, 4000)[1:-1], -rng.uniform(0, 745, 4000)))
+    n_true = 0
+    for e in es:
+        for x in (rng.standard_normal(), -abs(rng.standard_normal()) * 6.0,
+                  math.sqrt(2.0) * -math.sqrt(-e) * rng.uniform(0.9, 1.1)):
+            z = np.array([x])
+            c1, c2 = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+            got = exp_below(float(e), z, c1)
+            want = uniform_below(z, c2, math.exp(e))
+            assert got == want and c1[0] == c2[0] == 1, (e, x)
+            n_true += want
+    assert n_true > 1000
 
 
 def test_bridge_run_is_bridge_segment():

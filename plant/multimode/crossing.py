@@ -22,7 +22,7 @@ from numba import njit
 
 from plant.randomness import normal, uniform_below
 
-__all__ = ["crossed", "LOG_PHI_LO", "LOG_PHI_HI", "GRID_MIN", "GRID_STEP"]
+__all__ = ["crossed", "exp_below", "LOG_PHI_LO", "LOG_PHI_HI", "GRID_MIN", "GRID_STEP"]
 
 GRID_MIN = -16.0
 """Left end a_0 of the grid of x [unit normals]; its right end is 0 (U < ½)."""
@@ -47,6 +47,29 @@ LOG_PHI_HI.flags.writeable = False
 
 
 @njit(cache=True, _nrt=False)
+def exp_below(e, z, cursor):
+    """``uniform_below(z, cursor, math.exp(e))`` for −745 < e < −1e-6 (so 0 < exp(e) < 1): the
+    same decision from the same one normal, exp and erfc only when the grid cannot decide."""
+    x = normal(z, cursor)
+    if x >= 0.0:
+        if e < -0.7:                    # pc < ½ ≤ U (uniform_below's sign rule)
+            return False
+    elif x > GRID_MIN:
+        i = int((x - GRID_MIN) * (1.0 / GRID_STEP))
+        if i < LOG_PHI_LO.shape[0]:
+            if e < LOG_PHI_LO[i]:       # pc < Φ(x) = U
+                return False
+            if e > LOG_PHI_HI[i]:       # pc > U
+                return True
+    pc = math.exp(e)
+    if x >= 0.0 and pc <= 0.5:
+        return False
+    if x < 0.0 and pc > 0.5:
+        return True
+    return 0.5 * math.erfc(-x / math.sqrt(2.0)) < pc
+
+
+@njit(cache=True, _nrt=False)
 def crossed(va, vb, h, sig_v2, z, cursor):
     """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc the bridge crossing probability of
     x2 from ``va`` to ``vb`` over ``h`` (σ_v² = ``sig_v2``): the decision and the normals read of
@@ -61,22 +84,6 @@ def crossed(va, vb, h, sig_v2, z, cursor):
             return False
         return 0.5 * math.erfc(-x / math.sqrt(2.0)) < math.exp(e)
     if e < -1e-6:                       # pc = exp(e) < 1 for sure: a normal is read
-        x = normal(z, cursor)
-        if x >= 0.0:
-            if e < -0.7:                # pc < ½ ≤ U (uniform_below's sign rule)
-                return False
-        elif x > GRID_MIN:
-            i = int((x - GRID_MIN) * (1.0 / GRID_STEP))
-            if i < LOG_PHI_LO.shape[0]:
-                if e < LOG_PHI_LO[i]:   # pc < Φ(x) = U
-                    return False
-                if e > LOG_PHI_HI[i]:   # pc > U
-                    return True
-        pc = math.exp(e)
-        if x >= 0.0 and pc <= 0.5:
-            return False
-        if x < 0.0 and pc > 0.5:
-            return True
-        return 0.5 * math.erfc(-x / math.sqrt(2.0)) < pc
+        return exp_below(e, z, cursor)
     pc = math.exp(e)
     return pc >= 1.0 or uniform_below(z, cursor, pc)
