@@ -33,6 +33,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from numba.np.arrayobj import reshape_unchecked
 
 from plant.drive import DriveCommand, DriveType
 from plant.multimode.moving import deterministic_move, first_mean_zero
@@ -227,25 +228,21 @@ def _moving_plan(X, S, t_end, p):
     return mode, s, x3, u, ks, h_end, h_fb, reflecting, h
 
 
-@njit(cache=True, inline="always")
-def _views(o, W):
-    """(TH, P, L, Q): the ladder thresholds (2 × LADDER) of the plan vector and the fresh step's
-    7 × 7 and 4 × 4 scratch in W[14:95], made once per interval (a reshape is a runtime call).
-    Inlined, so its views follow the caller's reference counting (on in interval_kernel, off in
-    interval_fast)."""
-    return (o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER)), W[14:63].reshape((7, 7)),
-            W[63:79].reshape((4, 4)), W[79:95].reshape((4, 4)))
-
-
 @njit(cache=True, _nrt=False)
-def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W, M):
+def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W):
     """The bridge locator (or the reflection) over the segment; (stopped, must stop now).
-    ``M``: :func:`_views` of the plan vector and ``W``."""
+
+    The thresholds TH (2 × LADDER, from the plan vector) and the fresh step's 7 × 7 and 4 × 4
+    scratch (W[14:95]) are strided views built in place by numba's ``reshape_unchecked`` (what
+    ``as_strided`` lowers to; ``as_strided`` itself is refused without reference counting):
+    ``reshape`` calls into numba's runtime, four times per segment."""
     budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-    TH, P, L, Qt = M
+    f = W.itemsize
+    TH = reshape_unchecked(o[_O_LADDER:_O_LADDER + 2 * LADDER], (2, LADDER), (LADDER * f, f))
     advanced, stopped, peak, n, chattered = bridge_run(
         X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
-        S[_PEAK], budget, W, P, L, Qt)
+        S[_PEAK], budget, W, reshape_unchecked(W[14:63], (7, 7), (7 * f, f)),
+        reshape_unchecked(W[63:79], (4, 4), (4 * f, f)), reshape_unchecked(W[79:95], (4, 4), (4 * f, f)))
     _torque_metrics(S, x3, u, advanced, bridge, p)
     S[_PEAK] = peak
     S[_NSUB] += n
@@ -273,14 +270,14 @@ def _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev):
 
 
 @njit(cache=True)
-def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M):
+def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
     """Moving until t_end or the next event; True when the interval must stop."""
     mode, s, x3, u, ks, h_end, h_fb, reflecting, h = _moving_plan(X, S, t_end, p)
     noise_on = o[_O_NOISE] != 0.0
     white = noise_on and p.sigma2_sq > 0.0
     if white and (reflecting or o[_O_NEWTON] == 0.0):
         stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC,
-                                            z, cursor, W, M)
+                                            z, cursor, W)
         if chattered:
             return True
     elif white:
@@ -302,7 +299,7 @@ def _moving(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, 
 
 
 @njit(cache=True, _nrt=False)
-def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M):
+def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
     """The interval loop's body (:func:`interval_kernel`) up to ``t_end`` while every moving
     segment takes the bridge locator: the same calls in the same order. Compiled without numba's
     reference counting (nothing it calls allocates), which otherwise costs atomic increments
@@ -319,7 +316,7 @@ def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, e
             if not (reflecting or o[_O_NEWTON] == 0.0):
                 return -1
             stopped, chattered = _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw,
-                                                BG, BC, z, cursor, W, M)
+                                                BG, BC, z, cursor, W)
             stop = chattered or _moving_end(X, S, stopped, s, ks, h, h_end, h_fb, t_end, p, o, ev)
         if stop:
             return 1
@@ -332,7 +329,7 @@ def _fast_span(X, S, t_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, e
 # --- the interval -----------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False)
-def _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M):
+def _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W):
     """:func:`interval_kernel`'s loop over the command's segments when every moving segment takes
     the bridge locator (noise on, σ2 > 0, no Newton): the same calls in the same order, all
     inside code compiled without reference counting (:func:`_fast_span`)."""
@@ -344,7 +341,7 @@ def _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BP
             return
         if seg > 0 and _event(S, X, _LEVEL, o, ev):
             return
-        if _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M) == 1:
+        if _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W) == 1:
             return
 
 
@@ -370,8 +367,7 @@ def interval_fast(x, mode, flyback, t0, duration, offsets, levels, bridge, prm, 
     for i in range(_SHEET):
         S[i] = 0.0
     S[_T], S[_MODE], S[_FB] = t0, mode, 1.0 if flyback else 0.0
-    _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W,
-                   _views(o, W))
+    _fast_segments(X, S, t0, duration, offsets, levels, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
     if S[_STATUS] == _OK:
         S[_T] = t0 + duration
     out[0], out[1], out[2], out[3], out[4], out[5] = X[A1], X[A2], X[A3], X[A4], X[A5], X[AU]
@@ -397,8 +393,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
     cursor[0] = zpos
     X = np.empty(7)
     white = o[_O_NOISE] != 0.0 and p.sigma2_sq > 0.0     # noisy moving segments: _fast_span
-    W = np.zeros(_WORK if white else 95)                 # bridge_run's scratch (noise-free: _views only)
-    M = _views(o, W)
+    W = np.zeros(_WORK if white else 1)                  # bridge_segment's scratch (noise-free: unused)
     X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU] = x[0], x[1], x[2], x[3], x[4], p.coulomb, x[5]
     for i in range(_SHEET):
         S[i] = 0.0
@@ -414,7 +409,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
         stop = False
         while S[_T] < t_seg_end:
             if white:
-                r = _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M)
+                r = _fast_span(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
                 if r == 1:
                     stop = True
                     break
@@ -423,7 +418,7 @@ def interval_kernel(x, mode, flyback, t0, duration, offsets, levels, bridge, prm
             if S[_MODE] == 2.0:
                 stop = _stuck(X, S, t_seg_end, bridge, p, o, z, cursor, ev)
             else:
-                stop = _moving(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W, M)
+                stop = _moving(X, S, t_seg_end, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, ev, W)
             if stop:
                 break
             if not (abs(X[A1]) <= o[_O_DIVERGE]):          # also catches NaN
