@@ -7,8 +7,9 @@ linear and time-invariant, so the state jumps from event to event with X⁺ = Φ
 Modules by idea: ``expfun`` is shared (:mod:`plant.expfun`); ``transition`` (Φ and the noise
 covariance as matrices: the test oracles' counterpart), ``noise`` (the minimal factor (4-20)),
 ``segments`` (torque events and integrals), ``stuck`` (mode 2), ``moving`` (modes 1 and 3),
-``zero_velocity`` (the noisy velocity-zero locators), ``interval`` (the pure step, compiled
-whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
+``zero_velocity`` (the noisy velocity-zero locators), ``crossing`` (the bridge crossing decision
+from a table of log Φ), ``bridge_loop`` (the sub-step loop the interval runs), ``interval`` (the
+pure step, compiled whole), ``law_loop`` (the compiled closed loop of a fixed linear law), ``pulse`` (one pulse's
 response), ``reference`` (Euler–Maruyama and ``solve_ivp`` reference simulators), ``em_family`` (the
 Euler–Maruyama reference behind the family seam, for closed-loop comparisons), ``disturbed``
 (the Ornstein–Uhlenbeck disturbance torque of SPEC §11: a seventh state entry d, used only when

@@ -35,6 +35,7 @@ from numba import njit, types
 from numba.extending import get_cython_function_address, intrinsic
 
 from plant.expfun import e1, e2, e4
+from plant.multimode.crossing import exp_below
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.segments import hermite_peak, torque_integrals, torque_integrals_given
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
@@ -963,10 +964,15 @@ def _decide(Y, Yb, e, mode, dirn, ks, sig2, w, far, rungs, z, cursor):
             v = 0 if sgn < 0.0 else 1
         else:
             e[Y2] = dirn
+            va, vb = dirn * Y[Y2], dirn * Yb[Y2]
             if far:
-                prob = _cross_prob_far(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+                prob = _cross_prob_far(va, vb, w, sig2)
             else:
-                prob = _cross_prob(dirn * Y[Y2], dirn * Yb[Y2], w, sig2)
+                if va > 0.0 and vb > 0.0 and sig2 > 0.0 and w > 0.0:
+                    ex = -2.0 * va * vb / (sig2 * w)     # _cross_prob's exponent, the same operations
+                    if -745.0 < ex < -1e-6:              # 0 < prob < 1: the decision below, cheaper
+                        return exp_below(ex, z, cursor), v, c0
+                prob = _cross_prob(va, vb, w, sig2)
         # uniform_below: the decision uniform(z, cursor) < prob, the same draw, erfc only when needed
         if prob >= 1.0 or (prob > 0.0 and not far and uniform_below(z, cursor, prob)):
             crossed = True

@@ -33,6 +33,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from numba.np.arrayobj import reshape_unchecked
 
 from plant.drive import DriveCommand, DriveType
 from plant.multimode.moving import deterministic_move, first_mean_zero
@@ -41,7 +42,8 @@ from plant.randomness import NoiseExhausted, NoiseStream
 from plant.multimode.segments import torque_crossing_time, torque_integrals
 from plant.state import EVENT_FIELDS, N_STATE, X1, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.multimode.stuck import stuck_propagate
-from plant.multimode.zero_velocity import LADDER, bisection_tables, bridge_segment, ladder_thresholds, newton_segment, substep_tables
+from plant.multimode.bridge_loop import bridge_run
+from plant.multimode.zero_velocity import LADDER, bisection_tables, ladder_thresholds, newton_segment, substep_tables
 
 __all__ = ["advance"]
 
@@ -54,7 +56,7 @@ _SHEET = 15
 # plant.multimode.zero_velocity.ladder_thresholds.
 _O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
 _O_LADDER = 7
-# Scratch floats of bridge_segment, allocated once per interval.
+# Scratch floats of bridge_run (plant.multimode.bridge_loop), allocated once per interval.
 _WORK = 400
 # Kernel status codes.
 _OK, _CHATTER, _DIVERGED, _BAD_LEVEL = 0, 1, 2, 3
@@ -228,12 +230,19 @@ def _moving_plan(X, S, t_end, p):
 
 @njit(cache=True, _nrt=False)
 def _moving_bridge(X, S, mode, x3, u, h, reflecting, bridge, p, o, TP, TL, BPh, BPw, BG, BC, z, cursor, W):
-    """The bridge locator (or the reflection) over the segment; (stopped, must stop now)."""
+    """The bridge locator (or the reflection) over the segment; (stopped, must stop now).
+
+    The thresholds TH (2 × LADDER, from the plan vector) and the fresh step's 7 × 7 and 4 × 4
+    scratch (W[14:95]) are strided views built in place by numba's ``reshape_unchecked`` (what
+    ``as_strided`` lowers to; ``as_strided`` itself is refused without reference counting):
+    ``reshape`` calls into numba's runtime, four times per segment."""
     budget = max(o[_O_MAXEV] - S[_COUNT], 1.0)
-    TH = o[_O_LADDER:_O_LADDER + 2 * LADDER].reshape((2, LADDER))
-    advanced, stopped, peak, n, chattered = bridge_segment(
+    f = W.itemsize
+    TH = reshape_unchecked(o[_O_LADDER:_O_LADDER + 2 * LADDER], (2, LADDER), (LADDER * f, f))
+    advanced, stopped, peak, n, chattered = bridge_run(
         X, mode, h, reflecting, o[_O_SUB], o[_O_RSUB], o[_O_TOL], p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor,
-        S[_PEAK], budget, W)
+        S[_PEAK], budget, W, reshape_unchecked(W[14:63], (7, 7), (7 * f, f)),
+        reshape_unchecked(W[63:79], (4, 4), (4 * f, f)), reshape_unchecked(W[79:95], (4, 4), (4 * f, f)))
     _torque_metrics(S, x3, u, advanced, bridge, p)
     S[_PEAK] = peak
     S[_NSUB] += n
