@@ -92,12 +92,8 @@ def pick(per_move: dict, threshold: float) -> tuple[str, dict]:
     score = {f: float(np.mean(v)) for f, v in pm.items()}
     best = min(fams, key=lambda f: score[f])
     ranks = {f: F._signed_rank(pm[f], pm[best]) for f in fams}
-    keep = F._SEPARABLE_SE
-    F._SEPARABLE_SE = threshold
-    try:
-        chosen = F._rule(fams, score, {f: w for f, (w, _) in ranks.items()}, {f: sd for f, (_, sd) in ranks.items()})
-    finally:
-        F._SEPARABLE_SE = keep
+    chosen = F._rule(fams, score, {f: w for f, (w, _) in ranks.items()}, {f: sd for f, (_, sd) in ranks.items()},
+                     threshold)
     return chosen, {f: (w / sd if sd else 0.0) for f, (w, sd) in ranks.items()}
 
 

@@ -1171,13 +1171,15 @@ def _folds(log: AxisLog) -> np.ndarray:
     return np.array(out)
 
 
-def _rule(fams, score: dict, excess: dict, se: dict) -> str:
+def _rule(fams, score: dict, excess: dict, se: dict, threshold: float | None = None) -> str:
     """:data:`RULE` on the held-out scores: the fewest parameters among the families not separably
-    worse than the best, the lower score among equally many; a family with an infinite score (its
-    fold fit failed to predict) is never kept."""
+    worse than the best (``excess ≤ threshold·se``; default :data:`_SEPARABLE_SE`), the lower score
+    among equally many; a family with an infinite score (its fold fit failed to predict) is never
+    kept."""
+    th = _SEPARABLE_SE if threshold is None else threshold
     best = min(fams, key=lambda f: score[f])
     # a family whose fold fit failed (score ∞, and so SE ∞) is never "within 2 SE" of the best
-    kept = [f for f in fams if f == best or (math.isfinite(score[f]) and excess[f] <= _SEPARABLE_SE * se[f])]
+    kept = [f for f in fams if f == best or (math.isfinite(score[f]) and excess[f] <= th * se[f])]
     return min(kept, key=lambda f: (len(FAMILY_FREE[f]), score[f]))
 
 
