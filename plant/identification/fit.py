@@ -1021,6 +1021,9 @@ _CORE_SHIFT = {"stribeck": (1.0, 0.92, 0.85, 0.78)}
 # Simpler first: parameter count (stribeck and lugre both six: the order of the fold fits only).
 _SIMPLER = ("multimode", "two-mass", "stribeck", "lugre")
 _SEPARABLE_SE = 2.0    # a family is separably worse when its mean excess exceeds 2 standard errors
+# the signed-rank rule's threshold (null sd of W) under the predictive criterion, :func:`choose_family`'s
+# ``separable`` (issue 25, ninth session: the dev sweep, docs/axis.md "Ninth session: auto")
+_SEPARABLE_Z = 2.0
 _FOLDS = (", 2-fold over moves (each kind of move, the same commands up to direction, split evenly: its "
           "occurrences go to folds 0, 1, 1, 0, 0, 1, …)")
 _PARSIMONY = ("the one with the fewest fitted parameters (multimode 4 < two-mass 5 < stribeck = lugre 6), and among "
@@ -1033,7 +1036,7 @@ RULE = ("held-out predictive density" + _FOLDS + ": each family is fitted on one
         f"noise: the posterior predictive t of a Gaussian whose mean and covariance are estimated from {_MC} noisy "
         "replicates (ν = replicates − features), plus σ1²/window; best = the lowest score; a family is separably "
         "worse than the best when Wilcoxon's paired signed-rank test over moves says so: W = Σ sign(d)·rank(|d|) "
-        f"over the moves' score differences d ≠ 0 exceeds {_SEPARABLE_SE:g} null standard deviations "
+        f"over the moves' score differences d ≠ 0 exceeds {_SEPARABLE_Z:g} null standard deviations "
         "(ranks, not means: one move predicted stuck that slid costs 10²–10⁶); "
         "among the families not separably worse than the best, " + _PARSIMONY)
 _RULE_OE = ("held-out prediction error" + _FOLDS + ": each family is fitted on one half of the moves (output "
@@ -1608,7 +1611,8 @@ class _FoldFits:
 
 def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int = 0,
                   budget_s: float = DEFAULT_BUDGET_S, criterion: str = "predictive",
-                  final_fit: bool = True, mapper=map) -> tuple[AxisFit | None, FamilyChoice]:
+                  final_fit: bool = True, mapper=map,
+                  separable: float | None = None) -> tuple[AxisFit | None, FamilyChoice]:
     """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
 
     Rule (:data:`RULE`): the moves are split into two folds, each kind of move evenly
@@ -1660,6 +1664,9 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         raise ValueError(f"criterion must be 'predictive' or 'output-error', got {criterion!r}")
     if not callable(mapper):
         raise ValueError(f"mapper must be callable like map, got {mapper!r}")
+    if separable is not None and not (isinstance(separable, (int, float)) and math.isfinite(separable)
+                                      and 0.0 <= separable <= 10.0):
+        raise ValueError(f"separable must be a number in [0, 10], got {separable!r}")
     t0 = time.perf_counter()
     bases = {}
     for f in fams:
@@ -1694,10 +1701,11 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         signs = {f: _sign_counts(per_move[f], per_move[best]) for f in fams}
         # the signed-rank statistic in the rule's form: W against its null standard deviation
         ranks = {f: _signed_rank(per_move[f], per_move[best]) for f in fams}
-        chosen = _rule(fams, score, {f: w for f, (w, _) in ranks.items()}, {f: sd for f, (_, sd) in ranks.items()})
+        chosen = _rule(fams, score, {f: w for f, (w, _) in ranks.items()}, {f: sd for f, (_, sd) in ranks.items()},
+                       _SEPARABLE_Z if separable is None else separable)
     else:
         signs, ranks = {}, {}
-        chosen = _rule(fams, score, excess, se)
+        chosen = _rule(fams, score, excess, se, separable)
     choice = FamilyChoice(chosen, best, score, excess, se, RULE if criterion == "predictive" else _RULE_OE,
                           time.perf_counter() - t0, cpu, {f: v.copy() for f, v in per_move.items()},
                           {f: v.copy() for f, v in per_move_oe.items()}, fold_fits, criterion, signs,
