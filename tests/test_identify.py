@@ -308,6 +308,39 @@ def test_auto_folds_hold_every_kind_of_move_in_both_directions(plan):
     assert abs(int(fold.sum()) - fold.size / 2) <= 1
 
 
+def test_auto_rule_threshold_against_scipy_wilcoxon():
+    """The signed-rank rule's threshold (``choose_family(separable=…)``, :data:`_SEPARABLE_Z`): a
+    richer family best by the mean, multimode worse with a signed-rank z that scipy's Wilcoxon test
+    (normal approximation, no continuity correction, zeros dropped) puts between 1 and 2 — kept
+    (multimode chosen) at a threshold above that z, dropped (the richer family chosen) below it; a
+    threshold outside [0, 10] is one clear error before any fit."""
+    from scipy import stats
+
+    from plant.identification.fit import _SEPARABLE_Z, _rule, _signed_rank, choose_family
+
+    rng = np.random.default_rng(7)
+    richer = rng.normal(0.0, 1.0, 60)
+    multimode = richer + rng.normal(0.25, 1.0, 60)
+    multimode[:3] = richer[:3]                                   # moves neither family moves: ties, dropped
+    z_scipy = abs(stats.wilcoxon(multimode - richer, zero_method="wilcox", correction=False, method="approx").zstatistic)
+    assert 1.0 < z_scipy < 2.0, z_scipy
+    w, sd = _signed_rank(multimode, richer)
+    assert w / sd == pytest.approx(z_scipy, rel=1e-12)
+    fams = ("multimode", "two-mass")
+    score = {"multimode": float(np.mean(multimode)), "two-mass": float(np.mean(richer))}
+    assert score["two-mass"] < score["multimode"]
+    excess, se = {"multimode": w, "two-mass": 0.0}, {"multimode": sd, "two-mass": 0.0}
+    assert _rule(fams, score, excess, se, z_scipy + 0.01) == "multimode"
+    assert _rule(fams, score, excess, se, z_scipy - 0.01) == "two-mass"
+    assert _rule(fams, score, excess, se) == ("multimode" if z_scipy <= 2.0 else "two-mass")    # _SEPARABLE_SE = 2
+    assert _rule(fams, score, excess, se, _SEPARABLE_Z) == ("multimode" if z_scipy <= _SEPARABLE_Z else "two-mass")
+    log = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
+                       get_family("multimode").Params(), 5)[0]
+    for bad in (-0.5, 11.0, math.nan, "2"):
+        with pytest.raises(ValueError, match="separable"):
+            choose_family(log, separable=bad)
+
+
 def test_auto_rule_fewest_parameters_then_lower_score():
     """The stated rule on given scores: the fewest fitted parameters among the families within
     2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""
