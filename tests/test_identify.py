@@ -341,6 +341,22 @@ def test_auto_rule_threshold_against_scipy_wilcoxon():
             choose_family(log, separable=bad)
 
 
+def test_shifted_core_survives_a_stiction_gap_below_rounding():
+    """A multimode fold fit may end with k̄s − k̄c below k̄c's rounding (dev log 8484 lugre k=0 raised
+    a math domain error in choose_family): the shifted start keeps k̄c·factor and k̄s − k̄c·factor > 0."""
+    from plant.identification.fit import _shifted
+
+    core = np.array([math.log(1.5), math.log(1.5) - 60.0, math.log(0.5), math.log(0.01)])
+    for factor in (1.0, 0.92, 0.78):
+        c = _shifted(core, factor)
+        assert np.all(np.isfinite(c))
+        assert math.exp(c[0]) == pytest.approx(1.5 * factor, rel=1e-12)
+        assert math.exp(c[0]) + math.exp(c[1]) == pytest.approx(1.5, rel=1e-12)   # k̄s held
+    ordinary = np.array([math.log(1.2), math.log(0.4), math.log(0.5), math.log(0.01)])
+    c = _shifted(ordinary, 0.85)
+    assert math.exp(c[0]) + math.exp(c[1]) == pytest.approx(1.6, rel=1e-12)
+
+
 def test_auto_rule_fewest_parameters_then_lower_score():
     """The stated rule on given scores: the fewest fitted parameters among the families within
     2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""

@@ -1074,7 +1074,10 @@ def _shifted(core: np.ndarray, factor: float) -> np.ndarray:
     """``core`` (logarithms of k̄c, k̄s − k̄c, J, τ3) with k̄c times ``factor`` and k̄s held."""
     kc, ks = math.exp(core[0]), math.exp(core[0]) + math.exp(core[1])
     c = np.array(core, dtype=float)
-    c[0], c[1] = math.log(factor * kc), math.log(ks - factor * kc)
+    gap = ks - factor * kc
+    if gap <= 0.0:      # k̄s − k̄c below kc's rounding (a multimode fold fit at k̄s = k̄c, dev log 8484 lugre k=0)
+        gap = math.exp(core[1]) + (1.0 - factor) * kc
+    c[0], c[1] = math.log(factor * kc), math.log(gap)
     return c
 
 
