@@ -625,3 +625,11 @@ def test_lugre_bootstrap_spreads_the_stribeck_velocity_truths_and_calibrates(mon
             assert "stribeck_velocity" in fit.not_identified
         for k in CORE:
             assert fit.interval[k][0] < fit.estimates[k] < fit.interval[k][1]
+
+
+def test_identify_separable_bad_value_is_one_line(tmp_path):
+    """``identify --separable`` outside [0, 10] (or not finite): one line naming the option, exit 2."""
+    for bad in ("-1", "11", "nan"):
+        r = _inproc("identify", tmp_path / "axis.csv", "--family", "auto", "--separable", bad)
+        assert r.returncode == 2, (bad, r.stdout, r.stderr)
+        assert "--separable" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
