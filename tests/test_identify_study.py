@@ -3,7 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 5757, 2 logs per family (test_eighth_auto_picks_the_generating_family, the
+* the auto pick: seed 7531, 2 logs per family (test_ninth_auto_picks_the_generating_family, the
+  ninth session's dev-chosen threshold); seed 5757 (test_eighth_auto_picks_the_generating_family, the
   eighth session's features); seed 9393 (test_auto_picks_the_generating_family; 6262 was the
   fourth session's, 6161 the third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
@@ -200,13 +201,19 @@ NINTH_AUTO_SEED = 7531
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 6 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.xfail(strict=True, reason="XFAIL_NINTH")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, ninth session) on the 8 logs of the fresh "
+                   "seed 7531 with the candidate threshold 0.5: 6 of 8 — stribeck k=1 picked multimode (multimode best by "
+                   "the mean), lugre k=0 picked stribeck (stribeck best by the mean, lugre better by ranks, z = -3.18); "
+                   "the default threshold 2 also 6 of 8 (lugre k=0: multimode); below the must-show of >= 90 % "
+                   "(docs/axis.md)")
 def test_ninth_auto_picks_the_generating_family():
     """``--family auto`` with the ninth session's candidate threshold (``separable=0.5``,
     :data:`plant.identification.fit._NINTH_SEPARABLE_Z`, chosen on dev seed 8484 before this seed
     ran) on 2 fresh logs per family (seed 7531, cases 0–1, :func:`auto_case`, default plan): the
     generating family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Ninth session: auto"). The
-    default rule's pick (threshold 2) on the same fold fits is printed beside it. MEASURED_NINTH"""
+    default rule's pick (threshold 2) on the same fold fits is printed beside it. Measured with
+    tests/identify_dev.py (the same fold fits, no final point fit): 6 of 8 at 0.5 and 6 of 8 at 2;
+    CPU of the choice 27–212 s per log (median 48 s; one process per log, two at a time, load 10–15)."""
     from plant.identification.fit import _NINTH_SEPARABLE_Z, _rule
 
     picked = {}
