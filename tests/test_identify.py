@@ -316,7 +316,7 @@ def test_auto_rule_threshold_against_scipy_wilcoxon():
     threshold outside [0, 10] is one clear error before any fit."""
     from scipy import stats
 
-    from plant.identification.fit import _SEPARABLE_Z, _rule, _signed_rank, choose_family
+    from plant.identification.fit import RULE, _SEPARABLE_Z, _rule, _rule_text, _signed_rank, choose_family
 
     rng = np.random.default_rng(7)
     richer = rng.normal(0.0, 1.0, 60)
@@ -334,6 +334,8 @@ def test_auto_rule_threshold_against_scipy_wilcoxon():
     assert _rule(fams, score, excess, se, z_scipy - 0.01) == "two-mass"
     assert _rule(fams, score, excess, se) == ("multimode" if z_scipy <= 2.0 else "two-mass")    # _SEPARABLE_SE = 2
     assert _rule(fams, score, excess, se, _SEPARABLE_Z) == ("multimode" if z_scipy <= _SEPARABLE_Z else "two-mass")
+    assert "exceeds 2 null standard deviations" in RULE and RULE == _rule_text(_SEPARABLE_Z) == _rule_text(2.0)
+    assert "exceeds 0.5 null standard deviations" in _rule_text(0.5)     # FamilyChoice.rule states the threshold used
     log = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
                        get_family("multimode").Params(), 5)[0]
     for bad in (-0.5, 11.0, math.nan, "2"):
