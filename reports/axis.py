@@ -206,6 +206,9 @@ def identify_command(
                                 help="Processes for the bootstrap's replicates and auto's two folds (default: the "
                                      "cores available, capped at that work; 1: all in this process). The "
                                      "results are the same, bit for bit, for any N."),
+    separable: float = typer.Option(None, "--separable", show_default=False,
+                                    help="auto only: a family is separably worse than the best when its signed-rank "
+                                         "z over moves exceeds this (default: the rule's, docs/axis.md)."),
 ) -> None:
     """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
     from plant.identification.fit import choose_family, fit_log
@@ -221,6 +224,8 @@ def identify_command(
         raise UserError(f"--budget: must be > 0 nominal CPU seconds, got {budget}")
     if workers is not None and workers < 1:
         raise UserError(f"--workers: must be an integer >= 1, got {workers}")
+    if separable is not None and not (math.isfinite(separable) and 0.0 <= separable <= 10.0):
+        raise UserError(f"--separable: must be in [0, 10], got {separable}")
     try:
         log = read_log(log_path)
     except LogError as exc:
@@ -229,7 +234,8 @@ def identify_command(
     try:
         with fit_map(fit_workers(workers, family, bootstrap)) as mapper:
             if family == "auto":
-                fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper)
+                fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper,
+                                            separable=separable)
             else:
                 fit = fit_log(log, family, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper)
     except (ValueError, RuntimeError) as exc:

@@ -308,6 +308,57 @@ def test_auto_folds_hold_every_kind_of_move_in_both_directions(plan):
     assert abs(int(fold.sum()) - fold.size / 2) <= 1
 
 
+def test_auto_rule_threshold_against_scipy_wilcoxon():
+    """The signed-rank rule's threshold (``choose_family(separable=…)``, :data:`_SEPARABLE_Z`): a
+    richer family best by the mean, multimode worse with a signed-rank z that scipy's Wilcoxon test
+    (normal approximation, no continuity correction, zeros dropped) puts between 1 and 2 — kept
+    (multimode chosen) at a threshold above that z, dropped (the richer family chosen) below it; a
+    threshold outside [0, 10] is one clear error before any fit."""
+    from scipy import stats
+
+    from plant.identification.fit import RULE, _SEPARABLE_Z, _rule, _rule_text, _signed_rank, choose_family
+
+    rng = np.random.default_rng(7)
+    richer = rng.normal(0.0, 1.0, 60)
+    multimode = richer + rng.normal(0.25, 1.0, 60)
+    multimode[:3] = richer[:3]                                   # moves neither family moves: ties, dropped
+    z_scipy = abs(stats.wilcoxon(multimode - richer, zero_method="wilcox", correction=False, method="approx").zstatistic)
+    assert 1.0 < z_scipy < 2.0, z_scipy
+    w, sd = _signed_rank(multimode, richer)
+    assert w / sd == pytest.approx(z_scipy, rel=1e-12)
+    fams = ("multimode", "two-mass")
+    score = {"multimode": float(np.mean(multimode)), "two-mass": float(np.mean(richer))}
+    assert score["two-mass"] < score["multimode"]
+    excess, se = {"multimode": w, "two-mass": 0.0}, {"multimode": sd, "two-mass": 0.0}
+    assert _rule(fams, score, excess, se, z_scipy + 0.01) == "multimode"
+    assert _rule(fams, score, excess, se, z_scipy - 0.01) == "two-mass"
+    assert _rule(fams, score, excess, se) == ("multimode" if z_scipy <= 2.0 else "two-mass")    # _SEPARABLE_SE = 2
+    assert _rule(fams, score, excess, se, _SEPARABLE_Z) == ("multimode" if z_scipy <= _SEPARABLE_Z else "two-mass")
+    assert "exceeds 2 null standard deviations" in RULE and RULE == _rule_text(_SEPARABLE_Z) == _rule_text(2.0)
+    assert "exceeds 0.5 null standard deviations" in _rule_text(0.5)     # FamilyChoice.rule states the threshold used
+    log = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
+                       get_family("multimode").Params(), 5)[0]
+    for bad in (-0.5, 11.0, math.nan, "2"):
+        with pytest.raises(ValueError, match="separable"):
+            choose_family(log, separable=bad)
+
+
+def test_shifted_core_survives_a_stiction_gap_below_rounding():
+    """A multimode fold fit may end with k̄s − k̄c below k̄c's rounding (dev log 8484 lugre k=0 raised
+    a math domain error in choose_family): the shifted start keeps k̄c·factor and k̄s − k̄c·factor > 0."""
+    from plant.identification.fit import _shifted
+
+    core = np.array([math.log(1.5), math.log(1.5) - 60.0, math.log(0.5), math.log(0.01)])
+    for factor in (1.0, 0.92, 0.78):
+        c = _shifted(core, factor)
+        assert np.all(np.isfinite(c))
+        assert math.exp(c[0]) == pytest.approx(1.5 * factor, rel=1e-12)
+        assert math.exp(c[0]) + math.exp(c[1]) == pytest.approx(1.5, rel=1e-12)   # k̄s held
+    ordinary = np.array([math.log(1.2), math.log(0.4), math.log(0.5), math.log(0.01)])
+    c = _shifted(ordinary, 0.85)
+    assert math.exp(c[0]) + math.exp(c[1]) == pytest.approx(1.6, rel=1e-12)
+
+
 def test_auto_rule_fewest_parameters_then_lower_score():
     """The stated rule on given scores: the fewest fitted parameters among the families within
     2 SE of the best; stribeck and lugre (six each) are told apart by their scores, not by order."""
@@ -605,3 +656,11 @@ def test_a_calibration_point_the_family_rejects_gets_no_replicate():
     assert all(p.stribeck_velocity == points[i] == at["stribeck_velocity"] and p.bristle_stiffness == 3.8277147e+05
                for i, at, p in truths)
     assert _replicate_truths(fitted, {}, 3, range(3)) == ([(0, {}, fitted), (1, {}, fitted), (2, {}, fitted)], [])
+
+
+def test_identify_separable_bad_value_is_one_line(tmp_path):
+    """``identify --separable`` outside [0, 10] (or not finite): one line naming the option, exit 2."""
+    for bad in ("-1", "11", "nan"):
+        r = _inproc("identify", tmp_path / "axis.csv", "--family", "auto", "--separable", bad)
+        assert r.returncode == 2, (bad, r.stdout, r.stderr)
+        assert "--separable" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

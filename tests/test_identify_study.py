@@ -3,7 +3,8 @@
 * coverage of the stribeck fit: random axes of tests/identify_draws.py (seed 2611, not used while
   writing the fit or the plan), Table 2-1 noise, default plan, 10-replicate bootstrap;
 * coverage of the lugre fit (same seed and draws, family index 2);
-* the auto pick: seed 5757, 2 logs per family (test_eighth_auto_picks_the_generating_family, the
+* the auto pick: seed 7531, 2 logs per family (test_ninth_auto_picks_the_generating_family, the
+  ninth session's dev-chosen threshold); seed 5757 (test_eighth_auto_picks_the_generating_family, the
   eighth session's features); seed 9393 (test_auto_picks_the_generating_family; 6262 was the
   fourth session's, 6161 the third session's, on the output-error rule) and
   tests/test_identify.py::test_auto_on_held_out_truth (seed 4711, 10 per family; SOLNIC_AXIS_STUDY=1).
@@ -48,11 +49,11 @@ def coverage_case(family: str, case: int, seed: int = 2611, bootstrap: int = 10)
     return out, cpu
 
 
-def auto_case(family: str, case: int, seed: int = AUTO_SEED, options=None):
-    """``choose_family`` (bootstrap 0) on one log of ``family`` at the ``case``-th random axis of
-    tests/identify_draws.py (draws from ``default_rng([seed, f])``, log seed seed·1000 + 100·f +
-    case, f the family's index in FAMILY_FREE; the plan of ``options``, default the default
-    plan): (choice, CPU seconds)."""
+def auto_case(family: str, case: int, seed: int = AUTO_SEED, options=None, separable=None):
+    """``choose_family`` (bootstrap 0; the rule's threshold ``separable``, default the default) on
+    one log of ``family`` at the ``case``-th random axis of tests/identify_draws.py (draws from
+    ``default_rng([seed, f])``, log seed seed·1000 + 100·f + case, f the family's index in
+    FAMILY_FREE; the plan of ``options``, default the default plan): (choice, CPU seconds)."""
     from plant.identification import ExperimentOptions
     from plant.identification.fit import choose_family
     from tests.identify_draws import draw
@@ -63,7 +64,7 @@ def auto_case(family: str, case: int, seed: int = AUTO_SEED, options=None):
         p = draw(family, rng)
     log, _ = simulate_log(design_experiment(options or ExperimentOptions()), family, p, seed * 1000 + 100 * f + case)
     t0 = time.process_time()
-    _, choice = choose_family(log, bootstrap=0)
+    _, choice = choose_family(log, bootstrap=0, separable=separable)
     return choice, time.process_time() - t0
 
 
@@ -190,6 +191,40 @@ def test_eighth_auto_picks_the_generating_family():
             choice, cpu = auto_case(family, case, seed=EIGHTH_AUTO_SEED)
             picked[family, case] = choice.family
             print(family, case, choice.family, f"cpu {cpu:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+
+
+# the auto study of issue 25's ninth session: named before any run of this session, never used
+# while tuning the rule (dev seed 8484, tests/identify_dev.py); the candidate was fixed before it ran
+NINTH_AUTO_SEED = 7531
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 6 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, ninth session) on the 8 logs of the fresh "
+                   "seed 7531 with the candidate threshold 0.5: 6 of 8 — stribeck k=1 picked multimode (multimode best by "
+                   "the mean), lugre k=0 picked stribeck (stribeck best by the mean, lugre better by ranks, z = -3.18); "
+                   "the default threshold 2 also 6 of 8 (lugre k=0: multimode); below the must-show of >= 90 % "
+                   "(docs/axis.md)")
+def test_ninth_auto_picks_the_generating_family():
+    """``--family auto`` with the ninth session's candidate threshold (``separable=0.5``,
+    :data:`plant.identification.fit._NINTH_SEPARABLE_Z`, chosen on dev seed 8484 before this seed
+    ran) on 2 fresh logs per family (seed 7531, cases 0–1, :func:`auto_case`, default plan): the
+    generating family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Ninth session: auto"). The
+    default rule's pick (threshold 2) on the same fold fits is printed beside it. Measured with
+    tests/identify_dev.py (the same fold fits, no final point fit): 6 of 8 at 0.5 and 6 of 8 at 2;
+    CPU of the choice 27–212 s per log (median 48 s; one process per log, two at a time, load 10–15)."""
+    from plant.identification.fit import _NINTH_SEPARABLE_Z, _rule
+
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            choice, cpu = auto_case(family, case, seed=NINTH_AUTO_SEED, separable=_NINTH_SEPARABLE_Z)
+            picked[family, case] = choice.family
+            fams = list(choice.score)
+            default = _rule(fams, choice.score, {f: w for f, (w, _) in choice.ranks.items()},
+                            {f: sd for f, (_, sd) in choice.ranks.items()}, 2.0)
+            print(family, case, choice.family, "(threshold 2:", default + ")", f"cpu {cpu:.1f}")
     assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
 
 
