@@ -10,7 +10,8 @@ the cell (or x off the grid) pays for both, exactly as before. The table is wide
 relative margin of 1e-9 on each side (the rounding of erfc, exp and the table itself is
 ~1e-16 relative), so a decided comparison is the one the floating-point form makes, and the
 decision and the normals read are those of :func:`plant.multimode.zero_velocity._crossed`
-(tests/test_kernel_equivalence.py checks both on millions of draws and at the cells' edges).
+(tests/test_bridge_loop.py checks both on random draws, at the grid points ±1 ulp and at the
+cells' edges).
 """
 
 from __future__ import annotations
