@@ -367,7 +367,7 @@ class _Model:
                 n_ev += step.n_events
                 n_sub += step.n_substeps
                 if step.status is not Status.OK:
-                    self.clock.add(self.family, k + 1, n_ev, n_sub, tm_root_steps() - roots0 if two_mass else 0)
+                    self.clock.add(self.family, k + 1, n_ev, n_sub, *((tm_root_steps() - roots0,) if two_mass else ()))
                     return None
                 state = step.state
                 x = state.x
@@ -384,7 +384,8 @@ class _Model:
                 elif state.mode == 2 and not state.flyback and abs(x[2]) <= p.stiction and x[1] == 0.0:
                     x1[k:] = x[0]
                     break
-            self.clock.add(self.family, k, n_ev, n_sub, tm_root_steps() - roots0 if two_mass else 0)
+            self.clock.add(self.family, k, n_ev, n_sub, *((tm_root_steps() - roots0,) if two_mass else ()))
+            # (two-mass alone adds its root-search steps: the other families' additions as before)
             if streams is None:
                 done[key] = x1
                 if symmetric:
