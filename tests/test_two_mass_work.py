@@ -8,6 +8,8 @@ reflect, stick … at t ≈ 1.6 ms, a Zeno point) and each of its events costs t
 
 from __future__ import annotations
 
+import numpy as np
+
 from plant.drive import DriveCommand, DriveType
 from plant.identification import fit
 from plant.protocol import get_family
@@ -76,3 +78,29 @@ def test_other_families_clock_unchanged():
         clock = fit._WorkClock()
         clock.add(fam, 1234, 56, 789)
         assert clock.spent == a * 1234 + b * 56 + c * 789
+
+
+def test_two_mass_prediction_charges_its_root_steps():
+    """fit._Model.predict (noise-free, the path the point fit and the bootstrap use) hands each
+    simulated move's root steps to the clock, and their sum is the kernel's count."""
+    from plant.identification import ExperimentOptions, design_experiment, simulate_log
+
+    p = FAM.Params().replace(**FAM.scenarios["compliant"][0])
+    log, _ = simulate_log(design_experiment(ExperimentOptions(repeats=1)), "two-mass", p, 5)
+    u_max = max(float(log.u_max), FAM.Params().u_max)
+    model = fit._Model(log, "two-mass", FAM.Params().replace(u_max=u_max, sample_period=log.sample_period))
+    seen = []
+
+    class _Clock(fit._WorkClock):
+        def add(self, family, *work):
+            seen.append(work)
+            super().add(family, *work)
+
+    model.clock = _Clock()
+    # z: ln of k̄c, k̄s − k̄c, J, τ3, k_sh (fit._Model.params)
+    z = np.log([p.coulomb, p.stiction - p.coulomb, p.inertia, p.motor_time_constant, p.shaft_stiffness])
+    r0 = root_steps()
+    y = model.predict(z)
+    assert y is not None and seen and all(len(w) == 4 for w in seen)
+    assert sum(w[3] for w in seen) == root_steps() - r0 > 0
+    assert model.clock.spent > sum(4.0e-6 * w[0] + 88e-6 * w[1] for w in seen)
