@@ -203,7 +203,7 @@ def test_interval_k_reads_the_first_k_segments_and_is_interval_kernel_bit_for_bi
     k segments of longer arrays whose tail is NaN) against ``interval_kernel`` on exact slices:
     the same state, work sheet, events and noise position on a noisy train of bridge pulses and
     linear levels that sticks, breaks loose and reverses."""
-    from plant.two_mass.interval import MOVE_SCRATCH, _event_scratch, interval_k, interval_kernel, plan
+    from plant.two_mass.interval import MOVE_SCRATCH, _SHEET, _event_scratch, interval_k, interval_kernel, plan
     from plant.two_mass.modes import NCORE
     from plant.two_mass.motion import NX
     p = _compliant()
@@ -229,7 +229,7 @@ def test_interval_k_reads_the_first_k_segments_and_is_interval_kernel_bit_for_bi
         pad_o = np.concatenate([offs, np.full(3, np.nan)])
         pad_l = np.concatenate([levs, np.full(3, np.nan)])
         ev1, ev2 = _event_scratch().copy(), _event_scratch().copy()
-        out1, out2 = np.empty(8 + 15), np.empty(8 + 15)
+        out1, out2 = np.empty(8 + _SHEET), np.empty(8 + _SHEET)     # 15 slots before the root-step count
         p1 = interval_kernel(x, mode, fb, t, tau, offs, levs, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, pos, ev1,
                              out1)
         p2 = interval_k(x, mode, fb, t, tau, pad_o, pad_l, k, bridge, prm, q, V, Vi, lam, o, TP, TL, BT, z, pos, ev2,

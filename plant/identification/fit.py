@@ -55,6 +55,7 @@ from plant.multimode import move_loop as mm_move_loop
 from plant.lugre.integrate import TOLERANCES as lugre_tolerances
 from plant.protocol import get_family
 from plant.state import SimOptions, Status
+from plant.two_mass.interval import root_steps as tm_root_steps
 
 __all__ = ["FAMILY_FREE", "AxisFit", "FamilyChoice", "fit_log", "choose_family", "moves", "RULE",
            "NOT_IDENTIFIED_RULE", "DEFAULT_BUDGET_S"]
@@ -171,6 +172,12 @@ class _OutOfTime(Exception):
 # Constants: a budget is the same count of work on every machine and under any load.
 _UNIT_COST_S = {"multimode": (2.2e-6, 48e-6, 0.0), "stribeck": (10e-6, 22e-6, 0.065e-6),
                 "lugre": (0.0, 16e-6, 0.27e-6), "two-mass": (4.0e-6, 88e-6, 0.0)}
+# Nominal CPU seconds per root-search safe step (plant.two_mass.interval.root_steps), the fourth
+# unit: work the other three miss — a stiff, lightly damped shaft rings at a high frequency and
+# the searches step through every ringing (issue 25, ninth session, held-out seed 6571 two-mass
+# case 8: 150.8 CPU s of point fit priced 7.5 nominal s). Measured once against the units above,
+# docs/axis.md "Ninth session". A family without it adds nothing (its clock bit-identical).
+_ROOT_STEP_COST_S = {"two-mass": 0.30e-6}
 
 
 class _WorkClock:
@@ -186,9 +193,12 @@ class _WorkClock:
     def __init__(self) -> None:
         self.spent = 0.0
 
-    def add(self, family: str, samples: int, events: int, substeps: int) -> None:
+    def add(self, family: str, samples: int, events: int, substeps: int, roots: int = 0) -> None:
         a, b, c = _UNIT_COST_S[family]
-        self.spent += a * samples + b * events + c * substeps
+        work = a * samples + b * events + c * substeps
+        if roots:
+            work += _ROOT_STEP_COST_S[family] * roots
+        self.spent += work
 
     def past(self, deadline: float, family: str) -> bool:
         """Whether the clock is past ``deadline`` (asked by a model of ``family`` before it simulates a move)."""
@@ -215,9 +225,11 @@ class _TraceClock(_WorkClock):
         self.family = family
         self.first_past: int | None = None
 
-    def add(self, family: str, samples: int, events: int, substeps: int) -> None:
+    def add(self, family: str, samples: int, events: int, substeps: int, roots: int = 0) -> None:
         a, b, c = _UNIT_COST_S[family]
         work = a * samples + b * events + c * substeps
+        if roots:
+            work += _ROOT_STEP_COST_S[family] * roots
         self.spent += work
         self.trace.append(float(work))
 
@@ -298,6 +310,7 @@ class _Model:
         fam, out = self.fam, []
         opts = _OPTS if streams is None else _NOISY_OPTS
         lugre = self.family == "lugre"
+        two_mass = self.family == "two-mass"
         if lugre:   # bristle ring-down time 1/(ζ·ω0) ≤ 4/ω0 bounds the motion a velocity still makes
             ring = 4.0 / math.sqrt(p.bristle_stiffness / p.inertia)
         done: dict = {}     # noise-free: a kind of move's response, simulated once
@@ -348,12 +361,13 @@ class _Model:
             noise = None if streams is None else streams(g)
             x1 = np.empty(e - s)
             k = n_ev = n_sub = 0
+            roots0 = tm_root_steps() if two_mass else 0
             while k < e - s:
                 step = fam.step(state, self.log.commands[s + k], p, noise, opts)
                 n_ev += step.n_events
                 n_sub += step.n_substeps
                 if step.status is not Status.OK:
-                    self.clock.add(self.family, k + 1, n_ev, n_sub)
+                    self.clock.add(self.family, k + 1, n_ev, n_sub, *((tm_root_steps() - roots0,) if two_mass else ()))
                     return None
                 state = step.state
                 x = state.x
@@ -370,7 +384,8 @@ class _Model:
                 elif state.mode == 2 and not state.flyback and abs(x[2]) <= p.stiction and x[1] == 0.0:
                     x1[k:] = x[0]
                     break
-            self.clock.add(self.family, k, n_ev, n_sub)
+            self.clock.add(self.family, k, n_ev, n_sub, *((tm_root_steps() - roots0,) if two_mass else ()))
+            # (two-mass alone adds its root-search steps: the other families' additions as before)
             if streams is None:
                 done[key] = x1
                 if symmetric:

@@ -35,18 +35,18 @@ from plant.multimode.zero_velocity import _crossed
 from plant.randomness import NoiseExhausted, NoiseStream, normal
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass.bridge import BISECT_SCRATCH, bisect_fresh, bisect_w, bridge_tables
-from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_al, first_root
+from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_exit_n, first_root, first_root_n
 from plant.two_mass.motion import (A1, A2, A3, A4, A5, AKC, AU, NB, NNB, NX, PHI, WM, mode_row, process_noise,
                                    rotor_after, _start_coords_w, propagate, psd_factor, start_coords,
                                    transition, transition_u, process_noise_u, unit_coords)
 from plant.two_mass.params import TwoMassParams
 
-__all__ = ["advance", "N_X"]
+__all__ = ["advance", "N_X", "root_steps"]
 
 N_X = 8   # x = [x1, x2, x3, x4, x5, u, φ, ω_m]
 
-_T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC = range(15)
-_SHEET = 15
+_T, _MODE, _FB, _COUNT, _PEAK, _IABS, _ISQ, _CHG, _DUR, _NEV, _NBRK, _NSTK, _NSUB, _STATUS, _NREC, _NROOT = range(16)
+_SHEET = 16   # _NROOT: the root searches' safe steps (modes.first_root_n, first_exit_n), for the fit's work clock
 _O_NOISE, _O_NEWTON, _O_SUB, _O_RSUB, _O_TOL, _O_MAXEV, _O_DIVERGE = range(7)
 _OK, _CHATTER, _DIVERGED, _BAD_LEVEL, _NO_ROOT = 0, 1, 2, 3, 4
 _LEVEL, _FLYBACK_END, _BREAKAWAY, _REGIME_END, _STICK, _REVERSAL, _REFLECTION = (int(k) for k in EventKind)
@@ -111,6 +111,13 @@ def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
     """:func:`_torque_exit` in the scratch C (5 × NCORE complex: w, b̃, then the coefficients
     and exponents in rows 2-4) and F (3 × NCORE: z, b, |λ|): the same operations,
     allocation-free and without reference counting."""
+    h, side, _ = _torque_exit_n(X, ks, horizon, p, q, V, Vi, lam, C, F)
+    return h, side
+
+
+@njit(cache=True, _nrt=False)
+def _torque_exit_n(X, ks, horizon, p, q, V, Vi, lam, C, F):
+    """:func:`_torque_exit_w` and the safe steps its search took (0 when the bound decided)."""
     n = _start_coords_w(X, 2, p, Vi, C, F)
     for i in range(NCORE):
         C[2, i] = 0j
@@ -122,10 +129,10 @@ def _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F):
         C[3, i] = cv * C[1, i]
         C[4, i] = lam[M_STUCK, i]
     if _stays_inside(C, n, ks, horizon):
-        return math.inf, 0
+        return math.inf, 0, 0
     for i in range(n):
         F[2, i] = abs(C[4, i])
-    return first_exit_al(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
+    return first_exit_n(C[2], C[3], C[4], F[2], n, -ks, ks, horizon)
 
 
 @njit(cache=True, _nrt=False)
@@ -186,7 +193,8 @@ def _stays_inside(C, n, ks, horizon):
 
 @njit(cache=True)
 def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
-    """First root of the mean x2 (which = 0) or of ẋ1 = x2 − x4 (which = 1) while moving."""
+    """First root of the mean x2 (which = 0) or of ẋ1 = x2 − x4 (which = 1) while moving, and
+    the safe steps its search took (modes.first_root_n)."""
     r = mode_row(mode)
     W0 = np.empty(NCORE, dtype=np.complex128)
     B0 = np.empty(NCORE, dtype=np.complex128)
@@ -203,7 +211,10 @@ def _velocity_root(X, mode, which, sigma, horizon, p, q, V, Vi, lam):
         ca[n] = -X[A4]
         lm[n] = -p.beta4
         m = n + 1
-    return first_root(ca, cb, lm, m, sigma, horizon)
+    al = np.empty(max(m, 1))
+    for i in range(m):
+        al[i] = abs(lm[i])
+    return first_root_n(ca, cb, lm, al, m, sigma, horizon)
 
 
 # --- mode 2 -----------------------------------------------------------------------------------
@@ -217,7 +228,8 @@ def _stuck(X, S, t_end, bridge, p, q, V, Vi, lam, o, z, cursor, ev, Xn, C, F):
     h_end = t_end - S[_T]
     h_fb = _flyback_time(X, S, p)
     horizon = min(h_end, h_fb)
-    h_brk, side = _torque_exit_w(X, ks, horizon, p, q, V, Vi, lam, C, F)
+    h_brk, side, steps = _torque_exit_n(X, ks, horizon, p, q, V, Vi, lam, C, F)
+    S[_NROOT] += steps
     if h_brk < 0.0:
         S[_STATUS] = _NO_ROOT
         return True
@@ -265,8 +277,10 @@ def _velocity_zero(X, S, p, q):
 
 @njit(cache=True)
 def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
-    """max(peak, |x1| at the roots of ẋ1 = x2 − x4 in (0, τ)) for the noise-free segment from X."""
+    """(max(peak, |x1| at the roots of ẋ1 = x2 − x4 in (0, τ)), work) for the noise-free segment
+    from X; work: the searches' safe steps, and one per root for its propagation."""
     t = 0.0
+    work = 0
     Xa = X.copy()
     for _ in range(10000):
         d = Xa[A2] - Xa[A4]
@@ -275,17 +289,18 @@ def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
             Xd = np.empty(NX)
             propagate(Xa, mode, 1e-9, p, q, V, Vi, lam, Xd)
             sigma = 1.0 if Xd[A2] - Xd[A4] > 0.0 else -1.0
-        r = _velocity_root(Xa, mode, 1, sigma, tau - t, p, q, V, Vi, lam)
+        r, steps = _velocity_root(Xa, mode, 1, sigma, tau - t, p, q, V, Vi, lam)
+        work += steps + 1
         if not (r > 0.0 and r < tau - t):
             if r == 0.0:
                 r = min(1e-12, tau - t)   # a double zero at the start: step past it
             else:
-                return peak
+                return peak, work
         propagate(Xa, mode, r, p, q, V, Vi, lam, Xn)
         Xa[:] = Xn
         t += r
         peak = max(peak, abs(Xa[A1]))
-    return peak
+    return peak, work
 
 
 @njit(cache=True, _nrt=True)
@@ -293,13 +308,15 @@ def _quiet_segment(X, S, mode, s, h, bridge, p, q, V, Vi, lam, noise_on, z, curs
     """:func:`_moving`'s segment when x2 carries no white noise: the first root of the mean
     velocity, the peak, the closed form (and the segment's exact noise). Returns −1 when no root
     was found, 1 at a velocity zero, else 0. It allocates: reference counting on, explicitly."""
-    tau = _velocity_root(X, mode, 0, s, h, p, q, V, Vi, lam)
+    tau, steps = _velocity_root(X, mode, 0, s, h, p, q, V, Vi, lam)
+    S[_NROOT] += steps
     if tau < 0.0:
         return -1
     stopped = tau <= h
     advanced = tau if stopped else h
     _torque_metrics(S, x3, u, advanced, bridge, p)
-    S[_PEAK] = _x1_peak(X, mode, advanced, p, q, V, Vi, lam, max(S[_PEAK], abs(X[A1])), Xn)
+    S[_PEAK], work = _x1_peak(X, mode, advanced, p, q, V, Vi, lam, max(S[_PEAK], abs(X[A1])), Xn)
+    S[_NROOT] += work
     propagate(X, mode, advanced, p, q, V, Vi, lam, Xn)
     X[:] = Xn
     if noise_on:
@@ -583,6 +600,14 @@ _NO_NOISE = np.empty(0)
 _STATUS_OF = {_OK: Status.OK, _CHATTER: Status.CHATTER, _DIVERGED: Status.DIVERGED, _NO_ROOT: Status.ERROR}
 
 
+def root_steps() -> int:
+    """The root searches' safe steps (and x1-peak roots) of every :func:`advance` on this thread
+    so far: work that samples, events and sub-steps do not show (a stiff, lightly damped shaft
+    rings at a high frequency, and each interval's searches step through its ringing). Read it
+    before and after a simulation for that simulation's count (the fit's work clock)."""
+    return getattr(_SCRATCH, "root_steps", 0)
+
+
 def _event_scratch() -> np.ndarray:
     ev = getattr(_SCRATCH, "events", None)
     if ev is None:
@@ -659,7 +684,8 @@ def advance(state: PlantState, command: DriveCommand, params: TwoMassParams, noi
     if noisy:
         noise.consumed(pos_after)
     x_out = out[:N_X].copy()
-    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec) = out[N_X:].tolist()
+    (t, mode, flyback, _, peak, iabs, isq, chg, dur, nev, nbrk, nstk, nsub, code, nrec, nroot) = out[N_X:].tolist()
+    _SCRATCH.root_steps = getattr(_SCRATCH, "root_steps", 0) + int(nroot)
     code = int(code)
     if code == _BAD_LEVEL:
         raise ValueError(f"bridge drive levels must be 0 or ±u_max ({params.u_max}), got {command.segments!r}")

@@ -218,8 +218,16 @@ def first_exit(ca, cb, lam, n, lo, hi, horizon):
 @njit(cache=True, _nrt=False)
 def first_exit_al(ca, cb, lam, al, n, lo, hi, horizon):
     """first_exit with |λ_i| in ``al``, compiled without reference counting (allocates nothing); same bits."""
+    h, side, _ = first_exit_n(ca, cb, lam, al, n, lo, hi, horizon)
+    return h, side
+
+
+@njit(cache=True, _nrt=False)
+def first_exit_n(ca, cb, lam, al, n, lo, hi, horizon):
+    """:func:`first_exit_al` and the number of safe steps it evaluated (each a g, g′, M2 over the
+    n modal terms: the search's work, counted for the fit's work clock)."""
     t = 0.0
-    for _ in range(100000):
+    for it in range(100000):
         g, g1, m2, size = _g_fast(ca, cb, lam, al, n, t, t == 0.0)
         best = math.inf
         side = 0
@@ -231,7 +239,7 @@ def first_exit_al(ca, cb, lam, al, n, lo, hi, horizon):
                 y = 0.0
             if y <= 0.0:
                 if t > 0.0 or y < 0.0 or y1 < 0.0 or (y1 == 0.0 and -sigma * second_derivative(ca, cb, lam, n, t)[0] <= 0.0):
-                    return t, (1 if k == 0 else -1)
+                    return t, (1 if k == 0 else -1), it + 1
                 if y1 == 0.0:
                     y2, m3 = second_derivative(ca, cb, lam, n, t)
                     s = 1.5 * (-sigma * y2) / m3
@@ -249,14 +257,14 @@ def first_exit_al(ca, cb, lam, al, n, lo, hi, horizon):
         if t + best >= horizon:
             g, _, _, _ = _g_fast(ca, cb, lam, al, n, horizon, False)
             if g >= hi:
-                return horizon, 1
+                return horizon, 1, it + 1
             if g <= lo:
-                return horizon, -1
-            return math.inf, 0
+                return horizon, -1, it + 1
+            return math.inf, 0, it + 1
         if best < 1e-15:
-            return t + best, side
+            return t + best, side, it + 1
         t += best
-    return -1.0, 0
+    return -1.0, 0, 100000
 
 
 @njit(cache=True)
@@ -288,8 +296,14 @@ def first_root(ca, cb, lam, n, sigma, horizon):
 @njit(cache=True, _nrt=False)
 def first_root_al(ca, cb, lam, al, n, sigma, horizon):
     """first_root with |λ_i| in ``al``, compiled without reference counting (allocates nothing); same bits."""
+    return first_root_n(ca, cb, lam, al, n, sigma, horizon)[0]
+
+
+@njit(cache=True, _nrt=False)
+def first_root_n(ca, cb, lam, al, n, sigma, horizon):
+    """:func:`first_root_al` and the number of safe steps it evaluated (counted for the fit's work clock)."""
     t = 0.0
-    for _ in range(100000):
+    for it in range(100000):
         g, g1, m2, size = _g_fast(ca, cb, lam, al, n, t, t == 0.0)
         y = sigma * g
         y1 = sigma * g1
@@ -297,16 +311,16 @@ def first_root_al(ca, cb, lam, al, n, sigma, horizon):
             y = 0.0           # at the level to rounding (e.g. x2 = 0 at breakaway): the slope decides
         if y <= 0.0:
             if t > 0.0:
-                return t
+                return t, it + 1
             if y < 0.0 or y1 < 0.0:
-                return 0.0
+                return 0.0, it + 1
             if y1 == 0.0:
                 # a double zero at the start (e.g. breakaway with ks = kc): the sign of g'' decides;
                 # σg ≥ ½σg''·s² − M3·s³/6 > 0 for s < 3σg''/M3
                 y2, m3 = second_derivative(ca, cb, lam, n, t)
                 y2 = sigma * y2
                 if y2 <= 0.0:
-                    return 0.0
+                    return 0.0, it + 1
                 t = 1.5 * y2 / m3
                 continue
         r = math.sqrt(y1 * y1 + 2.0 * m2 * max(y, 0.0))
@@ -316,8 +330,8 @@ def first_root_al(ca, cb, lam, al, n, sigma, horizon):
             s = 2.0 * y / (r - y1)
         if t + s >= horizon:
             g, _, _, _ = _g_fast(ca, cb, lam, al, n, horizon, False)
-            return horizon if sigma * g <= 0.0 else math.inf
+            return (horizon if sigma * g <= 0.0 else math.inf), it + 1
         if s < 1e-15:
-            return t + s
+            return t + s, it + 1
         t += s
-    return -1.0
+    return -1.0, 100000
