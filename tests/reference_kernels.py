@@ -5,8 +5,12 @@ them: each is the code as it was before an optimisation that must not change a s
 for the tridiagonal matrix and separate factorisation, elimination and source loops (issue 27).
 ``step``: :func:`plant.multimode.zero_velocity._step` drawing its four normals by four checked
 calls of :func:`plant.randomness.normal` (issue 27).
-``bridge_low``: the reflecting sub-step's bridge minimum in
-:func:`plant.multimode.zero_velocity.bridge_segment`, computing p = exp(e) always (issue 27).
+``bridge_low``: the reflecting sub-step's bridge minimum of the noisy moving segment, computing
+p = exp(e) always (issue 27).
+``bridge_segment``, ``crossed_exact``: the noisy moving segment's loop and its crossing decision
+(exp and erfc always evaluated but for a far exponent) before
+:func:`plant.multimode.bridge_loop.bridge_run` and :func:`plant.multimode.crossing.crossed`
+replaced them (issue 27).
 ``hermite_peak``: :func:`plant.multimode.segments.hermite_peak` with its roots in an array
 (issue 27).
 ``grid_table``: :meth:`controllers.solnic.grid_posterior.FrictionGrid.table` in numpy (np.clip,
@@ -19,7 +23,9 @@ import numpy as np
 from numba import njit
 
 from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
-from plant.randomness import normal
+from plant.multimode.moving import chol_psd, phi_moving, q_moving, substep_peak, velocity_extremum_time
+from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _mean_min, _step
+from plant.randomness import normal, uniform_below
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -204,3 +210,104 @@ def grid_table(grid, dt_u):
     spread = spread.ravel()
     i = grid._idx
     return dc[i], ts[i], tb[i], spread[i]
+
+
+@njit(cache=True)
+def crossed_exact(va, vb, h, sig_v2, z, cursor):
+    """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc the bridge crossing probability:
+    the same decision from the same draws, without exp and erfc when the exponent is below −70
+    (pc < 4e−31) and the normal above −11 (U = Φ(Z) > 1.9e−28 > pc: no crossing)."""
+    if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
+        return True
+    e = -2.0 * va * vb / (sig_v2 * h)
+    if e < -70.0:
+        x = normal(z, cursor)
+        if x > -11.0:
+            return False
+        return 0.5 * math.erfc(-x / math.sqrt(2.0)) < math.exp(e)
+    pc = math.exp(e)
+    return pc >= 1.0 or uniform_below(z, cursor, pc)
+
+
+@njit(cache=True)
+def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor, peak,
+                   max_steps, W):
+    """The noisy moving segment as ``plant.multimode.zero_velocity.bridge_segment`` computed it
+    before :func:`plant.multimode.bridge_loop.bridge_run` replaced it (same arguments but the
+    scratch views; returns (advanced, stopped, peak, sub-steps, chattered))."""
+    s = 1.0 if mode == 3 else -1.0
+    m = 0 if mode == 1 else 1
+    j = 1 if reflect else 0
+    base = o_rsub if reflect else o_sub
+    sig_v2 = p.alpha * p.alpha * p.sigma2_sq
+    nrung = TP.shape[2]
+    no_tables = BPh[:, :0]
+    Xb = W[0:7]
+    Xc = W[7:14]
+    P = W[14:63].reshape((7, 7))
+    L = W[63:79].reshape((4, 4))
+    Qtmp = W[79:95].reshape((4, 4))
+    t = 0.0
+    n = 0
+    while h - t > 0.0:
+        rem = h - t
+        k = 0
+        if nrung > 1 and s * X[A2] >= TH[j, 1] and base < rem:
+            # the rung the start velocity allows, up to the first one reaching the segment end;
+            # then the mean path over the width w actually used (TH grows with h: conservative)
+            k = 1
+            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and base * 2.0**k < rem:
+                k += 1
+            if reflect:
+                # the torque beyond ks keeps the mean drift of s·x2 ≥ −α·|x5|·β5·τ (x5's mean
+                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·w²/2
+                while k > 0:
+                    w = min(base * 2.0**k, rem)
+                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * w * w >= TH[j, k]:
+                        break
+                    k -= 1
+            else:
+                t_ext = velocity_extremum_time(mode, X, p)
+                while k > 0 and _mean_min(mode, X, p, min(base * 2.0**k, rem), t_ext) < TH[j, k]:
+                    k -= 1
+        sub = base * 2.0**k
+        # one fresh step to the segment's end when an admissible rung reaches it (any shorter
+        # width is admissible too: c(h) and E[L_h] grow with h), or the last ≤ 1.5 sub-steps
+        regular = not (rem <= sub or (k == 0 and rem <= 1.5 * sub))
+        if regular:
+            while k > 0 and 1.5 * sub >= rem:
+                k -= 1
+                sub = sub / 2.0
+            step = sub
+            _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
+        else:
+            step = rem
+            phi_moving(mode, step, p, P)
+            q_moving(mode, step, p, Qtmp)
+            chol_psd(Qtmp, L)
+            _step(X, P, L, z, cursor, Xb)
+        n += 1
+        if n > max_steps:
+            return t, False, peak, n, True
+        if reflect:
+            va, vb = s * X[A2], s * Xb[A2]
+            low = _bridge_low(va, vb, step, sig_v2, z, cursor) if sig_v2 > 0 else min(va, vb)
+            if low < 0.0:
+                Xb[A2] += s * (-low)
+                Xb[A1] += s * (-low) * step / 2.0
+        else:
+            if crossed_exact(X[A2], Xb[A2], step, sig_v2, z, cursor):
+                if regular and k == 0:
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
+                else:
+                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
+                                     BG[:, :0], BG[:, :0], W[96:])
+                n += lv
+                peak = substep_peak(X, Xc, tc, peak)
+                _copy(X, Xc)
+                X[A2] = 0.0
+                return t + tc, True, peak, n, False
+        peak = substep_peak(X, Xb, step, peak)
+        _copy(X, Xb)
+        t += step
+    return h, False, peak, n, False

@@ -2,12 +2,13 @@
 
 * :func:`plant.multimode.crossing.crossed` (the crossing decision from a table of log Φ, exp and
   erfc only inside a cell) against ``pc >= 1.0 or uniform_below(pc)`` with
-  pc = :func:`plant.multimode.zero_velocity._cross_prob` and against ``zero_velocity._crossed``: the same decision from the same normals,
+  pc = :func:`plant.multimode.zero_velocity._cross_prob` and against the code it replaced
+  (``tests.reference_kernels.crossed_exact``): the same decision from the same normals,
   on random exponents and normals, at the grid's points and with the exponent placed at log Φ(x)
   itself (where only exp and erfc can decide);
 * the table's cells bracket log Φ (computed independently with scipy's ``log_ndtr``);
 * :func:`plant.multimode.bridge_loop.bridge_run` against
-  :func:`plant.multimode.zero_velocity.bridge_segment` on random segments: the same state, peak,
+  ``tests.reference_kernels.bridge_segment`` (the code it replaced) on random segments: the same state, peak,
   sub-step count and read position, bit for bit.
 """
 
@@ -20,8 +21,9 @@ from scipy.special import log_ndtr
 from plant.multimode.bridge_loop import bridge_run
 from plant.multimode.crossing import GRID_MIN, GRID_STEP, LOG_PHI_HI, LOG_PHI_LO, crossed, exp_below
 from plant.multimode.interval import _tables
-from plant.multimode.zero_velocity import _cross_prob, _crossed, bridge_segment
+from plant.multimode.zero_velocity import _cross_prob
 from plant.params import PlantParams
+from tests.reference_kernels import bridge_segment, crossed_exact
 from plant.randomness import uniform_below
 from plant.state import SimOptions
 
@@ -40,7 +42,7 @@ def _check(e, x, h=1e-4, s2=0.3, sign=1.0):
     c3 = np.zeros(1, dtype=np.int64)
     got = crossed(va, vb, h, s2, z, c1)
     want = _reference(va, vb, h, s2, z, c2)
-    assert got == want == _crossed(va, vb, h, s2, z, c3), (e, x, va, vb)   # and the code it replaced
+    assert got == want == crossed_exact(va, vb, h, s2, z, c3), (e, x, va, vb)   # and the code it replaced
     assert c1[0] == c2[0] == c3[0]
     return want
 

@@ -2,7 +2,7 @@
 
 * :func:`plant.multimode.zero_velocity._step` (four normals behind one bounds check) against
   the four-call reference (tests/reference_kernels.py), on the ladder's own Φ and noise factors;
-* :func:`plant.multimode.zero_velocity._crossed` against ``pc >= 1.0 or uniform_below(pc)``
+* :func:`plant.multimode.zero_velocity._crossed` (:func:`plant.multimode.crossing.crossed`) against ``pc >= 1.0 or uniform_below(pc)``
   with pc = :func:`_cross_prob`: the same decision from the same number of normals, also where
   its shortcut applies (exponent < −70) and around its bounds;
 * :func:`plant.multimode.zero_velocity._bridge_low` (the reflecting sub-step's push, exp skipped

@@ -1,8 +1,8 @@
-"""The noisy moving segment's sub-step loop, as the interval's fast path runs it.
+"""The noisy moving segment's sub-step loop: the bridge locator or the reflection, on the step ladder.
 
-:func:`bridge_run` is :func:`plant.multimode.zero_velocity.bridge_segment` (the bridge locator or
-the reflection, on the step ladder: see there) with the same operations in the same order, so
-the same numbers and the same normals read, made cheaper where that changes no bit:
+:func:`bridge_run` replaced ``zero_velocity.bridge_segment`` (kept as the bit-for-bit reference in
+tests/reference_kernels.py) with the same operations in the same order, so the same numbers and
+the same normals read, made cheaper where that changes no bit:
 
 * the crossing test is :func:`plant.multimode.crossing.crossed` (a table of log Φ decides
   most sub-steps without exp and erfc);
@@ -11,9 +11,8 @@ the same numbers and the same normals read, made cheaper where that changes no b
   runtime calls);
 * it is compiled without numba's reference counting (it allocates nothing).
 
-tests/test_kernel_equivalence.py runs both on the same states and normals.
+tests/test_bridge_loop.py runs both on the same states and normals.
 """
-
 from __future__ import annotations
 
 from numba import njit
@@ -30,10 +29,28 @@ A1, A2, A5 = 0, 1, 4
 @njit(cache=True, _nrt=False)
 def bridge_run(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor, peak,
                max_steps, W, P, L, Qtmp):
-    """:func:`plant.multimode.zero_velocity.bridge_segment` with ``P`` (7 × 7), ``L`` and ``Qtmp``
-    (4 × 4) given as scratch instead of cut from ``W`` (≥ 370 floats, of which W[0:14] and
-    W[96:] are used here), and ``TH`` the (2, LADDER) thresholds. Returns (advanced [s],
-    stopped, peak |x1|, sub-steps used, chattered)."""
+    """Advance a noisy moving segment of length h in place (bridge locator, or reflection).
+
+    Steps come from a ladder of widths h_j·2^k (``TP[m, j, k], TL[m, j, k]``: Φ and noise
+    factor, :func:`substep_tables`; j = 0 regular with h_0 = ``o_sub``, j = 1 reflecting with
+    h_1 = ``o_rsub``; m = 0 for mode 1, 1 for mode 3). Each step takes the longest rung k whose
+    threshold ``TH[j, k]`` (:func:`ladder_thresholds`) the mean velocity clears over the whole
+    step; near zero that is rung 0, the fixed sub-step. When that rung reaches the segment's end
+    the rest of the segment is one step, factored afresh (a shorter width is admissible too,
+    since both bounds grow with h); otherwise the step is the longest admissible rung leaving
+    more than half of it, and the last ≤ 1.5·h_j is again one fresh step. The choice depends on
+    the state at the step's start only, so the chain of exact transitions X⁺ = Φ(h)X + N stays
+    exact; what a long step neglects is bounded in ``ladder_thresholds`` (crossing probability
+    ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the reflect sub-step's at
+    zero velocity). Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
+    (reflecting) below.
+
+    ``W`` is scratch space (≥ 370 floats, of which W[0:14] and W[96:] are used here) owned by the
+    caller; ``P`` (7 × 7), ``L`` and ``Qtmp`` (4 × 4) scratch views, ``TH`` the (2, LADDER) thresholds.
+
+    Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
+    velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
+    """
     s = 1.0 if mode == 3 else -1.0
     m = 0 if mode == 1 else 1
     j = 1 if reflect else 0

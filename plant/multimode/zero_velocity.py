@@ -28,9 +28,10 @@ from numba import njit
 
 from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
                           q_moving, substep_peak, velocity_extremum_time)
+from plant.multimode.crossing import crossed as _crossed    # the crossing decision (table of log Φ)
 from plant.randomness import ZPOS, NoiseExhausted, normal, uniform, uniform_below
 
-__all__ = ["bridge_segment", "newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
+__all__ = ["newton_segment", "substep_tables", "bisection_tables", "ladder_thresholds", "LADDER",
            "FAR_SIGMAS", "hitting_midpoint"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
@@ -50,23 +51,6 @@ def _cross_prob(va, vb, h, sig_v2):
     if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
         return 1.0
     return math.exp(-2.0 * va * vb / (sig_v2 * h))
-
-
-@njit(cache=True)
-def _crossed(va, vb, h, sig_v2, z, cursor):
-    """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc = :func:`_cross_prob` (va, vb, h):
-    the same decision from the same draws, without exp and erfc when the exponent is below −70
-    (pc < 4e−31) and the normal above −11 (U = Φ(Z) > 1.9e−28 > pc: no crossing)."""
-    if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
-        return True
-    e = -2.0 * va * vb / (sig_v2 * h)
-    if e < -70.0:
-        x = normal(z, cursor)
-        if x > -11.0:
-            return False
-        return 0.5 * math.erfc(-x / math.sqrt(2.0)) < math.exp(e)
-    pc = math.exp(e)
-    return pc >= 1.0 or uniform_below(z, cursor, pc)
 
 
 @njit(cache=True)
@@ -471,108 +455,6 @@ def _mean_min(mode, X, p, h, t_ext):
     if 0.0 < t_ext < h:
         v = min(v, s * mean_velocity(mode, t_ext, X, p))
     return v
-
-
-@njit(cache=True)
-def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw, BG, BC, z, cursor, peak,
-                   max_steps, W):
-    """Advance a noisy moving segment of length h in place (bridge locator, or reflection).
-
-    Steps come from a ladder of widths h_j·2^k (``TP[m, j, k], TL[m, j, k]``: Φ and noise
-    factor, :func:`substep_tables`; j = 0 regular with h_0 = ``o_sub``, j = 1 reflecting with
-    h_1 = ``o_rsub``; m = 0 for mode 1, 1 for mode 3). Each step takes the longest rung k whose
-    threshold ``TH[j, k]`` (:func:`ladder_thresholds`) the mean velocity clears over the whole
-    step; near zero that is rung 0, the fixed sub-step. When that rung reaches the segment's end
-    the rest of the segment is one step, factored afresh (a shorter width is admissible too,
-    since both bounds grow with h); otherwise the step is the longest admissible rung leaving
-    more than half of it, and the last ≤ 1.5·h_j is again one fresh step. The choice depends on
-    the state at the step's start only, so the chain of exact transitions X⁺ = Φ(h)X + N stays
-    exact; what a long step neglects is bounded in ``ladder_thresholds`` (crossing probability
-    ≤ 5.7e-17 per step; reflection: x1 push error rate no larger than the reflect sub-step's at
-    zero velocity). Every step keeps the Brownian-bridge crossing test (regular) or the Skorokhod push
-    (reflecting) below.
-
-    ``W`` is scratch space (≥ 370 floats) owned by the caller.
-
-    Returns (advanced [s], stopped, peak |x1|, sub-steps used, chattered). ``stopped``: the
-    velocity reached zero at X (x2 set to 0) after ``advanced`` seconds.
-    """
-    s = 1.0 if mode == 3 else -1.0
-    m = 0 if mode == 1 else 1
-    j = 1 if reflect else 0
-    base = o_rsub if reflect else o_sub
-    sig_v2 = p.alpha * p.alpha * p.sigma2_sq
-    nrung = TP.shape[2]
-    no_tables = BPh[:, :0]
-    Xb = W[0:7]
-    Xc = W[7:14]
-    P = W[14:63].reshape((7, 7))
-    L = W[63:79].reshape((4, 4))
-    Qtmp = W[79:95].reshape((4, 4))
-    t = 0.0
-    n = 0
-    while h - t > 0.0:
-        rem = h - t
-        k = 0
-        if nrung > 1 and s * X[A2] >= TH[j, 1] and base < rem:
-            # the rung the start velocity allows, up to the first one reaching the segment end;
-            # then the mean path over the width w actually used (TH grows with h: conservative)
-            k = 1
-            while k + 1 < nrung and s * X[A2] >= TH[j, k + 1] and base * 2.0**k < rem:
-                k += 1
-            if reflect:
-                # the torque beyond ks keeps the mean drift of s·x2 ≥ −α·|x5|·β5·τ (x5's mean
-                # decays while ks, kc hold x5's start value), so s·x̄2 ≥ s·x2 − α·|x5|·β5·w²/2
-                while k > 0:
-                    w = min(base * 2.0**k, rem)
-                    if s * X[A2] - 0.5 * p.alpha * abs(X[A5]) * p.beta5 * w * w >= TH[j, k]:
-                        break
-                    k -= 1
-            else:
-                t_ext = velocity_extremum_time(mode, X, p)
-                while k > 0 and _mean_min(mode, X, p, min(base * 2.0**k, rem), t_ext) < TH[j, k]:
-                    k -= 1
-        sub = base * 2.0**k
-        # one fresh step to the segment's end when an admissible rung reaches it (any shorter
-        # width is admissible too: c(h) and E[L_h] grow with h), or the last ≤ 1.5 sub-steps
-        regular = not (rem <= sub or (k == 0 and rem <= 1.5 * sub))
-        if regular:
-            while k > 0 and 1.5 * sub >= rem:
-                k -= 1
-                sub = sub / 2.0
-            step = sub
-            _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
-        else:
-            step = rem
-            phi_moving(mode, step, p, P)
-            q_moving(mode, step, p, Qtmp)
-            chol_psd(Qtmp, L)
-            _step(X, P, L, z, cursor, Xb)
-        n += 1
-        if n > max_steps:
-            return t, False, peak, n, True
-        if reflect:
-            va, vb = s * X[A2], s * Xb[A2]
-            low = _bridge_low(va, vb, step, sig_v2, z, cursor) if sig_v2 > 0 else min(va, vb)
-            if low < 0.0:
-                Xb[A2] += s * (-low)
-                Xb[A1] += s * (-low) * step / 2.0
-        else:
-            if _crossed(X[A2], Xb[A2], step, sig_v2, z, cursor):
-                if regular and k == 0:
-                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, BPh, BPw, BG, BC, W[96:])
-                else:
-                    tc, lv = _bisect(mode, X, Xb, step, tol, p, sig_v2, z, cursor, Xc, no_tables, no_tables,
-                                     BG[:, :0], BG[:, :0], W[96:])
-                n += lv
-                peak = substep_peak(X, Xc, tc, peak)
-                _copy(X, Xc)
-                X[A2] = 0.0
-                return t + tc, True, peak, n, False
-        peak = substep_peak(X, Xb, step, peak)
-        _copy(X, Xb)
-        t += step
-    return h, False, peak, n, False
 
 
 @njit(cache=True)
