@@ -193,12 +193,17 @@ class _WorkClock:
     def __init__(self) -> None:
         self.spent = 0.0
 
-    def add(self, family: str, samples: int, events: int, substeps: int, roots: int = 0) -> None:
+    @staticmethod
+    def work(family: str, samples: int, events: int, substeps: int, roots: int = 0) -> float:
+        """The nominal CPU seconds of the counted work of one simulated move."""
         a, b, c = _UNIT_COST_S[family]
         work = a * samples + b * events + c * substeps
         if roots:
             work += _ROOT_STEP_COST_S[family] * roots
-        self.spent += work
+        return work
+
+    def add(self, family: str, samples: int, events: int, substeps: int, roots: int = 0) -> None:
+        self.spent += self.work(family, samples, events, substeps, roots)
 
     def past(self, deadline: float, family: str) -> bool:
         """Whether the clock is past ``deadline`` (asked by a model of ``family`` before it simulates a move)."""
@@ -226,10 +231,7 @@ class _TraceClock(_WorkClock):
         self.first_past: int | None = None
 
     def add(self, family: str, samples: int, events: int, substeps: int, roots: int = 0) -> None:
-        a, b, c = _UNIT_COST_S[family]
-        work = a * samples + b * events + c * substeps
-        if roots:
-            work += _ROOT_STEP_COST_S[family] * roots
+        work = self.work(family, samples, events, substeps, roots)
         self.spent += work
         self.trace.append(float(work))
 
