@@ -33,9 +33,9 @@ velocity x4(0) (``command_velocity_initial``: a servo's trajectory generator kno
 by the stuck-sample average x̂4 of ``reset-pid``; e_db = ``error_deadband``·σ̄1, σ̄1 the model's
 sensor noise. u = clip(u_pid + u_ff, ±u_max) on the linear amplifier.
 
-Knob: the compensation fraction κ [–] (``compensation``). Default κ = 1.5 (k̄s fed forward for
-Acker's model), the lowest mean peak of the sweep in
-docs/tuning.md (thesis, tuning seeds 0–4 only).
+Knob: the compensation fraction κ [–] (``compensation``). Default κ = 1.75 (1.75·k̄c = 2.45 ozf·in fed forward for
+Acker's model, above k̄s = 2.1), the lowest mean peak of the sweep in
+docs/tuning.md (thesis, tuning seeds 0–4 only; re-swept 2026-11-28, when it moved from 1.5).
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ class FrictionFfPidOptions(PidFrictionOptions):
         e_db in units of the model's sensor noise σ̄1 [–], ≥ 0.
     """
 
-    compensation: float = 1.5
+    compensation: float = 1.75
     stribeck_velocity: float = 0.0
     error_deadband: float = 3.0
 

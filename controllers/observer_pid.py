@@ -336,7 +336,7 @@ class ObserverPidOptions(PidFrictionOptions):
     observer supplies the static level.
     """
 
-    observer_bandwidth: float = 160.0
+    observer_bandwidth: float = 120.0
     coulomb_tau: float = 1.0
     initial_coulomb_factor: float = 0.5
     breakaway_jump: bool = True
