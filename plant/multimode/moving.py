@@ -31,6 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.fixed_linalg import gemv_lanes
 from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.multimode.segments import hermite_peak, torque_crossing_time
@@ -399,7 +400,8 @@ def deterministic_move(mode, X, p, h, noisy, z, cursor, peak):
     peak = max(peak, abs(X[A1]), mean_x1_peak(mode, X, p, h))
     P = np.empty((7, 7))
     phi_moving(mode, h, p, P)
-    Xn = P @ X
+    Xn = np.empty(7)
+    gemv_lanes(P, X, Xn)            # P @ X's bits on OpenBLAS Haswell, without BLAS (plant.fixed_linalg)
     if noisy:
         L = np.empty((4, 4))
         noise_factor_moving(mode, h, p, L)
