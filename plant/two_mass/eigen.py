@@ -109,6 +109,10 @@ def core_modes(kind: str, alpha: float, motor_inertia: float, k: float, c: float
         else:
             right.append([1 + 0j, lm])
             left.append([x / (2.0 * lm + p) for x in (lm + p, 1 + 0j)])
+    for beta, _ in decoupled:                 # −β at a shaft root: V singular (module docstring)
+        ell = -beta
+        if abs(ell * ell + p * ell + q) <= DEFECTIVE * (ell * ell + abs(p * ell) + q):
+            return None
     nshaft = len(lams)
     n = nt + len(decoupled)
     V = np.zeros((n, n), dtype=np.complex128)
@@ -128,8 +132,6 @@ def core_modes(kind: str, alpha: float, motor_inertia: float, k: float, c: float
     for j, (beta, col) in enumerate(decoupled):
         ell = -beta
         den = ell * ell + p * ell + q
-        if abs(den) <= DEFECTIVE * (ell * ell + abs(p * ell) + q):
-            return None
         R = [-x for x in col]
         if kind == "moving":
             phi = -(R[2] - R[0] + (p + ell) * R[1]) / den
