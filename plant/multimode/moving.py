@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from plant.fixed_linalg import gemv_lanes
+from plant.gauss_legendre import nodes_weights
 from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.multimode.segments import hermite_peak, torque_crossing_time
@@ -41,7 +42,7 @@ __all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 NOISY_BLOCK = np.array([A1, A2, A4, A5])
-_GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
+_GL4_X, _GL4_W = nodes_weights(4)          # constants: no LAPACK (plant.gauss_legendre)
 _PANEL_RATE = 1e-3
 _SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
