@@ -180,7 +180,8 @@ def test_noise_moments_kept_with_the_table_follow_the_lattice():
         for dtu, vr, br in ((0.8e-3, 2.5, 0.8), (1.3e-3, 1.3, 0.6), (1.3e-3, 3.7, 1.0), (2.1e-3, 0.0, 0.0)):
             mean, var, moves, ts = g.noise_moments(dtu, vr, br)
             dc, ts0, tb, spread = g.table(dtu)
-            f = np.where(tb >= 0.0, s2 * np.maximum(ts0 - tb, 0.0) ** 3 / 3.0, 0.0)
+            tm = np.maximum(ts0 - tb, 0.0)
+            f = np.where(tb >= 0.0, s2 * (tm * tm * tm) / 3.0, 0.0)      # T_m³ as T_m·T_m·T_m
             want_mean, want_var = (dc + br * np.sqrt(f), spread + vr * f) if (vr > 0 or br > 0) else (dc, spread)
             assert mean.tobytes() == want_mean.tobytes() and var.tobytes() == want_var.tobytes()
             assert np.array_equal(moves, tb >= 0.0) and ts is ts0

@@ -308,7 +308,10 @@ class FrictionGrid:
             s2 = self.params.alpha**2 * self.params.sigma2_sq
             f = root_f = None
             if s2 > 0:
-                f = np.where(moves, s2 * np.maximum(ts - tb, 0.0) ** 3 / 3.0, 0.0)
+                tm = np.maximum(ts - tb, 0.0)
+                # T_m³ as T_m·T_m·T_m (two correctly rounded products), not ** 3: numpy's power
+                # ufunc has an AVX-512 loop that rounds otherwise than libm's pow (measured)
+                f = np.where(moves, s2 * (tm * tm * tm) / 3.0, 0.0)
                 root_f = np.sqrt(f)
                 f.flags.writeable = root_f.flags.writeable = False
             moves.flags.writeable = False
