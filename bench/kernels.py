@@ -1,12 +1,14 @@
 """Which numeric kernels this process computes with: one string per process, stored in every row.
 
-A cell's rows are bit-identical on every executor of one machine, and on 9 of the 11 built-in
-scenarios under every OpenBLAS kernel; not on ``disturbed`` and ``compliant``, whose plants set up
-their noise factors and modal forms with LAPACK, and OpenBLAS picks its kernels by CPU (or by
-``OPENBLAS_CORETYPE``). numpy's element-wise functions (``exp``, ``log``) pick SIMD code by CPU
-too. Each kernel rounds in its own order, and stick-slip amplifies last-bit differences
-(measured: docs/results.md, "Reproducibility across machines"). So each row says which kernels
-made it, and ``run`` and the report say when one results directory mixes rows of several.
+A cell's rows are bit-identical on every executor of one machine, and under both OpenBLAS
+kernels tried (Haswell, SkylakeX) on all 11 built-in scenarios: the plants and the controllers'
+designs compute without BLAS or LAPACK (plant.fixed_linalg, plant.two_mass.eigen,
+plant.gauss_legendre, controllers.discrete_tf). What still depends on the CPU: numpy's
+element-wise functions (``exp``, ``log``, ``power``) pick SIMD loops by CPU, and glibc's libm
+picks FMA or non-FMA variants of ``exp``, ``pow``, ``sin``, ``erfc``, ... by CPU; each rounds in
+its own way, and stick-slip amplifies last-bit differences (measured: docs/results.md,
+"Reproducibility across machines"). So each row says which BLAS kernels and SIMD level made it,
+and ``run`` and the report say when one results directory mixes rows of several.
 
 The string is read with threadpoolctl (the BLAS libraries loaded in this process: numpy's and
 scipy's OpenBLAS, the latter being numba's BLAS) and numpy's CPU dispatch table, e.g.

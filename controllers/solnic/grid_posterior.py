@@ -237,7 +237,7 @@ class FrictionGrid:
     def _set_weights(self, logL: np.ndarray) -> None:
         self._logL = logL
         logw = self._log_prior + logL
-        w = np.exp(logw - np.max(logw))
+        w = _exp_each(logw - np.max(logw))
         self.w = w / np.sum(w)
         kc, ks = self._kc_valid, self._ks_valid
         w = self.w
@@ -308,7 +308,10 @@ class FrictionGrid:
             s2 = self.params.alpha**2 * self.params.sigma2_sq
             f = root_f = None
             if s2 > 0:
-                f = np.where(moves, s2 * np.maximum(ts - tb, 0.0) ** 3 / 3.0, 0.0)
+                tm = np.maximum(ts - tb, 0.0)
+                # T_m³ as T_m·T_m·T_m (two correctly rounded products), not ** 3: numpy's power
+                # ufunc has an AVX-512 loop that rounds otherwise than libm's pow (measured)
+                f = np.where(moves, s2 * (tm * tm * tm) / 3.0, 0.0)
                 root_f = np.sqrt(f)
                 f.flags.writeable = root_f.flags.writeable = False
             moves.flags.writeable = False
@@ -318,14 +321,14 @@ class FrictionGrid:
     def _loglik(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float,
                 bias_ratio: float) -> np.ndarray:
         # −(m − d)²/(2(R + v)) compiled (:func:`_loglik_kernel`, the numpy expression's operations
-        # on the same operands), log(R + v) by numpy's log, the ufunc the expression called
+        # on the same operands), log(R + v) by libm's log element by element (:func:`_log_each`)
         dc, ts, tb, spread = self.table(dt_u)
         moves, f, root_f = self._moving_time(float(dt_u), ts, tb)
         noisy = f is not None and (var_ratio > 0 or bias_ratio > 0)
         var, quad = np.empty(dc.size), np.empty(dc.size)
         _loglik_kernel(dc, spread, moves, root_f if noisy else dc, f if noisy else dc, noisy, float(var_ratio),
                        float(bias_ratio), float(sign), float(m), float(R), var, quad)
-        return quad - 0.5 * np.log(var)
+        return quad - 0.5 * _log_each(var)
 
     def update(self, dt_u: float, sign: int, m: float, R: float, var_ratio: float = 0.0,
                bias_ratio: float = 0.0) -> None:
@@ -416,6 +419,26 @@ def _eigh2(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if l1 < l0:
         return np.array([l1, l0]), vec[:, ::-1].copy()
     return np.array([l0, l1]), vec
+
+
+@njit(cache=True)
+def _exp_each(x):
+    """exp of each entry by libm (``math.exp`` compiled: one scalar call per entry), not numpy's
+    ufunc, whose SIMD loop numpy picks by CPU (AVX-512 and AVX2 round differently: measured,
+    docs/results.md, "Reproducibility across machines")."""
+    out = np.empty(x.size)
+    for i in range(x.size):
+        out[i] = math.exp(x[i])
+    return out
+
+
+@njit(cache=True)
+def _log_each(x):
+    """log of each entry by libm (``math.log`` compiled), as :func:`_exp_each`; x > 0 here (R + v)."""
+    out = np.empty(x.size)
+    for i in range(x.size):
+        out[i] = math.log(x[i])
+    return out
 
 
 @njit(cache=True)

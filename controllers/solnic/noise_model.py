@@ -80,12 +80,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from plant.gauss_legendre import nodes_weights
 from plant.params import PlantParams
 from controllers.models.acker import closed_form_kernel
 
 __all__ = ["PulseNoise", "pulse_noise", "pulse_bias", "braked_pulse_noise", "velocity_std_after"]
 
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
+_GL_X, _GL_W = nodes_weights(12)      # constants: no LAPACK (plant.gauss_legendre)
 # the backward-equation solver: grid points in x, time steps after/before t_ks, domain width in
 # standard deviations beyond the noise-free peak velocity, and the blend of r = v0(t_cz)/√V
 _PDE_N_X, _PDE_N_ABS, _PDE_N_REFL, _PDE_SIGMAS = 64, 48, 16, 6.0

@@ -49,6 +49,7 @@ from plant.drive import DriveCommand, DriveType
 from plant.expfun import e1, e2, e4
 from plant.multimode import disturbed_jit
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
+from plant.fixed_linalg import eigh_jacobi, gram, mat_mat, mat_mat_t, mat_vec, pinv_hermitian
 from plant.multimode.noise import noise_factor
 from plant.multimode.segments import torque_integrals
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER, hitting_midpoint
@@ -178,15 +179,15 @@ def _bridge_law(memo, params, mode, w):
         half = _transition(memo, params, mode, w / 2)
         Qh, Qw, Ph = half.Q, full.Q, half.phi
         rows = np.flatnonzero(np.diag(Qw) > 0.0)
-        M = Qh @ Ph.T                                  # COV[X_m, X_b | X_a]
+        M = mat_mat_t(Qh, Ph)                          # COV[X_m, X_b | X_a] = Qh·Phᵀ
         G = np.zeros((_N, _N))
         if rows.size:
             sc = np.sqrt(np.diag(Qw)[rows])
-            inv = np.linalg.pinv(Qw[np.ix_(rows, rows)] / np.outer(sc, sc), rcond=1e-13, hermitian=True)
-            G[:, rows] = (M[:, rows] / sc) @ inv / sc
-        S = Qh - G @ M.T
+            inv = pinv_hermitian(Qw[np.ix_(rows, rows)] / np.outer(sc, sc), 1e-13)
+            G[:, rows] = mat_mat(np.ascontiguousarray(M[:, rows] / sc), inv) / sc
+        S = Qh - mat_mat_t(G, M)
         S = 0.5 * (S + S.T)
-        lam, V = np.linalg.eigh(S)
+        lam, V = eigh_jacobi(S)
         B = V * np.sqrt(np.clip(lam, 0.0, None))
         keep = np.flatnonzero(lam > 1e-14 * max(lam.max(initial=0.0), 1e-300))
         full._bridge = (Ph, G, B[:, keep])
@@ -214,10 +215,22 @@ class _Draws:
         self.noise.consumed(self.pos)
 
 
+def _mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A·x in the compiled path's fixed order (disturbed_jit._gemv: no BLAS, the same bits on every CPU)."""
+    out = np.empty(A.shape[0])
+    disturbed_jit._gemv(np.ascontiguousarray(A), np.ascontiguousarray(x, dtype=float), out)
+    return out
+
+
+def _dot(e: np.ndarray, x: np.ndarray) -> float:
+    """e·x summed in index order (disturbed_jit._edot)."""
+    return float(disturbed_jit._edot(np.ascontiguousarray(e, dtype=float), np.ascontiguousarray(x, dtype=float)))
+
+
 def _gauss(step: _Step, Y: np.ndarray, draws: _Draws | None) -> np.ndarray:
-    out = step.phi @ Y
+    out = _mv(step.phi, Y)
     if draws is not None and step.m:
-        out[step.rows] += step.B @ draws.normals(step.m)
+        out[step.rows] += _mv(step.B, draws.normals(step.m))
     return out
 
 
@@ -400,17 +413,17 @@ def bridge_bisect(law, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     while w > tol:
         full = law(w)
         Ph, G, B = full._bridge
-        mean = Ph @ Ya + G @ (Yb - full.phi @ Ya)
+        mean = _mv(Ph, Ya) + _mv(G, Yb - _mv(full.phi, Ya))
         given = full._given.get(ekey)
         if given is None:                           # depends on (mode, w, e) only: computed once
             given = full._given[ekey] = _conditional(B, e)
         var, k, F = given
-        mu = float(e @ mean) + c0
-        a, b = float(e @ Ya) + c0, float(e @ Yb) + c0
+        mu = _dot(e, mean) + c0
+        a, b = _dot(e, Ya) + c0, _dot(e, Yb) + c0
         half = w / 2
         if draws is None:                           # noise-free: the path is its mean, Φ(w/2)·Ya
             Ym = mean
-            cm = float(e @ Ym) + c0
+            cm = _dot(e, Ym) + c0
         elif var > 0.0:
             sd = math.sqrt(var)
             if a > 0.0 and b > 0.0 and sig2 > 0.0:
@@ -426,10 +439,10 @@ def bridge_bisect(law, e, c0, Ya, Yb, w, tol, sig2, draws, run):
                 cm = mu + sd * float(draws.normals(1)[0])
             Ym = mean + k * (cm - mu)
             if F is not None:
-                Ym += F @ draws.normals(F.shape[1])
+                Ym += _fixed_mv(F, draws.normals(F.shape[1]))
         else:
-            Ym = mean + (B @ draws.normals(B.shape[1]) if B.shape[1] else 0.0)
-            cm = float(e @ Ym) + c0
+            Ym = mean + (_fixed_mv(B, draws.normals(B.shape[1])) if B.shape[1] else 0.0)
+            cm = _dot(e, Ym) + c0
         pl = _cross_prob(a, cm, half, sig2)
         pr = _cross_prob(cm, b, half, sig2)
         pc = 1.0 - (1.0 - pl) * (1.0 - pr)
@@ -442,17 +455,25 @@ def bridge_bisect(law, e, c0, Ya, Yb, w, tol, sig2, draws, run):
     return t0 + w, Yb
 
 
+def _fixed_mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A·x summed over k ascending (:func:`plant.fixed_linalg.mat_vec`, the compiled bisection's
+    factor products)."""
+    out = np.empty(A.shape[0])
+    mat_vec(np.ascontiguousarray(A), np.ascontiguousarray(x, dtype=float), out)
+    return out
+
+
 def _conditional(B, e):
     """(var, k, F) of the midpoint's law N(·, S = B·Bᵀ) given c = e·Y: var = eᵀSe, the gain
     k = Se/var and a factor F of the conditional covariance S − Se·(Se)ᵀ/var (None when it is 0)."""
-    S = B @ B.T
-    Se = S @ e
-    var = float(e @ Se)
+    S = gram(np.ascontiguousarray(B))
+    Se = _fixed_mv(S, e)
+    var = _dot(e, Se)
     if not var > 0.0:
         return var, None, None
     k = Se / var
     R = S - np.outer(Se, Se) / var
-    lam, V = np.linalg.eigh(0.5 * (R + R.T))
+    lam, V = eigh_jacobi(0.5 * (R + R.T))
     keep = lam > 1e-14 * max(lam.max(initial=0.0), 1e-300)
     F = (V[:, keep] * np.sqrt(lam[keep])) if keep.any() else None
     return var, k, F

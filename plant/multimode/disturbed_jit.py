@@ -7,17 +7,14 @@ path's, operation for operation, so the results are bit-identical (tests/test_di
 compares whole pulse trains and closed loops, every field, on many seeds):
 
 * scalar expressions are written in the same order (numba does not reassociate or fuse);
-* numpy's small products go through BLAS. The sub-step's Φ·Y and B·z are written out here in
-  OpenBLAS's dgemv order (:func:`_gemv`); the bisection's products (G·(…), e·Y, the column-ordered
-  factors) and the bridge law's matrix products are ``np.dot``, which numba sends to scipy's
-  BLAS (the same OpenBLAS kernels on this machine: dgemv, dgemm, ddot agree bit for bit);
-* ``B @ B.T`` is BLAS ``dsyrk`` in numpy's matmul and the Cholesky factor is LAPACK ``dpotrf``
-  on the lower triangle: both are called here by their scipy addresses with numpy's arguments
-  (numba's own ``np.linalg.cholesky`` factors the other triangle and rounds differently);
-* ``eigh`` is LAPACK ``dsyevd`` in both; the hermitian pseudo-inverse is numpy's recipe.
-
-A machine whose OpenBLAS selects another dgemv kernel (AVX-512, Zen), or where numpy's and scipy's
-builds differ, could break the identity (not the statistics); the tests would then fail on bits.
+* no BLAS or LAPACK: every product, factor and eigen-decomposition is fixed-order code, so the
+  rows are the same on every CPU whatever kernel OpenBLAS would pick (docs/results.md,
+  "Reproducibility across machines"). The sub-step's Φ·Y and B·z keep the order of OpenBLAS's
+  Haswell dgemv (:func:`plant.fixed_linalg.gemv_lanes`, four FMA lanes: the order the rows were
+  first computed in, now for every size); the Cholesky factor, B·Bᵀ, the bridge law's products, the
+  eigen-decompositions (cyclic Jacobi) and the hermitian pseudo-inverse are
+  :mod:`plant.fixed_linalg`'s; the column-ordered factor products are :func:`_factor_add`'s
+  plain sums. The Python path calls the same routines.
 
 Transitions (Φ(h), Q(h), the minimal factor) and bridge laws are cached per (mode, h) in
 direct-mapped tables kept with the plant's parameters (a pure function of them: a miss is
@@ -29,12 +26,12 @@ from __future__ import annotations
 import math
 import threading
 
-import llvmlite.ir as ir
 import numpy as np
-from numba import njit, types
-from numba.extending import get_cython_function_address, intrinsic
+from numba import njit
 
 from plant.expfun import e1, e2, e4
+from plant.fixed_linalg import cholesky, eigh_jacobi, gemv_lanes as _gemv, gram, mat_mat, mat_mat_t, mat_vec, pinv_hermitian
+from plant.fixed_linalg import fma as _fma
 from plant.multimode.crossing import exp_below
 from plant.multimode.moving import phi_moving, q_moving, substep_peak
 from plant.multimode.segments import hermite_peak, torque_integrals, torque_integrals_given
@@ -72,157 +69,8 @@ _NT = 1 << _NT_BITS         # transition cache slots
 _NB = 1 << _NB_BITS         # bridge-law cache slots
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)     # 2^64 / golden ratio, odd (_slot)
 
-# LAPACK dpotrf and BLAS dsyrk of scipy, called through their addresses passed in at run time
-# (an address baked into the code would stop numba from caching the compiled kernel)
-_ADDR = np.array([get_cython_function_address("scipy.linalg.cython_lapack", "dpotrf"),
-                  get_cython_function_address("scipy.linalg.cython_blas", "dsyrk")], dtype=np.int64)
-_ADDR.flags.writeable = False
-_POTRF, _SYRK = 0, 1
-
-
-@intrinsic
-def _call_ptrs(typingctx, addr, ptrs):
-    """Call the void C function at ``addr`` with the pointers ``ptrs`` (a tuple of integers)."""
-    n = len(ptrs)
-    sig = types.void(addr, ptrs)
-
-    def codegen(context, builder, signature, args):
-        i8p = ir.IntType(8).as_pointer()
-        fnty = ir.FunctionType(ir.VoidType(), [i8p] * n)
-        fn = builder.inttoptr(args[0], fnty.as_pointer())
-        vals = [builder.inttoptr(builder.extract_value(args[1], i), i8p) for i in range(n)]
-        builder.call(fn, vals)
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a·b + c with one rounding (LLVM's llvm.fma.f64), as controllers._fma."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
-        return builder.call(fn, args)
-
-    return sig, codegen
-
-
-@njit(cache=True)
-def _gemv(A, x, out):
-    """out = A @ x as numpy computes it for a C-ordered square A of order 1–5 or 8 (the sizes of Φ
-    and of the noise factors), else np.dot. numpy's product is OpenBLAS's dgemv_t (Haswell
-    kernel): four FMA lanes over the first m − m mod 4 terms, summed (l0 + l2) + (l1 + l3), then
-    the remaining terms: y + a·x (one fma), y + fma(a0, x0, a1·x1), y + fma(a2, x2, fma(a0, x0,
-    a1·x1)). Checked bit for bit against numpy (tests/test_disturbed_jit.py); ~20× cheaper than
-    a BLAS call from numba."""
-    n, m = A.shape
-    if n != m or (m > 5 and m != 8):
-        np.dot(A, x, out)
-        return
-    m1 = m - (m & 3)
-    r = m - m1
-    for i in range(n):
-        y = 0.0
-        if m1 > 0:
-            a0 = a1 = a2 = a3 = 0.0
-            for k in range(0, m1, 4):
-                a0 = _fma(A[i, k], x[k], a0)
-                a1 = _fma(A[i, k + 1], x[k + 1], a1)
-                a2 = _fma(A[i, k + 2], x[k + 2], a2)
-                a3 = _fma(A[i, k + 3], x[k + 3], a3)
-            y = (a0 + a2) + (a1 + a3)
-        if r == 1:
-            y = _fma(A[i, m1], x[m1], y)
-        elif r == 2:
-            y = y + _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1])
-        elif r == 3:
-            y = y + _fma(A[i, m1 + 2], x[m1 + 2], _fma(A[i, m1], x[m1], A[i, m1 + 1] * x[m1 + 1]))
-        out[i] = y
-
-
 class RecordFull(Exception):
     """The event buffer is full (the caller enlarges it and runs the interval again)."""
-
-
-# --- numpy's linear algebra, bit for bit --------------------------------------------------------
-
-@njit(cache=True)
-def _cholesky(D, L, fa):
-    """numpy.linalg.cholesky(D) into L (LAPACK dpotrf, 'L', on D in column order); False when D is
-    not positive definite (numpy's LinAlgError)."""
-    n = D.shape[0]
-    buf = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            buf[i, j] = D[j, i]
-    uplo = np.array([76], np.uint8)                 # 'L'
-    nn = np.array([n], np.int32)
-    info = np.zeros(1, np.int32)
-    _call_ptrs(fa[_POTRF], (uplo.ctypes.data, nn.ctypes.data, buf.ctypes.data, nn.ctypes.data, info.ctypes.data))
-    if info[0] != 0:
-        return False
-    for i in range(n):
-        for j in range(n):
-            L[i, j] = buf[j, i] if j <= i else 0.0
-    return True
-
-
-@njit(cache=True)
-def _aat(B, fa):
-    """B @ B.T as numpy's matmul computes it (BLAS dsyrk, the other triangle mirrored)."""
-    m, k = B.shape
-    C = np.zeros((m, m))
-    if k == 0:
-        return C
-    uplo = np.array([76], np.uint8)                 # 'L' of the column-order view = numpy's upper
-    tr = np.array([84], np.uint8)                   # 'T'
-    mm = np.array([m], np.int32)
-    kk = np.array([k], np.int32)
-    one = np.array([1.0])
-    zero = np.array([0.0])
-    Bc = np.ascontiguousarray(B)
-    _call_ptrs(fa[_SYRK], (uplo.ctypes.data, tr.ctypes.data, mm.ctypes.data, kk.ctypes.data, one.ctypes.data,
-                           Bc.ctypes.data, kk.ctypes.data, zero.ctypes.data, C.ctypes.data, mm.ctypes.data))
-    for i in range(m):
-        for j in range(i):
-            C[i, j] = C[j, i]
-    return C
-
-
-@njit(cache=True)
-def _pinv_hermitian(A, rcond):
-    """numpy.linalg.pinv(A, rcond, hermitian=True): eigh, |λ| sorted descending, 1/|λ| above the cutoff."""
-    s, u = np.linalg.eigh(A)
-    n = s.shape[0]
-    sgn = np.empty(n)
-    for i in range(n):
-        sgn[i] = math.copysign(1.0, s[i])
-        s[i] = abs(s[i])
-    sidx = np.argsort(s)[::-1]
-    s2 = np.empty(n)
-    sg2 = np.empty(n)
-    u2 = np.empty((n, n))
-    for j in range(n):
-        s2[j] = s[sidx[j]]
-        sg2[j] = sgn[sidx[j]]
-        for i in range(n):
-            u2[i, j] = u[i, sidx[j]]
-    top = s2[0]
-    for j in range(1, n):
-        top = max(top, s2[j])
-    cutoff = rcond * top
-    for j in range(n):
-        s2[j] = 1.0 / s2[j] if s2[j] > cutoff else 0.0
-    left = np.empty((n, n))                         # transpose(vt) = u·sgn
-    right = np.empty((n, n))                        # s[:, None]·uᵀ
-    for i in range(n):
-        for j in range(n):
-            left[i, j] = u2[i, j] * sg2[j]
-            right[i, j] = s2[i] * u2[j, i]
-    return np.dot(left, right)
 
 
 @njit(cache=True)
@@ -270,9 +118,10 @@ def _closed_form(mode, h, rec, rd, dp, phi, Q):
 
 
 @njit(cache=True)
-def _noise_factor(Q, rows, Bflat, fa):
+def _noise_factor(Q, rows, Bflat):
     """plant.multimode.noise.noise_factor(Q): the non-zero rows and the factor of their block
-    (Cholesky, else the scaled eigen-factor, stored transposed and flagged by returning −m); returns m."""
+    (:func:`plant.fixed_linalg.cholesky`, else the scaled eigen-factor by
+    :func:`plant.fixed_linalg.eigh_jacobi`, flagged by returning −m); returns m."""
     m = 0
     for i in range(_N):
         nz = False
@@ -289,7 +138,7 @@ def _noise_factor(Q, rows, Bflat, fa):
         for j in range(m):
             D[i, j] = Q[rows[i], rows[j]]
     B = Bflat[:m * m].reshape((m, m))
-    if _cholesky(D, B, fa):
+    if cholesky(D, B):
         return m
     d = np.empty(m)
     for i in range(m):
@@ -304,10 +153,10 @@ def _noise_factor(Q, rows, Bflat, fa):
     for i in range(m):
         for j in range(m):
             Sy[i, j] = 0.5 * (Ds[i, j] + Ds[j, i])
-    lam, V = np.linalg.eigh(Sy)
+    lam, V = eigh_jacobi(Sy)
     for i in range(m):
         for j in range(m):
-            B[j, i] = (V[i, j] * math.sqrt(max(lam[j], 0.0))) * d[i]      # stored as Bᵀ (numpy's is column-ordered)
+            B[i, j] = (V[i, j] * math.sqrt(max(lam[j], 0.0))) * d[i]
     return -m
 
 
@@ -327,31 +176,31 @@ def _slot(mode, w, bits):
 
 
 @njit(cache=True, inline="always")
-def _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM):
+def _trans(mode, w, rec, rd, dp, TK, TPHI, TQ, TB, TROWS, TM):
     """Slot of (mode, w) in the transition cache, computed on a miss."""
     k = _slot(mode, w, _NT_BITS)
     if TK[k, 0] == mode and TK[k, 1] == w:
         return k
     _closed_form(mode, w, rec, rd, dp, TPHI[k], TQ[k])
-    TM[k] = _noise_factor(TQ[k], TROWS[k], TB[k], fa)
+    TM[k] = _noise_factor(TQ[k], TROWS[k], TB[k])
     TK[k, 0], TK[k, 1] = mode, w
     return k
 
 
 @njit(cache=True)
-def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN):
+def _bridge(mode, w, rec, rd, dp, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN):
     """Slot of (mode, w) in the bridge cache: disturbed._bridge_law (Matheron's rule)."""
     k = _slot(mode, w, _NB_BITS)
     if BK[k, 0] == mode and BK[k, 1] == w:
         return k
-    kf = _trans(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    kf = _trans(mode, w, rec, rd, dp, TK, TPHI, TQ, TB, TROWS, TM)
     Qw = TQ[kf].copy()
     BPW[k] = TPHI[kf]
-    kh = _trans(mode, w / 2, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    kh = _trans(mode, w / 2, rec, rd, dp, TK, TPHI, TQ, TB, TROWS, TM)
     Qh = TQ[kh].copy()
     Ph = TPHI[kh].copy()
     BPH[k] = Ph
-    M = np.dot(Qh, Ph.T)
+    M = mat_mat_t(Qh, Ph)
     G = np.zeros((_N, _N))
     rows = np.empty(_N, np.int64)
     r = 0
@@ -367,16 +216,16 @@ def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW,
         for i in range(r):
             for j in range(r):
                 A[i, j] = Qw[rows[i], rows[j]] / (sc[i] * sc[j])
-        inv = _pinv_hermitian(A, 1e-13)
+        inv = pinv_hermitian(A, 1e-13)
         T1 = np.empty((_N, r))
         for i in range(_N):
             for j in range(r):
                 T1[i, j] = M[i, rows[j]] / sc[j]
-        T2 = np.dot(T1, inv)
+        T2 = mat_mat(T1, inv)
         for i in range(_N):
             for j in range(r):
                 G[i, rows[j]] = T2[i, j] / sc[j]
-    GM = np.dot(G, M.T)
+    GM = mat_mat_t(G, M)
     S = np.empty((_N, _N))
     for i in range(_N):
         for j in range(_N):
@@ -385,7 +234,7 @@ def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW,
     for i in range(_N):
         for j in range(_N):
             Sy[i, j] = 0.5 * (S[i, j] + S[j, i])
-    lam, V = np.linalg.eigh(Sy)
+    lam, V = eigh_jacobi(Sy)
     top = 0.0
     for j in range(_N):
         top = max(top, lam[j])
@@ -394,7 +243,7 @@ def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW,
     for j in range(_N):
         if lam[j] > thr:
             nb += 1
-    BbT = BBF[k, :_N * nb].reshape((nb, _N))       # Bᵀ: numpy's B is column-ordered (eigh's V)
+    BbT = BBF[k, :_N * nb].reshape((nb, _N))       # Bᵀ: the Python path's B (V's columns), transposed
     c = 0
     for j in range(_N):
         if lam[j] > thr:
@@ -410,14 +259,17 @@ def _bridge(mode, w, rec, rd, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW,
 
 
 @njit(cache=True)
-def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
+def _conditional(k, v, e, BBF, BNB, BCV, BCK, BCF, BCN):
     """disturbed._conditional for bridge slot k and barrier variant v (cached): var, gain, factor."""
     if BCN[k, v] != -2:
         return
     nb = BNB[k]
-    S = _aat(BBF[k, :_N * nb].reshape((nb, _N)).T, fa)
-    Se = np.dot(S, e)
-    var = np.dot(e, Se)
+    S = gram(BBF[k, :_N * nb].reshape((nb, _N)).T)
+    Se = np.empty(_N)
+    mat_vec(S, e, Se)
+    var = 0.0
+    for i in range(_N):
+        var += e[i] * Se[i]
     BCV[k, v] = var
     if not var > 0.0:
         BCN[k, v] = -1
@@ -432,7 +284,7 @@ def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
     for i in range(_N):
         for j in range(_N):
             Sy[i, j] = 0.5 * (R[i, j] + R[j, i])
-    lam, V = np.linalg.eigh(Sy)
+    lam, V = eigh_jacobi(Sy)
     top = 0.0
     for j in range(_N):
         top = max(top, lam[j])
@@ -441,7 +293,7 @@ def _conditional(k, v, e, fa, BBF, BNB, BCV, BCK, BCF, BCN):
     for j in range(_N):
         if lam[j] > thr:
             nf += 1
-    FT = BCF[k, v, :_N * nf].reshape((nf, _N))     # Fᵀ: numpy's F is column-ordered
+    FT = BCF[k, v, :_N * nf].reshape((nf, _N))     # Fᵀ: the Python path's F, transposed
     c = 0
     for j in range(_N):
         if lam[j] > thr:
@@ -661,7 +513,7 @@ def _edot(e, x):
 def _bridge_miss(mode, w, recs, rds, FB, IB):
     """:func:`_bridge` on the table views (a bridge-cache miss: the views are cut only here);
     reference counting on explicitly (it allocates), not inherited from its callers."""
-    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    dp, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
     nb = _NB
     BK = FB[_OFF_BK:_OFF_BK + nb * 2].reshape((nb, 2))
     BPH = FB[_OFF_BPH:_OFF_BPH + nb * 64].reshape((nb, _N, _N))
@@ -670,12 +522,12 @@ def _bridge_miss(mode, w, recs, rds, FB, IB):
     BBF = FB[_OFF_BBF:_OFF_BBF + nb * 64].reshape((nb, 64))
     BNB = IB[_OFF_BNB:_OFF_BNB + nb]
     BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
-    return _bridge(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
+    return _bridge(mode, w, recs, rds, dp, TK, TPHI, TQ, TB, TROWS, TM, BK, BPH, BPW, BG, BBF, BNB, BCN)
 
 
 @njit(cache=True, inline="always")
 def _trans_views(FB, IB):
-    """(dp, fa, TK, TPHI, TQ, TB, TROWS, TM): the transition cache's views (a miss cuts only the
+    """(dp, TK, TPHI, TQ, TB, TROWS, TM): the transition cache's views (a miss cuts only the
     tables it needs: each view costs a reshape call and an atomic reference-count pair)."""
     nt = _NT
     dp = FB[:_DP_LEN]
@@ -683,10 +535,9 @@ def _trans_views(FB, IB):
     TPHI = FB[_OFF_TPHI:_OFF_TPHI + nt * 64].reshape((nt, _N, _N))
     TQ = FB[_OFF_TQ:_OFF_TQ + nt * 64].reshape((nt, _N, _N))
     TB = FB[_OFF_TB:_OFF_TB + nt * 64].reshape((nt, 64))
-    fa = IB[:2]
     TROWS = IB[_OFF_TROWS:_OFF_TROWS + nt * 8].reshape((nt, _N))
     TM = IB[_OFF_TM:_OFF_TM + nt]
-    return dp, fa, TK, TPHI, TQ, TB, TROWS, TM
+    return dp, TK, TPHI, TQ, TB, TROWS, TM
 
 
 @njit(cache=True, _nrt=True)
@@ -699,18 +550,20 @@ def _conditional_miss(k, v, e, recs, rds, FB, IB):
     BCF = FB[_OFF_BCF:_OFF_BCF + nb * 128].reshape((nb, 2, 64))
     BNB = IB[_OFF_BNB:_OFF_BNB + nb]
     BCN = IB[_OFF_BCN:_OFF_BCN + nb * 2].reshape((nb, 2))
-    _conditional(k, v, e, IB[:2], BBF, BNB, BCV, BCK, BCF, BCN)
+    _conditional(k, v, e, BBF, BNB, BCV, BCK, BCF, BCN)
 
 
 @njit(cache=True, _nrt=True)
 def _factor_add(FB, o, nf, z, cursor, Ym, base):
     """Ym = base + Fᵀᵀ·ζ (nf unit normals) for the transposed factor Fᵀ = FB[o:o + 8·nf] (nf × 8):
-    numpy's column-ordered product through BLAS, as ``np.dot(FT.T, ζ)``; ``base`` is Ym itself
-    (Ym += …) or the bridge mean. Reference counting on (np.dot allocates)."""
-    FT = FB[o:o + _N * nf].reshape((nf, _N))
-    add = np.dot(FT.T, _normals(z, cursor, nf))
+    Ym[i] = base[i] + Σ_c Fᵀ[c, i]·ζ[c], c ascending (:func:`plant.fixed_linalg.mat_vec`'s order on F);
+    ``base`` is Ym itself (Ym += …) or the bridge mean. Reference counting on (the view)."""
+    pos = _take(z, cursor, nf)
     for i in range(_N):
-        Ym[i] = base[i] + add[i]
+        acc = 0.0
+        for c in range(nf):
+            acc += FB[o + c * _N + i] * z[pos + c]
+        Ym[i] = base[i] + acc
 
 
 @njit(cache=True, _nrt=False)
@@ -857,8 +710,8 @@ def _gemv_flat(F, off, m, x, xoff, out):
 @njit(cache=True, _nrt=True)
 def _trans_miss(mode, w, recs, rds, FB, IB):
     """_trans on the table views (a cache miss: the views are cut only here)."""
-    dp, fa, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
-    return _trans(mode, w, recs, rds, dp, fa, TK, TPHI, TQ, TB, TROWS, TM)
+    dp, TK, TPHI, TQ, TB, TROWS, TM = _trans_views(FB, IB)
+    return _trans(mode, w, recs, rds, dp, TK, TPHI, TQ, TB, TROWS, TM)
 
 
 @njit(cache=True, _nrt=True)
@@ -868,14 +721,11 @@ def _noise_add(k, m, z, cursor, FB, IB, Yb, Yc):
         pos = _take(z, cursor, m)
         _gemv_flat(FB, _OFF_TB + k * 64, m, z, pos, Yc)
         add = Yc
-    elif m > 0:
+    else:                                           # another size, or the eigen-factor (m < 0)
+        m = abs(m)
         add = np.empty(m)
         B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
         _gemv(B, _normals(z, cursor, m), add)
-    else:                                           # the eigen-factor, stored transposed
-        m = -m
-        B = FB[_OFF_TB + k * 64:_OFF_TB + k * 64 + m * m].reshape((m, m))
-        add = np.dot(B.T, _normals(z, cursor, m))
     for i in range(m):
         Yb[IB[_OFF_TROWS + k * _N + i]] += add[i]
 
@@ -1129,7 +979,7 @@ _LAD_LEN = _MEMO + 4          # the step ladder's table (_ladder_table) and the 
 _LAYOUT_F = (("dp", _DP_LEN), ("TK", _NT * 2), ("TPHI", _NT * 64), ("TQ", _NT * 64), ("TB", _NT * 64),
              ("BK", _NB * 2), ("BPH", _NB * 64), ("BPW", _NB * 64), ("BG", _NB * 64), ("BBF", _NB * 64),
              ("BCV", _NB * 2), ("BCK", _NB * 16), ("BCF", _NB * 128), ("LAD", _LAD_LEN))
-_LAYOUT_I = (("fa", 2), ("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
+_LAYOUT_I = (("TROWS", _NT * 8), ("TM", _NT), ("BNB", _NB), ("BCN", _NB * 2))
 _SIZE_F = sum(n for _, n in _LAYOUT_F)
 _SIZE_I = sum(n for _, n in _LAYOUT_I)
 
@@ -1293,9 +1143,8 @@ def _tables_for(params) -> tuple:
             o += n
         FB[_SIZE_F - _LAD_LEN + _MEMO] = np.nan     # no width memoized (NaN equals no width)
         IB = np.zeros(_SIZE_I, np.int64)
-        IB[:2] = _ADDR
-        o = 2
-        for name, n in _LAYOUT_I[1:]:
+        o = 0
+        for name, n in _LAYOUT_I:
             if name == "BCN":
                 IB[o:o + n] = -2                # conditional laws not computed
             o += n

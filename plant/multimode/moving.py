@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.fixed_linalg import gemv_lanes
+from plant.gauss_legendre import nodes_weights
 from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.multimode.segments import hermite_peak, torque_crossing_time
@@ -40,7 +42,7 @@ __all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 NOISY_BLOCK = np.array([A1, A2, A4, A5])
-_GL4_X, _GL4_W = np.polynomial.legendre.leggauss(4)
+_GL4_X, _GL4_W = nodes_weights(4)          # constants: no LAPACK (plant.gauss_legendre)
 _PANEL_RATE = 1e-3
 _SERIES_LIMIT = 0.5
 _BRENT_ITER = 200
@@ -399,7 +401,8 @@ def deterministic_move(mode, X, p, h, noisy, z, cursor, peak):
     peak = max(peak, abs(X[A1]), mean_x1_peak(mode, X, p, h))
     P = np.empty((7, 7))
     phi_moving(mode, h, p, P)
-    Xn = P @ X
+    Xn = np.empty(7)
+    gemv_lanes(P, X, Xn)            # P @ X's bits on OpenBLAS Haswell, without BLAS (plant.fixed_linalg)
     if noisy:
         L = np.empty((4, 4))
         noise_factor_moving(mode, h, p, L)

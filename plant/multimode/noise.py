@@ -8,11 +8,17 @@ positive diagonal (4-22)–(4-34). One unit normal is drawn per non-zero row.
 When D is singular although no row is zero (for instance perfectly correlated entries), the
 Cholesky factor does not exist; B then comes from the eigen-decomposition of the diagonally
 scaled D (B = S⁻¹·V·√Λ), which still satisfies B·Bᵀ = D.
+
+Both factorizations and the product B·z are :mod:`plant.fixed_linalg`'s fixed-order loops (the
+Cholesky–Crout column loop, cyclic Jacobi, k-ascending sums), not LAPACK/BLAS: the same bits on
+every CPU (docs/results.md, "Reproducibility across machines").
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from plant.fixed_linalg import cholesky, eigh_jacobi, mat_vec
 
 __all__ = ["noise_factor", "NoiseFactor"]
 
@@ -42,7 +48,9 @@ class NoiseFactor:
     def sample(self, z: np.ndarray) -> np.ndarray:
         out = np.zeros(self.n)
         if self.m:
-            out[self.rows] = self.B @ z
+            y = np.empty(self.m)
+            mat_vec(self.B, np.ascontiguousarray(z, dtype=float), y)
+            out[self.rows] = y
         return out
 
 
@@ -67,9 +75,8 @@ def noise_factor(C: np.ndarray) -> NoiseFactor:
     D = C[np.ix_(rows, rows)]                          # D = RᵀCR  (4-26)
     if len(rows) == 0:
         return NoiseFactor(rows, np.zeros((0, 0)), C.shape[0])
-    try:
-        B = np.linalg.cholesky(D)                      # (4-29)–(4-34)
-    except np.linalg.LinAlgError:
+    B = np.empty(D.shape)
+    if not cholesky(np.ascontiguousarray(D), B):     # (4-29)–(4-34)
         B = _eigen_factor(D)
     return NoiseFactor(rows, B, C.shape[0])
 
@@ -78,7 +85,7 @@ def _eigen_factor(D: np.ndarray) -> np.ndarray:
     d = np.sqrt(np.abs(np.diag(D)))
     d[d == 0] = 1.0
     Ds = D / np.outer(d, d)
-    lam, V = np.linalg.eigh(0.5 * (Ds + Ds.T))
+    lam, V = eigh_jacobi(0.5 * (Ds + Ds.T))
     tol = 1e-10 * max(lam.max(initial=0.0), 1e-300)
     if lam.min(initial=0.0) < -tol:
         raise ValueError(f"covariance is not positive semi-definite (eigenvalue {lam.min():.3g})")

@@ -31,6 +31,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from plant.gauss_legendre import nodes_weights
 from plant.expfun import e1, e2, e3
 from plant.params import PlantParams
 
@@ -104,7 +105,7 @@ def noise_intensity(mode: int, params: PlantParams) -> np.ndarray:
     return Qc
 
 
-_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(8)
+_GL_NODES, _GL_WEIGHTS = nodes_weights(8)      # constants: no LAPACK (plant.gauss_legendre)
 _PANEL_RATE = 0.25
 
 

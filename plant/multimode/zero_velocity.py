@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.fixed_linalg import gemv_lanes
 from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
                           q_moving, substep_peak, velocity_extremum_time)
 from plant.multimode.crossing import crossed as _crossed    # the crossing decision (table of log Φ)
@@ -517,7 +518,8 @@ def newton_segment(X, mode, h, p, z, cursor, peak):
     L = np.empty((4, 4))
     phi_moving(mode, tau, p, P)
     noise_factor_moving(mode, tau, p, L)
-    Xb = P @ X
+    Xb = np.empty(7)
+    gemv_lanes(P, X, Xb)            # P @ X's bits on OpenBLAS Haswell, without BLAS (plant.fixed_linalg)
     for r in range(4):
         Xb[NOISY_BLOCK[r]] += L[r, 0] * zf[0] + L[r, 1] * zf[1] + L[r, 2] * zf[2] + L[r, 3] * zf[3]
     peak = substep_peak(X, Xb, tau, peak)

@@ -7,7 +7,8 @@ ends X_a, X_b of a sub-step of width w, the midpoint is Gaussian (Matheron's rul
     G = Q(w/2)·Φ_hᵀ·Q(w)⁺,   Φ_h the NB block of Φ(w/2),
 
 with Q(w)⁺ the pseudo-inverse in diagonally scaled coordinates (directions below 1e-13 of
-the largest eigenvalue carry no noise). x2 is drawn first from its law conditioned on the
+the largest eigenvalue carry no noise; the eigen-decomposition is
+:func:`plant.fixed_linalg.eigh_jacobi`'s, not LAPACK's: the same bits on every CPU). x2 is drawn first from its law conditioned on the
 sub-step containing a crossing (plant.multimode.zero_velocity._hitting_midpoint, exact), the
 other coordinates given x2; the first crossing is in the left half with probability
 p_left/p_any. Bisection stops at ``bisection_tol``.
@@ -20,6 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.fixed_linalg import eigh_jacobi
 from plant.multimode.zero_velocity import _cross_prob, _hitting_midpoint
 from plant.randomness import normal, uniform_below
 from plant.two_mass.modes import NCORE
@@ -44,7 +46,7 @@ def _pinv_scaled(Q, out):
         for j in range(n):
             if d[i] > 0.0 and d[j] > 0.0:
                 S[i, j] = Q[i, j] / (d[i] * d[j])
-    lam, U = np.linalg.eigh(S)
+    lam, U = eigh_jacobi(S)
     top = max(lam.max(), 1e-300)
     for i in range(n):
         for j in range(n):

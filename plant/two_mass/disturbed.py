@@ -52,12 +52,14 @@ from functools import lru_cache
 import numpy as np
 
 from plant.drive import DriveCommand, DriveType
-from plant.multimode.disturbed import _apply_level, _breakaway, _cross_prob, _Draws, _Run, _Step, bridge_bisect
+from plant.fixed_linalg import eigh_jacobi, mat_mat, mat_mat_t, pinv_hermitian
+from plant.multimode.disturbed import _apply_level, _breakaway, _cross_prob, _Draws, _mv, _Run, _Step, bridge_bisect
 from plant.multimode.moving import substep_peak
 from plant.multimode.zero_velocity import FAR_SIGMAS, LADDER
 from plant.randomness import NoiseStream
 from plant.state import EVENT_FIELDS, EventKind, IntervalResult, PlantState, SimOptions, Status
 from plant.two_mass import interval as compiled
+from plant.two_mass.eigen import core_modes
 from plant.two_mass.modes import M_STUCK, NCORE, decompose, first_exit, first_root
 from plant.two_mass.params import TwoMassParams
 
@@ -119,13 +121,13 @@ def _phi_q(p: TwoMassParams, mode: int, h: float) -> tuple[np.ndarray, np.ndarra
     F = np.eye(2 * _N)
     term = np.eye(2 * _N)
     for i in range(1, 25):
-        term = term @ Mw / i
+        term = mat_mat(term, Mw) / i
         F = F + term
-    P = F[:_N, :_N]
-    Q = F[:_N, _N:] @ P.T
+    P = np.ascontiguousarray(F[:_N, :_N])
+    Q = mat_mat_t(np.ascontiguousarray(F[:_N, _N:]), P)
     for _ in range(j):
-        Q = Q + P @ Q @ P.T
-        P = P @ P
+        Q = Q + mat_mat_t(mat_mat(P, Q), P)
+        P = mat_mat(P, P)
     Q = 0.5 * (Q + Q.T)
     return P, Q
 
@@ -154,15 +156,15 @@ def _bridge_law(params, mode, w):
         half = transition(params, mode, w / 2)
         Qh, Qw, Ph = half.Q, full.Q, half.phi
         rows = np.flatnonzero(np.diag(Qw) > 0.0)
-        M = Qh @ Ph.T
+        M = mat_mat_t(Qh, Ph)
         G = np.zeros((_N, _N))
         if rows.size:
             sc = np.sqrt(np.diag(Qw)[rows])
-            inv = np.linalg.pinv(Qw[np.ix_(rows, rows)] / np.outer(sc, sc), rcond=1e-13, hermitian=True)
-            G[:, rows] = (M[:, rows] / sc) @ inv / sc
-        S = Qh - G @ M.T
+            inv = pinv_hermitian(Qw[np.ix_(rows, rows)] / np.outer(sc, sc), 1e-13)
+            G[:, rows] = mat_mat(np.ascontiguousarray(M[:, rows] / sc), inv) / sc
+        S = Qh - mat_mat_t(G, M)
         S = 0.5 * (S + S.T)
-        lam, V = np.linalg.eigh(S)
+        lam, V = eigh_jacobi(S)
         B = V * np.sqrt(np.clip(lam, 0.0, None))
         keep = np.flatnonzero(lam > 1e-14 * max(lam.max(initial=0.0), 1e-300))
         full._bridge = (Ph, G, B[:, keep])
@@ -170,9 +172,20 @@ def _bridge_law(params, mode, w):
 
 
 def _gauss(step, Y, draws):
-    out = step.phi @ Y
+    out = _mv(step.phi, Y)
     if draws is not None and step.m:
-        out[step.rows] += step.B @ draws.normals(step.m)
+        out[step.rows] += _mv(step.B, draws.normals(step.m))
+    return out
+
+
+def _cmv(A, x):
+    """A·x for a complex A (rows summed in index order, Python complexes: no BLAS)."""
+    out = np.empty(A.shape[0], dtype=np.complex128)
+    for i in range(A.shape[0]):
+        acc = 0j
+        for j in range(A.shape[1]):
+            acc += complex(A[i, j]) * complex(x[j])
+        out[i] = acc
     return out
 
 
@@ -205,8 +218,8 @@ def _stuck_exit(p, Y, ks, horizon):
     z = np.array([Y[YPHI], Y[YWM], Y[Y3]])
     b = np.array([0.0, 0.0, p.beta3 * Y[YU]])
     n = 3
-    w0 = Vi[M_STUCK, :n, :n] @ z
-    b0 = Vi[M_STUCK, :n, :n] @ b
+    w0 = _cmv(Vi[M_STUCK, :n, :n], z)
+    b0 = _cmv(Vi[M_STUCK, :n, :n], b)
     cv = p.shaft_stiffness * V[M_STUCK, 0, :n] + p.shaft_damping * V[M_STUCK, 1, :n]
     ca = np.zeros(NCORE + 1, dtype=np.complex128)
     cb = np.zeros(NCORE + 1, dtype=np.complex128)
@@ -218,16 +231,14 @@ def _stuck_exit(p, Y, ks, horizon):
 
 @lru_cache(maxsize=16)
 def _moving_modal(params: TwoMassParams, mode: int):
-    """(V, V⁻¹, λ) of the moving core with d, z = [x2, φ, ω_m, x3, x5, d] (ż = A·z + b), or
-    None when A is defective to working precision (τd equal to τ3, τ5): then sub-steps decide."""
-    A = drift(params, mode)[0][np.ix_(_CORE, _CORE)]
-    ev, vec = np.linalg.eig(A)
-    if np.linalg.cond(vec) > 1e8:
-        return None
-    scale = np.max(np.abs(A))
-    ev = np.where(np.abs(ev) < 1e-12 * scale, 0.0, ev)
-    ev = np.where(ev.real > 0, 1j * ev.imag, ev)
-    return vec, np.linalg.inv(vec), ev
+    """(V, V⁻¹, λ) of the moving core with d, z = [x2, φ, ω_m, x3, x5, d] (ż = A·z + b), in closed
+    form (plant.two_mass.eigen.core_modes: no LAPACK), or None when V is singular to working
+    precision (1/τ3, 1/τ5 or 1/τd at a shaft eigenvalue): then sub-steps decide."""
+    a, Jm = params.alpha, params.motor_inertia
+    s = 1.0 if mode == 3 else -1.0
+    return core_modes("moving", a, Jm, params.shaft_stiffness, params.shaft_damping,
+                      [(params.beta3, (0.0, 0.0, 1.0 / Jm)), (params.beta5, (-s * a, 0.0, 0.0)),
+                       (1.0 / params.disturbance_torque_tau, (a, 0.0, 0.0))])
 
 
 _CORE = [Y2, YPHI, YWM, Y3, Y5, YD]
@@ -243,11 +254,12 @@ def _moving_root(p, Y, mode, sigma, horizon, which=0):
     V, Vi, lam = modal
     A, _ = drift(p, mode)
     z = Y[_CORE]
-    b = A[np.ix_(_CORE, [YKC, YU])] @ Y[[YKC, YU]]
+    Ab = A[np.ix_(_CORE, [YKC, YU])]
+    b = np.array([Ab[i, 0] * Y[YKC] + Ab[i, 1] * Y[YU] for i in range(len(_CORE))])
     ca = np.zeros(7, dtype=np.complex128)
     cb = np.zeros(7, dtype=np.complex128)
     lm = np.zeros(7, dtype=np.complex128)
-    ca[:6], cb[:6], lm[:6] = V[0] * (Vi @ z), V[0] * (Vi @ b), lam
+    ca[:6], cb[:6], lm[:6] = V[0] * _cmv(Vi, z), V[0] * _cmv(Vi, b), lam
     n = 6
     if which == 1:
         ca[6], lm[6] = -Y[Y4], -p.beta4

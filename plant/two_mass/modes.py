@@ -37,6 +37,7 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.two_mass.eigen import core_modes
 from plant.two_mass.params import TwoMassParams
 
 __all__ = ["decompose", "first_root", "phi1", "NCORE"]
@@ -65,21 +66,30 @@ def core_matrix(mode: int, params: TwoMassParams) -> tuple[np.ndarray, int]:
 
 
 def decompose(params: TwoMassParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(V, V⁻¹, λ) for mode 1, mode 3 and stuck (rows 0, 1, 2), padded to 5 × 5.
+    """(V, V⁻¹, λ) for mode 1, mode 3 and stuck (rows 0, 1, 2), padded to 5 × 5: the closed
+    form of :func:`plant.two_mass.eigen.core_modes` (no LAPACK: the same bits on every CPU).
 
-    Eigenvalues within 1e-12·‖A‖ of 0 are set to 0 (the rigid-body mode), positive real parts
-    of rounding size to 0, so that the bound of :func:`first_root` holds.
+    The rigid-body eigenvalue is exactly 0 and no real part is positive (the shaft pair's is
+    −μc/2, the others −β), so the bound of :func:`first_root` holds.
     """
     V = np.zeros((3, NCORE, NCORE), dtype=np.complex128)
     Vi = np.zeros((3, NCORE, NCORE), dtype=np.complex128)
     lam = np.zeros((3, NCORE), dtype=np.complex128)
+    a, Jm = params.alpha, params.motor_inertia
+    k, c = params.shaft_stiffness, params.shaft_damping
     for row, mode in ((M_BACK, 1), (M_FWD, 3), (M_STUCK, 2)):
-        A, n = core_matrix(mode, params)
-        ev, vec = np.linalg.eig(A)
-        scale = np.max(np.abs(A))
-        ev = np.where(np.abs(ev) < 1e-12 * scale, 0.0, ev)
-        ev = np.where(ev.real > 0, 1j * ev.imag, ev)
-        vinv = np.linalg.inv(vec)
+        if mode == 2:
+            n = 3
+            got = core_modes("stuck", a, Jm, k, c, [(params.beta3, (0.0, 1.0 / Jm))])
+        else:
+            n = 5
+            s = 1.0 if mode == 3 else -1.0
+            got = core_modes("moving", a, Jm, k, c, [(params.beta3, (0.0, 0.0, 1.0 / Jm)),
+                                                     (params.beta5, (-s * a, 0.0, 0.0))])
+        if got is None:
+            raise ValueError(f"two-mass plant: 1/τ3 or 1/τ5 coincides with a shaft eigenvalue (mode {mode}); "
+                             "the modal form is singular")
+        vec, vinv, ev = got
         lam[row, :n] = ev
         V[row, :n, :n] = vec
         Vi[row, :n, :n] = vinv

@@ -21,6 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
+from plant.gauss_legendre import nodes_weights
 from plant.two_mass.modes import M_STUCK, NCORE, _div_k, _small, _tiny, phi1_e, phi2_e
 
 A1, A2, A3, A4, A5, AKC, AU, PHI, WM = range(9)
@@ -28,7 +29,7 @@ NX = 9
 # The noisy block of X (rows of the noise factor): x1, x2, x4, x5, φ, ω_m.
 NB = np.array([A1, A2, A4, A5, PHI, WM])
 NNB = 6
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL_X, _GL_W = nodes_weights(8)      # constants: no LAPACK (plant.gauss_legendre)
 
 
 @njit(cache=True)
