@@ -481,3 +481,9 @@ def test_identify_start_below_u_max():
     log = _no_breakaway_log()
     fit = fit_log(log, "multimode", bootstrap=0)
     assert math.isfinite(fit.estimates["stiction"]) and fit.estimates["stiction"] < log.u_max
+
+
+TENTH_SEED = 3181     # issue 25's tenth session (helper twomass10): named and committed before any run, to measure
+                      # two-mass coverage on held-out logs on the code with fit._start's no-breakaway fix and the
+                      # work clock's root-step price (both made after NINTH_SEED's study began); never used before
+TENTH_CASES = 10
