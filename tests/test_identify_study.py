@@ -481,3 +481,41 @@ def test_identify_start_below_u_max():
     log = _no_breakaway_log()
     fit = fit_log(log, "multimode", bootstrap=0)
     assert math.isfinite(fit.estimates["stiction"]) and fit.estimates["stiction"] < log.u_max
+
+
+TENTH_SEED = 3181     # issue 25's tenth session (helper twomass10): named and committed before any run, to measure
+                      # two-mass coverage on held-out logs on the code with fit._start's no-breakaway fix and the
+                      # work clock's root-step price (both made after NINTH_SEED's study began); never used before
+TENTH_CASES = 10
+
+
+def _tenth_coverage(cases=range(TENTH_CASES)) -> float:
+    """Share of the two-mass fields inside their stated 95 % intervals over ``cases`` at
+    :data:`TENTH_SEED` (:func:`coverage_case`, 10-replicate bootstrap, as :func:`_fresh_coverage`).
+    A log whose fit raises states no interval: its fields count as outside (the error printed)."""
+    inside = []
+    for case in cases:
+        try:
+            res, cpu = coverage_case("two-mass", case, seed=TENTH_SEED, bootstrap=10)
+        except (ValueError, RuntimeError) as exc:
+            print("two-mass", case, "the fit raised:", exc)
+            inside += [False] * (4 + len(FAMILY_FREE["two-mass"]))
+            continue
+        print("two-mass", case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
+        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
+    return float(np.mean(inside))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 5 min of CPU: SOLNIC_AXIS_STUDY=1")
+def test_tenth_two_mass_coverage_all_fields():
+    """Random two-mass axes at the held-out seed 3181 (:data:`TENTH_SEED`, draws from ``default_rng([3181, 3])``,
+    log seed 3181·1000 + k; named and committed before any run): every fitted field (k̄c, k̄s, J, τ3, k_sh)
+    inside its stated 95 % interval in ≥ 90 % of the 50 cases, on the code with the two-mass kernel's
+    k̄s = k̄c fix (tenth session; committed before this seed's logs ran on it). Measured (one log per process,
+    `nice 10`, two at once, loaded machine, load 7–12): **47 of 50 (94 %)** — k̄c 10/10, k̄s 9/10 (case 5
+    −3.4 %), J 9/10 (case 8 −7.7 %), τ3 10/10, k_sh 9/10 (case 1: −46 %, calibration interval 1.3e3–6.5e3
+    against 2.06e4; not identified, the bounded range, on the other 9). CPU per log 12–80 s (median 18.6 s),
+    ≤ 60 s on 9 of 10. Case 0 had run past 335 CPU s unfinished on the code before the fix (stopped).
+    docs/axis.md, "Tenth session"."""
+    assert _tenth_coverage() >= 0.90

@@ -278,11 +278,21 @@ def _velocity_zero(X, S, p, q):
 @njit(cache=True)
 def _x1_peak(X, mode, tau, p, q, V, Vi, lam, peak, Xn):
     """(max(peak, |x1| at the roots of ẋ1 = x2 − x4 in (0, τ)), work) for the noise-free segment
-    from X; work: the searches' safe steps, and one per root for its propagation."""
+    from X; work: the searches' safe steps, and one per root for its propagation.
+
+    Nothing is left of the segment once t = τ (e.g. τ = 0: a velocity zero at the segment's
+    start, as at a Zeno point where the load reflects again and again at one instant): the
+    loop returns there. It used to search on with a zero horizon, and a root at 0 sent it
+    round all 10000 times on zero-length steps (2·10⁴ counted steps per such segment, issue 25's
+    tenth session). Those rounds cannot change the peak: a zero horizon gives a root of 0, ∞,
+    −1 or beyond the horizon, only 0 goes on, with the zero-length step r = min(1e-12, 0) = 0,
+    and propagating by 0 leaves x1 exact (x1 + 0·(…) − x4·expm1(0)/β4); so the same peak."""
     t = 0.0
     work = 0
     Xa = X.copy()
     for _ in range(10000):
+        if tau - t == 0.0:
+            return peak, work
         d = Xa[A2] - Xa[A4]
         sigma = 1.0 if d > 0.0 else -1.0
         if d == 0.0:
