@@ -490,15 +490,21 @@ TENTH_AUTO_SEED = 2953
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 8 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, tenth session) on the 8 logs of the fresh seed 2953 "
+                   "with the pairwise rule: 5 of 8 — stribeck k=1 picked multimode (multimode z -0.04 against "
+                   "stribeck), two-mass k=0 and k=1 picked multimode (shafts fitted 3-4x too stiff); the default "
+                   "(mean) rule also 5 of 8 on the same fold fits; below the must-show of >= 90 % (docs/axis.md)")
 def test_tenth_auto_pairwise_picks_the_generating_family():
     """``--family auto --rule pairwise`` (:func:`plant.identification.fit._rule_pairwise`: the
     simplest family that no other family predicts separably better, every pair tested by the
     signed-rank test at the threshold 2; chosen on dev seed 8484 before this seed ran) on 2 fresh
     logs per family (seed 2953, cases 0–1, :func:`auto_case`'s draws and log seeds, default plan):
     the generating family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Tenth session: auto").
-    The default rule's pick on the same fold fits is printed beside it."""
+    Measured with tests/identify_dev.py (the same fold fits): 5 of 8 with the pairwise rule and 5
+    of 8 with the default rule; CPU of the choice 26–118 s per log (median 43 s; one process per
+    log, two at a time, load 8–10)."""
     from plant.identification import ExperimentOptions
-    from plant.identification.fit import choose_family
+    from plant.identification.fit import _rule, choose_family
     from tests.identify_draws import draw
 
     picked = {}
@@ -513,5 +519,7 @@ def test_tenth_auto_pairwise_picks_the_generating_family():
             t0 = time.process_time()
             _, choice = choose_family(log, bootstrap=0, final_fit=False, rule="pairwise")
             picked[family, case] = choice.family
-            print(family, case, choice.family, f"cpu {time.process_time() - t0:.1f}")
+            default = _rule(list(choice.score), choice.score, {f: w for f, (w, _) in choice.ranks.items()},
+                            {f: sd for f, (_, sd) in choice.ranks.items()}, 2.0)
+            print(family, case, choice.family, "(mean rule:", default + ")", f"cpu {time.process_time() - t0:.1f}")
     assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
