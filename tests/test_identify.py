@@ -402,6 +402,8 @@ def test_auto_pairwise_rule_against_scipy_wilcoxon():
     for bad in ("ranks", "", None):
         with pytest.raises(ValueError, match="rule"):
             choose_family(log, rule=bad)
+    with pytest.raises(ValueError, match="pairwise"):
+        choose_family(log, rule="pairwise", criterion="output-error")
 
 
 def test_shifted_core_survives_a_stiction_gap_below_rounding():
