@@ -1862,6 +1862,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         raise ValueError(f"separable must be a number in [0, 10], got {separable!r}")
     if rule not in _RULES:
         raise ValueError(f"rule must be one of {', '.join(_RULES)}, got {rule!r}")
+    if not isinstance(restart, bool):
+        raise ValueError(f"restart must be True or False, got {restart!r}")
     if rule == "pairwise" and criterion != "predictive":
         raise ValueError("rule 'pairwise' needs criterion 'predictive' (its signed-rank tests)")
     t0 = time.perf_counter()
