@@ -533,12 +533,18 @@ TENTH_RESTART_SEED = 3671
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 8 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, tenth session) on the 8 logs of the fresh seed 3671 "
+                   "with restart=True: 5 of 8 — multimode k=0 picked two-mass (multimode z 3.09), stribeck k=0 and "
+                   "two-mass k=0 picked multimode; the restart fired on no fold, so the default is 5 of 8 too; below "
+                   "the must-show of >= 90 % (docs/axis.md)")
 def test_tenth_auto_restart_picks_the_generating_family():
     """``choose_family(…, restart=True)`` (the default rule; a fold whose first multimode fit costs
     more than :data:`plant.identification.fit._RESTART_FACTOR` times multimode's refit in its own
     noise frame is fitted again from the refit's core) on 2 fresh logs per family (seed 3671, cases
     0–1, :func:`auto_case`'s draws and log seeds, default plan): the generating family picked in
-    ≥ 90 % of the 8 logs (docs/axis.md, "Tenth session: auto")."""
+    ≥ 90 % of the 8 logs (docs/axis.md, "Tenth session: auto"). Measured (this function's call, in
+    one process per log, two at a time, load 2.4–5.3): 5 of 8; the restart fired on none of the 16
+    folds; CPU 28–139 s per log (median 50 s)."""
     from plant.identification import ExperimentOptions
     from plant.identification.fit import choose_family
     from tests.identify_draws import draw
