@@ -187,7 +187,12 @@ def test_choose_family_restart_changes_nothing_when_no_fold_is_stuck(tm_log, mon
     passes = []
     replace = dataclasses.replace
     monkeypatch.setattr(F, "_RESTART_FACTOR", 0.0)
-    monkeypatch.setattr(F.dataclasses, "replace", lambda obj, **kw: (passes.append(kw.get("core")), replace(obj, **kw))[1])
+
+    def counted(obj, **kw):        # dataclasses.replace of a _FoldFits is the restart (Params use it too)
+        if isinstance(obj, F._FoldFits):
+            passes.append(kw.get("core"))
+        return replace(obj, **kw)
+    monkeypatch.setattr(F.dataclasses, "replace", counted)
     _, forced = choose_family(tm_log, fams, final_fit=False, restart=True)
     assert len(passes) == 2 and all(c is not None and c.shape == (4,) for c in passes)
     assert forced.family in fams and all(np.isfinite(v) for v in forced.score.values())
