@@ -209,6 +209,10 @@ def identify_command(
     separable: float = typer.Option(None, "--separable", show_default=False,
                                     help="auto only: a family is separably worse than the best when its signed-rank "
                                          "z over moves exceeds this (default: the rule's, docs/axis.md)."),
+    rule: str = typer.Option("mean", "--rule",
+                             help="auto only: mean (the best by the mean score, the others tested against it) or "
+                                  "pairwise (every pair tested; the simplest family no other is separably better "
+                                  "than; docs/axis.md, 'Tenth session: auto')."),
 ) -> None:
     """Fit a plant family to LOG; print estimates ± sd; write OUT (matrix TOML) and the fit page."""
     from plant.identification.fit import choose_family, fit_log
@@ -226,6 +230,8 @@ def identify_command(
         raise UserError(f"--workers: must be an integer >= 1, got {workers}")
     if separable is not None and not (math.isfinite(separable) and 0.0 <= separable <= 10.0):
         raise UserError(f"--separable: must be in [0, 10], got {separable}")
+    if rule not in ("mean", "pairwise"):
+        raise UserError(f"--rule: must be mean or pairwise, got {rule!r}")
     try:
         log = read_log(log_path)
     except LogError as exc:
@@ -235,7 +241,7 @@ def identify_command(
         with fit_map(fit_workers(workers, family, bootstrap)) as mapper:
             if family == "auto":
                 fit, choice = choose_family(log, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper,
-                                            separable=separable)
+                                            separable=separable, rule=rule)
             else:
                 fit = fit_log(log, family, bootstrap=bootstrap, seed=seed, budget_s=budget, mapper=mapper)
     except (ValueError, RuntimeError) as exc:

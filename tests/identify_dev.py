@@ -79,6 +79,7 @@ def run(seed: int, repeats: int, family: str, case: int) -> dict:
             per[name][fam][test] = out[name]
     assert all(np.array_equal(per["today"][f], choice.per_move[f], equal_nan=True) for f in FAMILY_FREE)
     return {"seed": seed, "repeats": repeats, "family": family, "case": case, "picked": choice.family,
+            "picked_pairwise": F._rule_pairwise(list(choice.score), choice.score, choice.pairs),
             "cpu": cpu, "moves": G, "fold_cpu": {f: float(c) for f, c in choice.cpu.items()},
             "fold_fits": {f"{f} {k}": [float(x) for x in z] for (f, k), z in choice.fold_fits.items()},
             "per_move": {name: {f: [float(x) for x in v] for f, v in d.items()} for name, d in per.items()}}

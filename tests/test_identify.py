@@ -268,7 +268,7 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
     """The held-out rule on logs with sensor noise only (σ1 = 5 µrad, no friction noise), so the
     generating law is the only structure: a stribeck log with a strong curve (v_s = 20 mrad/s,
     b = 2) is stribeck; a multimode log is multimode (stribeck nests it: not separable → simpler)."""
-    from plant.identification.fit import choose_family
+    from plant.identification.fit import _rule_pairwise, choose_family
 
     plan = design_experiment(ExperimentOptions(repeats=1))
     quiet = dict(friction_noise_psd=0.0, correlated_friction_std=0.0)
@@ -278,6 +278,8 @@ def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_mov
         fit, choice = choose_family(log, ("multimode", "stribeck"), bootstrap=0)
         assert choice.family == fit.family == family, (family, choice)
         assert set(choice.score) == {"multimode", "stribeck"} and choice.excess[choice.best] == 0.0
+        # the tenth session's "pairwise" rule on the same held-out scores picks the same family
+        assert _rule_pairwise(list(choice.score), choice.score, choice.pairs) == family, (family, choice.pairs)
         other = ({"multimode", "stribeck"} - {family}).pop()
         if family == "stribeck":
             # the richer family wins: multimode is separably worse by the rule's own test (Wilcoxon's
@@ -341,6 +343,67 @@ def test_auto_rule_threshold_against_scipy_wilcoxon():
     for bad in (-0.5, 11.0, math.nan, "2"):
         with pytest.raises(ValueError, match="separable"):
             choose_family(log, separable=bad)
+
+
+def test_auto_pairwise_rule_against_scipy_wilcoxon():
+    """The "pairwise" rule (``choose_family(rule="pairwise")``, issue 25's tenth session) on given
+    per-move scores shaped like fresh log 7531 lugre k=0: stribeck best by the mean (four moves it
+    predicts far better), lugre better than every other family on most moves. scipy's Wilcoxon
+    test (normal approximation, no continuity correction, zeros dropped) says which pairs are
+    separable; the "mean" rule keeps multimode (not separably worse than stribeck), the pairwise rule
+    picks lugre (no family separably better than it; each other family separably worse than it).
+    A cycle of separable pairs falls back to the mean rule; an infinite score is never chosen."""
+    from scipy import stats
+
+    from plant.identification.fit import _rule, _rule_pairwise, _signed_rank, choose_family
+
+    rng = np.random.default_rng(11)
+    n = 90
+    lugre = rng.normal(-60.0, 1.0, n)
+    stribeck = lugre + np.abs(rng.normal(0.4, 0.3, n))
+    stribeck[:4] -= 40.0                                         # four moves stribeck predicts far better
+    multimode = stribeck + rng.normal(0.05, 1.0, n)
+    multimode[:4] = lugre[:4] + 1.0
+    two_mass = lugre + np.abs(rng.normal(0.6, 0.3, n))
+    pm = {"multimode": multimode, "two-mass": two_mass, "stribeck": stribeck, "lugre": lugre}
+    fams = list(pm)
+    score = {f: float(np.mean(v)) for f, v in pm.items()}
+    assert min(score, key=score.get) == "stribeck"
+
+    def z_scipy(a, b):
+        r = stats.wilcoxon(pm[a] - pm[b], zero_method="wilcox", correction=False, method="approx")
+        return math.copysign(abs(r.zstatistic), float(np.sum(np.sign(pm[a] - pm[b]) * stats.rankdata(np.abs(pm[a] - pm[b])))))
+
+    pairs = {(a, b): _signed_rank(pm[a], pm[b]) for a in fams for b in fams if a != b}
+    for (a, b), (w, sd) in pairs.items():
+        assert w / sd == pytest.approx(z_scipy(a, b), rel=1e-9)
+    assert z_scipy("multimode", "stribeck") < 2.0                 # the mean rule keeps multimode
+    assert all(z_scipy(f, "lugre") > 2.0 for f in fams if f != "lugre")
+    assert all(z_scipy("lugre", f) < -2.0 for f in fams if f != "lugre")
+    best = "stribeck"
+    assert _rule(fams, score, {f: pairs[f, best][0] if f != best else 0.0 for f in fams},
+                 {f: pairs[f, best][1] if f != best else 0.0 for f in fams}, 2.0) == "multimode"
+    assert _rule_pairwise(fams, score, pairs, 2.0) == "lugre"
+    # a cycle: multimode separably worse than two-mass, two-mass than stribeck, stribeck than multimode —
+    # no family is kept, and the mean rule decides: two-mass best by the mean, multimode 3 sd worse
+    # (dropped), stribeck 3 sd better (W < 0: kept), two-mass has fewer parameters
+    m, t, s_ = "multimode", "two-mass", "stribeck"
+    cyc = {(m, t): (30.0, 10.0), (t, m): (-30.0, 10.0), (t, s_): (30.0, 10.0), (s_, t): (-30.0, 10.0),
+           (s_, m): (30.0, 10.0), (m, s_): (-30.0, 10.0)}
+    sc = {m: 1.0, t: 0.0, s_: 2.0}
+    assert _rule_pairwise((m, t, s_), sc, cyc, 2.0) == "two-mass" == \
+        _rule((m, t, s_), sc, {m: 30.0, t: 0.0, s_: -30.0}, {m: 10.0, t: 0.0, s_: 10.0}, 2.0)
+    assert _rule_pairwise((m, t, s_), sc, cyc, 3.5) == "multimode"       # no pair separable at 3.5: the simplest
+    # a failed fold fit (infinite score) is never kept, even when no family is separably better
+    inf_score = dict(score, lugre=math.inf)
+    assert _rule_pairwise(fams, inf_score, pairs, 2.0) != "lugre"
+    log = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
+                       get_family("multimode").Params(), 5)[0]
+    for bad in ("ranks", "", None):
+        with pytest.raises(ValueError, match="rule"):
+            choose_family(log, rule=bad)
+    with pytest.raises(ValueError, match="pairwise"):
+        choose_family(log, rule="pairwise", criterion="output-error")
 
 
 def test_shifted_core_survives_a_stiction_gap_below_rounding():
@@ -656,6 +719,14 @@ def test_a_calibration_point_the_family_rejects_gets_no_replicate():
     assert all(p.stribeck_velocity == points[i] == at["stribeck_velocity"] and p.bristle_stiffness == 3.8277147e+05
                for i, at, p in truths)
     assert _replicate_truths(fitted, {}, 3, range(3)) == ([(0, {}, fitted), (1, {}, fitted), (2, {}, fitted)], [])
+
+
+def test_identify_rule_bad_value_is_one_line(tmp_path):
+    """``identify --rule`` other than mean or pairwise: one line naming the option, exit 2."""
+    for bad in ("ranks", "MEAN", ""):
+        r = _inproc("identify", tmp_path / "axis.csv", "--family", "auto", "--rule", bad)
+        assert r.returncode == 2, (bad, r.stdout, r.stderr)
+        assert "--rule" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
 def test_identify_separable_bad_value_is_one_line(tmp_path):

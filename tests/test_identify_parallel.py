@@ -151,12 +151,12 @@ def test_parallel_bootstrap_cut_in_a_multi_start_refit(tm_log, monkeypatch):
 
 def test_choose_family_folds_in_any_order_give_the_same_choice(tm_log):
     """The two folds are independent: run the second first, the choice, scores, per-move scores,
-    signed ranks and fold fits are those of the sequential loop, bit for bit (CPU and wall time
-    excepted)."""
+    signed ranks (against the best and pairwise) and fold fits are those of the sequential loop,
+    bit for bit (CPU and wall time excepted)."""
     fams = ["multimode", "two-mass"]
     _, ref = choose_family(tm_log, fams, final_fit=False)
     _, other = choose_family(tm_log, fams, final_fit=False, mapper=_reversed_eager)
-    for name in ("family", "best", "score", "excess", "excess_se", "rule", "criterion", "signs", "ranks"):
+    for name in ("family", "best", "score", "excess", "excess_se", "rule", "criterion", "signs", "ranks", "pairs"):
         assert getattr(other, name) == getattr(ref, name), name
     for name in ("per_move", "per_move_output_error", "fold_fits"):
         a, b = getattr(ref, name), getattr(other, name)
@@ -164,6 +164,40 @@ def test_choose_family_folds_in_any_order_give_the_same_choice(tm_log):
     assert set(other.cpu) == set(fams) and all(v > 0 for v in other.cpu.values())
     with pytest.raises(ValueError, match="mapper"):
         choose_family(tm_log, fams, final_fit=False, mapper=None)
+
+
+def test_choose_family_restart_changes_nothing_when_no_fold_is_stuck(tm_log, monkeypatch):
+    """``restart=True`` (issue 25's tenth session) re-fits a fold only when its first multimode fit
+    costs more than ``_RESTART_FACTOR`` times the refit's: on this log no fold is stuck, and the
+    choice, scores and fold fits equal the default's bit for bit. With the factor at 0 every fold
+    is re-fitted from the refit's core (two passes, each fold), and the result still names a family
+    with finite scores."""
+    import dataclasses
+
+    import plant.identification.fit as F
+
+    fams = ["multimode", "two-mass"]
+    _, ref = choose_family(tm_log, fams, final_fit=False)
+    _, other = choose_family(tm_log, fams, final_fit=False, restart=True)
+    for name in ("family", "best", "score", "excess", "excess_se", "rule", "criterion", "signs", "ranks", "pairs"):
+        assert getattr(other, name) == getattr(ref, name), name
+    for name in ("per_move", "per_move_output_error", "fold_fits"):
+        a, b = getattr(ref, name), getattr(other, name)
+        assert list(a) == list(b) and all(np.array_equal(a[k], b[k]) for k in a), name
+    passes = []
+    replace = dataclasses.replace
+    monkeypatch.setattr(F, "_RESTART_FACTOR", 0.0)
+
+    def counted(obj, **kw):        # dataclasses.replace of a _FoldFits is the restart (Params use it too)
+        if isinstance(obj, F._FoldFits):
+            passes.append(kw.get("core"))
+        return replace(obj, **kw)
+    monkeypatch.setattr(F.dataclasses, "replace", counted)
+    _, forced = choose_family(tm_log, fams, final_fit=False, restart=True)
+    assert len(passes) == 2 and all(c is not None and c.shape == (4,) for c in passes)
+    assert forced.family in fams and all(np.isfinite(v) for v in forced.score.values())
+    with pytest.raises(ValueError, match="restart"):
+        choose_family(tm_log, fams, final_fit=False, restart="yes")
 
 
 def test_worker_count_default_and_cap(monkeypatch):

@@ -519,3 +519,85 @@ def test_tenth_two_mass_coverage_all_fields():
     ≤ 60 s on 9 of 10. Case 0 had run past 335 CPU s unfinished on the code before the fix (stopped).
     docs/axis.md, "Tenth session"."""
     assert _tenth_coverage() >= 0.90
+
+
+# the auto study of issue 25's tenth session: named and committed before any run of it, never used
+# while choosing the rule (dev seed 8484, tests/identify_dev.py); the "pairwise" rule was fixed before it ran
+TENTH_AUTO_SEED = 2953
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 8 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, tenth session) on the 8 logs of the fresh seed 2953 "
+                   "with the pairwise rule: 5 of 8 — stribeck k=1 picked multimode (multimode z -0.04 against "
+                   "stribeck), two-mass k=0 and k=1 picked multimode (shafts fitted 3-4x too stiff); the default "
+                   "(mean) rule also 5 of 8 on the same fold fits; below the must-show of >= 90 % (docs/axis.md)")
+def test_tenth_auto_pairwise_picks_the_generating_family():
+    """``--family auto --rule pairwise`` (:func:`plant.identification.fit._rule_pairwise`: the
+    simplest family that no other family predicts separably better, every pair tested by the
+    signed-rank test at the threshold 2; chosen on dev seed 8484 before this seed ran) on 2 fresh
+    logs per family (seed 2953, cases 0–1, :func:`auto_case`'s draws and log seeds, default plan):
+    the generating family picked in ≥ 90 % of the 8 logs (docs/axis.md, "Tenth session: auto").
+    Measured with tests/identify_dev.py (the same fold fits): 5 of 8 with the pairwise rule and 5
+    of 8 with the default rule; CPU of the choice 26–118 s per log (median 43 s; one process per
+    log, two at a time, load 8–10)."""
+    from plant.identification import ExperimentOptions
+    from plant.identification.fit import _rule, choose_family
+    from tests.identify_draws import draw
+
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            f = list(FAMILY_FREE).index(family)
+            rng = np.random.default_rng([TENTH_AUTO_SEED, f])
+            for _ in range(case + 1):
+                p = draw(family, rng)
+            log, _ = simulate_log(design_experiment(ExperimentOptions()), family, p,
+                                  TENTH_AUTO_SEED * 1000 + 100 * f + case)
+            t0 = time.process_time()
+            _, choice = choose_family(log, bootstrap=0, final_fit=False, rule="pairwise")
+            picked[family, case] = choice.family
+            default = _rule(list(choice.score), choice.score, {f: w for f, (w, _) in choice.ranks.items()},
+                            {f: sd for f, (_, sd) in choice.ranks.items()}, 2.0)
+            print(family, case, choice.family, "(mean rule:", default + ")", f"cpu {time.process_time() - t0:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+
+
+# issue 25's tenth session, second fresh seed: named and committed before any run of it, never used while
+# choosing; choose_family(restart=True) (a stuck first multimode fold fit re-started from the refit's core)
+# was chosen on dev seed 8484 (8 of 10 against 7 of 10) before it ran
+TENTH_RESTART_SEED = 3671
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 8 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured (2026-11-28, tenth session) on the 8 logs of the fresh seed 3671 "
+                   "with restart=True: 5 of 8 — multimode k=0 picked two-mass (multimode z 3.09), stribeck k=0 and "
+                   "two-mass k=0 picked multimode; the restart fired on no fold, so the default is 5 of 8 too; below "
+                   "the must-show of >= 90 % (docs/axis.md)")
+def test_tenth_auto_restart_picks_the_generating_family():
+    """``choose_family(…, restart=True)`` (the default rule; a fold whose first multimode fit costs
+    more than :data:`plant.identification.fit._RESTART_FACTOR` times multimode's refit in its own
+    noise frame is fitted again from the refit's core) on 2 fresh logs per family (seed 3671, cases
+    0–1, :func:`auto_case`'s draws and log seeds, default plan): the generating family picked in
+    ≥ 90 % of the 8 logs (docs/axis.md, "Tenth session: auto"). Measured (this function's call, in
+    one process per log, two at a time, load 2.4–5.3): 5 of 8; the restart fired on none of the 16
+    folds; CPU 28–139 s per log (median 50 s)."""
+    from plant.identification import ExperimentOptions
+    from plant.identification.fit import choose_family
+    from tests.identify_draws import draw
+
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            f = list(FAMILY_FREE).index(family)
+            rng = np.random.default_rng([TENTH_RESTART_SEED, f])
+            for _ in range(case + 1):
+                p = draw(family, rng)
+            log, _ = simulate_log(design_experiment(ExperimentOptions()), family, p,
+                                  TENTH_RESTART_SEED * 1000 + 100 * f + case)
+            t0 = time.process_time()
+            _, choice = choose_family(log, bootstrap=0, final_fit=False, restart=True)
+            picked[family, case] = choice.family
+            print(family, case, choice.family, f"cpu {time.process_time() - t0:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
