@@ -517,12 +517,13 @@ _MULTI_START = {"lugre": {"bristle_stiffness": (1e5, 3e5, 1e6), "stribeck_veloci
                 "two-mass": {"shaft_stiffness": (5e3, 1e4, 2e4, 4e4, 1e5)}}
 _KEPT_STARTS = 3        # the designed starts of least weighted cost, each refitted by weighted least squares
 # Upper caps of a point fit's (and so of every bootstrap replicate's) box, below the factor 30 from the start
-# (issue 25, tenth session). LuGre σ0 ≤ 3e6 ozf·in/rad: a shaft deflects k̄s/σ0 ≤ 0.7 µrad (k̄s ≤ 2 ozf·in)
-# before it breaks away, far below σ1 = 5 µrad, so the log cannot tell 3e6 from the old top 3e7 (both a
-# rigid stick to it; the feature fits' cap, _FEATURE_CAP, is 1e6 for the same reason), while a prediction
-# costs ∝ σ0 up there (the explicit step is stability-bound: 22 ms at 3e6, 127 ms at 3e7 against 11 ms at
-# 3e5 on dev log B): the replicates that wandered to stiff σ0 were the bootstrap's slowest. A factor 3 above
-# the designed start grid's top (1e6), so that start stays inside the box.
+# (issue 25, tenth session). LuGre σ0 ≤ 3e6 ozf·in/rad (the box's top was 3e7): a prediction costs ∝ σ0 up
+# there (the explicit step is stability-bound: 22 ms at 3e6, 127 ms at 3e7 against 11 ms at 3e5 at dev log
+# B's estimate), and the bootstrap replicates that wandered to stiff σ0 were its slowest (B: 94 CPU s for
+# 440 predictions). It is a cost cap, not invisible to the log: noise-free, σ0 = 3e6 and 3e7 predict the
+# default plan up to 3.4e-4 rad apart (draws' region, v_s 4–10 mrad/s). A fit at the cap says so (the
+# interval is the bounded range, "at the fit's bound" in the method); the draws' σ0 (1e5–3e5) lies a
+# factor 10 below it, and 3e6 is a factor 3 above the designed start grid's top (1e6).
 _FIT_CAP = {"bristle_stiffness": 3e6}
 
 
@@ -579,14 +580,15 @@ def _multi_start(model: _Model, sigma1: float, box, deadline: float,
 
 
 def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, deadline: float = math.inf,
-               points=None, clock: _WorkClock | None = None):
+               points=None, clock: _WorkClock | None = None, final_nfev: int = 60):
     """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian, hit).
 
     ``deadline`` (on ``clock``, the model's own :class:`_WorkClock` when None): past it, the best
     point of the current pass stands and ``hit`` is True (the Jacobian is then a finite-difference one at that point). The families
     of :data:`_MULTI_START` start from :func:`_multi_start` (its pass replaces the two first
     passes; ``points``: its starts, see there); the others from :func:`_start`, unweighted,
-    reweighted twice."""
+    reweighted twice. ``final_nfev``: the final pass's evaluations per parameter (a bootstrap
+    replicate's: :data:`_REPLICATE_FINAL_NFEV`)."""
     model = _Model(log, family, base)
     if clock is not None:
         model.clock = clock
@@ -628,7 +630,7 @@ def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, de
             scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
         model.best_cost = math.inf
         sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
-                                     x_scale=1.0, max_nfev=60 * len(z), xtol=1e-10, ftol=1e-12)
+                                     x_scale=1.0, max_nfev=final_nfev * len(z), xtol=1e-10, ftol=1e-12)
     except _OutOfTime:
         z = getattr(model, "best_z", z)
         model.deadline = math.inf
@@ -748,6 +750,15 @@ def _replicate_truths(fitted, spans: dict[str, tuple[float, float]], bootstrap: 
     return truths, invalid
 
 
+# A lugre bootstrap replicate's final pass stops after 10 evaluations per parameter (the designed-start
+# refit's cap), the point fit's after 60 (issue 25, tenth session). Why: on dev log B (seed 4646 case 0)
+# a replicate whose v_s went to 0.2 mrad/s and σ0 to 2.4e6 crawled along a valley for 360 evaluations and
+# 344 Jacobians (2990 predictions, 41 CPU s, a third of the bootstrap); after 60 evaluations its estimate
+# was within 0.01 in ln of the end for k̄c, k̄s − k̄c, J, τ3, v_s and 0.04 for σ0 (docs/axis.md "Tenth
+# session"), small against the intervals' half-widths (0.1–0.8 in ln). The point estimate keeps 60.
+_REPLICATE_FINAL_NFEV = {"lugre": 10}
+
+
 def _replicate(plan: AxisLog, family: str, params, seed: int, base, z: np.ndarray, start_point, scale: np.ndarray,
                box, deadline: float, clock: _WorkClock) -> tuple[str, np.ndarray | None, dict | None]:
     """One parametric-bootstrap replicate of :func:`fit_log`: a log simulated from ``params`` with
@@ -769,7 +780,8 @@ def _replicate(plan: AxisLog, family: str, params, seed: int, base, z: np.ndarra
         # estimate or at the replicate's truth stays in that basin, and the noise-free model's
         # bias on a noisy log (two-mass dev log 5150 case 0: the cost at the truth 7.6 times the
         # estimate's) is then not seen (the intervals shrank to 2–3 % and missed)
-        zb, _, _, _, _, _, bhit = _point_fit(blog, family, base, deadline=deadline, points=[start_point], clock=clock)
+        zb, _, _, _, _, _, bhit = _point_fit(blog, family, base, deadline=deadline, points=[start_point], clock=clock,
+                                             final_nfev=_REPLICATE_FINAL_NFEV.get(family, 60))
         if bhit:
             return "hit", None, None
     else:
