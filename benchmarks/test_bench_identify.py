@@ -68,3 +68,38 @@ def test_prediction_speedup(benchmark, family):
     benchmark.extra_info["speedup"] = ratio
     benchmark.pedantic(fast.predict, args=(z,), rounds=1, iterations=1)
     assert ratio >= _GOAL[family], f"{family}: {ratio:.2f}x"
+
+
+# The fit's lugre tolerance (issue 25, tenth session, fit._LUGRE_TOLERANCES: RTOL 1e-8) against the plant's
+# own (1e-10, the path before): one default-plan prediction in the draws' region (σ0 = 2e5) and at σ0 = 1e6,
+# both timed alternately in this process. Measured 1.76–2.19× (dev log B's truth and a stiffer / softer
+# point, σ0 ≤ 6.8e5) and, in this benchmark's first run, 1.64× at 2e5 and 1.22× at 1e6 (there the step
+# is partly stability-bound, which no tolerance shortens); loaded 2-core machine. Asserted ≥ 1.4 at 2e5
+# only; the 1e6 ratio is recorded.
+_TOL_GOAL = 1.4
+
+
+def test_prediction_tolerance_speedup(benchmark):
+    if benchmark.disabled:
+        pytest.skip("a timing only (make benchmark)")
+    from plant.lugre.integrate import TOLERANCES
+
+    fit, _ = _model("lugre", True)
+    plant, _ = _model("lugre", True)
+    plant.lugre_tolerances = TOLERANCES
+    ratios = []
+    for point in ([1.2, 0.5, 0.5, 0.008, 0.006, 2e5], _POINTS["lugre"][:5] + [1e6]):
+        z = np.log(point)
+        fit.predict(z)
+        plant.predict(z)
+        spent = {True: [], False: []}
+        for _ in range(5):
+            for flag, m in ((True, fit), (False, plant)):
+                t0 = time.process_time()
+                for _ in range(3):
+                    m.predict(z)
+                spent[flag].append(time.process_time() - t0)
+        ratios.append(float(np.median(spent[False]) / np.median(spent[True])))
+    benchmark.extra_info["speedup"] = ratios
+    benchmark.pedantic(fit.predict, args=(np.log(_POINTS["lugre"]),), rounds=1, iterations=1)
+    assert ratios[0] >= _TOL_GOAL, ratios

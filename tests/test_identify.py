@@ -657,7 +657,7 @@ def test_lugre_bootstrap_spreads_the_stribeck_velocity_truths_and_calibrates(mon
         seen.append(params.stribeck_velocity)
         return log, {"coulomb": params.coulomb, "stiction": params.stiction, "x5": 0.0}
 
-    def stand_in(log_, family, base, z0=None, deadline=math.inf, points=None, clock=None):
+    def stand_in(log_, family, base, z0=None, deadline=math.inf, points=None, clock=None, final_nfev=60):
         model = fitmod._Model(log_, family, base)
         n = 4 + 2
         lo, hi = np.full(n, -np.inf), np.full(n, np.inf)

@@ -20,6 +20,7 @@ import pytest
 from plant.identification import design_experiment
 from plant.identification.families import FAMILY_FREE
 from plant.identification.fit import _OPTS, _Model, _OutOfTime, _TraceClock
+from plant.lugre.integrate import TOLERANCES
 from plant.protocol import get_family
 
 
@@ -94,6 +95,7 @@ def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop(whole):
     one where the plant leaves ok (both None)."""
     model, params = _model("lugre")
     model.whole_moves = whole
+    model.lugre_tolerances = TOLERANCES     # the plant's own (the Python loop's); the fit's are looser
     old = _Model(model.log, "lugre", model.base)
     old.share_mirror = old.compiled_moves = False
     for point in ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
@@ -115,6 +117,7 @@ def test_compiled_lugre_moves_count_the_work_the_python_loop_counts():
     move equal the Python loop's, summed from each step's IntervalResult, so a budget stops a fit
     at the same point on either path — including a move where the plant leaves ok."""
     model, _ = _model("lugre")
+    model.lugre_tolerances = TOLERANCES     # the plant's own (the Python loop's); the fit's are looser
     python = _Model(model.log, "lugre", model.base)
     python.compiled_moves = False
     from plant.identification.fit import _WorkClock

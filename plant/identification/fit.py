@@ -71,6 +71,14 @@ _QUIET_S = 0.25        # a rest sample counts for σ1 this long after the last c
 _OPTS = SimOptions(noise=False, max_events=2000)
 _NOISY_OPTS = SimOptions(noise=True, max_events=2000)
 _SETTLED = 1e-10       # rad: a LuGre shaft counts as settled when it can move less than this
+# The noise-free LuGre model's Dormand–Prince tolerances (plant.lugre.integrate's [RTOL, ATOL_v, ATOL_z,
+# ATOL_D]) in the fit: the plant's 1e-10 loosened 100× to RTOL 1e-8, ATOL (1e-11 rad/s, 1e-16 rad, 1e-16 rad)
+# (issue 25, tenth session). A prediction moves by ≤ 1.2e-12 rad (dev logs, docs/axis.md "Tenth session"),
+# 2.4e-7 of σ1 = 5 µrad (Table 2-1); by Gauss–Newton an estimate then moves by at most ‖δ‖/σ1 of its formal
+# standard error, ≈ 1.7e-5 over the default plan's ≈ 7000 rows. A prediction costs ≈ 0.5 of the
+# Dormand–Prince steps. The plant itself (the benchmark's cells, the replicate logs) keeps its own tolerances.
+_LUGRE_TOLERANCES = lugre_tolerances * 100.0
+_LUGRE_TOLERANCES.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -254,6 +262,8 @@ class _Model:
     share_mirror: bool = True     # simulate a move's mirror kind once (False: the path before, for tests)
     compiled_moves: bool = True   # lugre, multimode: a move in one compiled call (False: the Python loop, for tests)
     whole_moves: bool = True      # lugre: a whole prediction in one compiled call (False: a call per move, for tests)
+    lugre_tolerances = _LUGRE_TOLERANCES   # the compiled lugre paths' (the Python loop is the plant's own step at
+                                           # the plant's 1e-10: tests set this to compare them bit for bit)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -347,7 +357,7 @@ class _Model:
                 if g not in self._prepared:
                     self._prepared[g] = loop.prepare(self.log.commands[s:e])
                 if lugre:
-                    x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, lugre_tolerances, last, ring,
+                    x1, work = move_loop.play_move(state.x, self._prepared[g], p, opts, self.lugre_tolerances, last, ring,
                                                    _SETTLED)
                 else:
                     x1, work = mm_move_loop.play_move(state.x, self._prepared[g], p, opts, last)
@@ -433,7 +443,7 @@ class _Model:
         x1 = np.empty(plan.n)
         j, checked, deadline = 0, False, self.deadline
         while j < len(plan.sims):
-            work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, lugre_tolerances, ring, _SETTLED,
+            work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, self.lugre_tolerances, ring, _SETTLED,
                                                       _UNIT_COST_S[self.family], self.clock.spent, deadline, j)
             for w in work.tolist():
                 if not checked and self.clock.past(self.deadline, self.family):
@@ -506,6 +516,15 @@ def _start(model: _Model, sigma1: float) -> np.ndarray:
 _MULTI_START = {"lugre": {"bristle_stiffness": (1e5, 3e5, 1e6), "stribeck_velocity": (1e-3, 4e-3, 1.2e-2)},
                 "two-mass": {"shaft_stiffness": (5e3, 1e4, 2e4, 4e4, 1e5)}}
 _KEPT_STARTS = 3        # the designed starts of least weighted cost, each refitted by weighted least squares
+# Upper caps of a point fit's (and so of every bootstrap replicate's) box, below the factor 30 from the start
+# (issue 25, tenth session). LuGre σ0 ≤ 3e6 ozf·in/rad (the box's top was 3e7): a prediction costs ∝ σ0 up
+# there (the explicit step is stability-bound: 22 ms at 3e6, 127 ms at 3e7 against 11 ms at 3e5 at dev log
+# B's estimate), and the bootstrap replicates that wandered to stiff σ0 were its slowest (B: 94 CPU s for
+# 440 predictions). It is a cost cap, not invisible to the log: noise-free, σ0 = 3e6 and 3e7 predict the
+# default plan up to 3.4e-4 rad apart (draws' region, v_s 4–10 mrad/s). A fit at the cap says so (the
+# interval is the bounded range, "at the fit's bound" in the method); the draws' σ0 (1e5–3e5) lies a
+# factor 10 below it, and 3e6 is a factor 3 above the designed start grid's top (1e6).
+_FIT_CAP = {"bristle_stiffness": 3e6}
 
 
 def _multi_start(model: _Model, sigma1: float, box, deadline: float,
@@ -561,14 +580,15 @@ def _multi_start(model: _Model, sigma1: float, box, deadline: float,
 
 
 def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, deadline: float = math.inf,
-               points=None, clock: _WorkClock | None = None):
+               points=None, clock: _WorkClock | None = None, final_nfev: int = 60):
     """The weighted least-squares estimate: (z, model, σ̂1, dof, weighted residuals, Jacobian, hit).
 
     ``deadline`` (on ``clock``, the model's own :class:`_WorkClock` when None): past it, the best
     point of the current pass stands and ``hit`` is True (the Jacobian is then a finite-difference one at that point). The families
     of :data:`_MULTI_START` start from :func:`_multi_start` (its pass replaces the two first
     passes; ``points``: its starts, see there); the others from :func:`_start`, unweighted,
-    reweighted twice."""
+    reweighted twice. ``final_nfev``: the final pass's evaluations per parameter (a bootstrap
+    replicate's: :data:`_REPLICATE_FINAL_NFEV`)."""
     model = _Model(log, family, base)
     if clock is not None:
         model.clock = clock
@@ -587,6 +607,10 @@ def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, de
     n = 4 + extras.size
     lo, hi = np.full(n, -np.inf), np.full(n, np.inf)
     lo[4:], hi[4:] = extras - math.log(30.0), extras + math.log(30.0)
+    for name, top in _FIT_CAP.items():      # a stated cap, see _FIT_CAP
+        if name in model.names:
+            i = model.names.index(name)
+            hi[i] = min(hi[i], math.log(top))
     box = (lo, hi) if n > 4 else (-np.inf, np.inf)
     model.box = box
     try:
@@ -606,7 +630,7 @@ def _point_fit(log: AxisLog, family: str, base, z0: np.ndarray | None = None, de
             scale = np.sqrt(np.maximum(ms, sigma1 ** 2))[model.groups]
         model.best_cost = math.inf
         sol = optimize.least_squares(model.residual, z, args=(scale,), method="trf", diff_step=1e-5, bounds=box,
-                                     x_scale=1.0, max_nfev=60 * len(z), xtol=1e-10, ftol=1e-12)
+                                     x_scale=1.0, max_nfev=final_nfev * len(z), xtol=1e-10, ftol=1e-12)
     except _OutOfTime:
         z = getattr(model, "best_z", z)
         model.deadline = math.inf
@@ -726,6 +750,15 @@ def _replicate_truths(fitted, spans: dict[str, tuple[float, float]], bootstrap: 
     return truths, invalid
 
 
+# A lugre bootstrap replicate's final pass stops after 10 evaluations per parameter (the designed-start
+# refit's cap), the point fit's after 60 (issue 25, tenth session). Why: on dev log B (seed 4646 case 0)
+# a replicate whose v_s went to 0.2 mrad/s and σ0 to 2.4e6 crawled along a valley for 360 evaluations and
+# 344 Jacobians (2990 predictions, 41 CPU s, a third of the bootstrap); after 60 evaluations its estimate
+# was within 0.01 in ln of the end for k̄c, k̄s − k̄c, J, τ3, v_s and 0.04 for σ0 (docs/axis.md "Tenth
+# session"), small against the intervals' half-widths (0.1–0.8 in ln). The point estimate keeps 60.
+_REPLICATE_FINAL_NFEV = {"lugre": 10}
+
+
 def _replicate(plan: AxisLog, family: str, params, seed: int, base, z: np.ndarray, start_point, scale: np.ndarray,
                box, deadline: float, clock: _WorkClock) -> tuple[str, np.ndarray | None, dict | None]:
     """One parametric-bootstrap replicate of :func:`fit_log`: a log simulated from ``params`` with
@@ -747,7 +780,8 @@ def _replicate(plan: AxisLog, family: str, params, seed: int, base, z: np.ndarra
         # estimate or at the replicate's truth stays in that basin, and the noise-free model's
         # bias on a noisy log (two-mass dev log 5150 case 0: the cost at the truth 7.6 times the
         # estimate's) is then not seen (the intervals shrank to 2–3 % and missed)
-        zb, _, _, _, _, _, bhit = _point_fit(blog, family, base, deadline=deadline, points=[start_point], clock=clock)
+        zb, _, _, _, _, _, bhit = _point_fit(blog, family, base, deadline=deadline, points=[start_point], clock=clock,
+                                             final_nfev=_REPLICATE_FINAL_NFEV.get(family, 60))
         if bhit:
             return "hit", None, None
     else:
