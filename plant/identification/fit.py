@@ -1514,9 +1514,11 @@ _FEATURE_BUDGET_S = 8.0    # nominal CPU seconds (:class:`_WorkClock`) per featu
 _FEATURE_NU = 8.0
 _ROBUST_NEAR = 10.0   # the robust loss is used in a round whose start has median |whitened residual| ≤ this
 _FEATURE_NFEV = 15         # least-squares evaluations per parameter and round of a feature fit
-# Upper caps of a feature fit: a LuGre shaft with σ0 ≥ 1e6 ozf·in/rad deflects k̄s/σ0 ≤ 2 µrad
-# before it breaks away, below σ1 = 5 µrad — multimode's rigid stick as far as the log can tell —
-# and its noisy simulation costs ∝ σ0 (a fit that wandered to 3e6 took 30 CPU s per score).
+# Upper caps of a feature fit, a cost cap: a LuGre shaft with σ0 ≥ 1e6 ozf·in/rad deflects
+# k̄s/σ0 ≤ 2 µrad before it breaks away, below σ1 = 5 µrad, and its noisy simulation costs ∝ σ0 (a
+# fit that wandered to 3e6 took 30 CPU s per score). It is not invisible to the log: noise-free
+# predictions of the default plan at σ0 = 1e6 and 3e7 differ by up to 1.0e-3 rad (measured
+# 2026-11-28), so the cap can bias the lugre feature fit of a stiffer truth.
 _FEATURE_CAP = {"bristle_stiffness": 1e6}
 # The start grid of the shaft stiffness in a feature fit (finer than _GRID: one noise-free
 # simulation each, and the fit from the coarse grid ended at 7e4 on a 1.35e4 dev log).
