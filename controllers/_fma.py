@@ -19,25 +19,12 @@ from __future__ import annotations
 
 import math
 
-import llvmlite.ir as ir
 import numba
 import numpy as np
-from numba import types
-from numba.extending import intrinsic
+
+from plant.fixed_linalg import fma as _fma    # llvm.fma.f64, one rounding: the plant's intrinsic
 
 __all__ = ["fma", "lead_step1", "lead_step2", "cubic_predict", "cubic_invert", "rls_update", "window_push_dot"]
-
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
-        return builder.call(fn, args)
-
-    return sig, codegen
 
 
 @numba.njit(cache=True)

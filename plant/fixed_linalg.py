@@ -59,7 +59,7 @@ _EPS = 2.0 ** -53
 
 @intrinsic
 def fma(typingctx, a, b, c):
-    """a·b + c with one rounding (LLVM's llvm.fma.f64), as controllers._fma."""
+    """a·b + c with one rounding (LLVM's llvm.fma.f64); controllers._fma calls this one."""
     sig = types.float64(types.float64, types.float64, types.float64)
 
     def codegen(context, builder, signature, args):
