@@ -453,7 +453,7 @@ class SolnicController(Controller):
         step's state: the pending cycle, the undecided run, the counters, the schedule, the
         joint filter's motion-update count and prior of d; no cycle done yet."""
         c, C, sch, cnt = self._pending, _cyc, self.schedule, self.counts
-        s[C.F_OK] = self.grid is None and c is not None
+        s[C.F_OK] = self.grid is None
         if c is not None:
             s[C.PC_HAS:C.PC_SPREAD + 1] = (1.0, c.t_a, c.x1_a, c.var_x1_a, c.sign, c.dt_u, c.size, c.delta_c,
                                           c.H_b[0], c.H_b[1], c.peak_torque, c.moving_time, c.overshoot,

@@ -164,8 +164,9 @@ def _segment_ok(o, prev):
 
 
 @njit(cache=True)
-def _cycle(s, p, t, offs, levs):
-    """The fired sample with a pending cycle (module docstring), or 0 with ``s`` untouched."""
+def _cycle(s, p, t, offs, levs, evaluate):
+    """The sample (module docstring) — with ``evaluate``, the pending cycle's evaluation first —
+    or 0 with ``s`` untouched."""
     two = p[P_TWO]
     z0 = s[_i.J_Z:_i.J_Z + 5]
     P0 = s[_i.J_P:_i.J_P + 25].reshape((5, 5))
@@ -175,67 +176,78 @@ def _cycle(s, p, t, offs, levs):
     if not earliest > 0.0:
         earliest = 0.0
     # -- _evaluate(t): the joint EKF without the grid
-    c_sign, c_size, c_dtu = s[PC_SIGN], s[PC_SIZE], s[PC_DTU]
-    dc_e, var_e = z[4], P[4, 4]
-    sd = math.sqrt(_pmax(var_e, 1e-300))
-    zz = c_sign * dc_e / sd if math.isfinite(sd) else 0.0
-    significant = zz >= p[P_ZMOT]
+    c_sign = c_size = c_dtu = dc_e = sd = 0.0
+    significant = False
     undecided = s[UNDEC]
-    decision = 0                                   # moved
-    if not significant:
-        hb = np.empty(2)
-        hb[0], hb[1] = s[PC_HB0], s[PC_HB1]
-        var_k = quadratic_form2(hb, P[2:4, 2:4])
-        spread = math.sqrt(sd * sd + var_k + s[PC_NOISE])
-        x = (s[PC_DC] - p[P_ZMOT] * sd) / spread
-        power = 0.5 * (1.0 + math.erf((x - 0.0) / (1.0 * math.sqrt(2.0))))
-        if not power < p[P_POWER]:
-            return 0                               # "none": JointFilter.no_motion in Python
-        undecided += 1.0
-        decision = 1 if undecided <= p[P_MAXUND] else 2
-    if decision != 1:
-        undecided = 0.0
-    ks_before, kc_before = z[3], z[2]
-    prior_mean, prior_var = s[J_MP0], s[J_MP1]
-    post_var = P[4, 4]
+    decision = 0
+    ks_before = kc_before = 0.0
     has_nis, nis = False, 0.0
-    if post_var > 0 and prior_var > 0:             # JointFilter.motion_likelihood
-        info = 1.0 / post_var - 1.0 / prior_var
-        if info > 1e-12 / post_var:
-            R = 1.0 / info
-            m = R * (z[4] / post_var - prior_mean / prior_var)
-            if math.isfinite(R):
-                has_nis, nis = True, _sq(m - prior_mean, two) / (R + prior_var)
     n_mu, fu = s[J_NMU], 0.0
-    if decision == 0:
-        n_mu += 1.0
-        joint_moved(z, P, s[PC_PEAK], p[_i.J_UMAX])
-        fu = 1.0
-    # the schedule: undecided() or evaluated(significant, size, dt_u)
     opt, inc, size, startup, done = s[SC_OPT], s[SC_INC], s[SC_SIZE], s[SC_STARTUP], s[SC_DONE]
     reset = False
-    if decision == 1:
-        if c_size == _RAISE:
-            startup = _pmax(c_dtu - inc, 0.0)
+    if evaluate:
+        c_sign, c_size, c_dtu = s[PC_SIGN], s[PC_SIZE], s[PC_DTU]
+        dc_e, var_e = z[4], P[4, 4]
+        sd = math.sqrt(_pmax(var_e, 1e-300))
+        zz = c_sign * dc_e / sd if math.isfinite(sd) else 0.0
+        significant = zz >= p[P_ZMOT]
+        undecided = s[UNDEC]
+        decision = 0                                   # moved
+        if not significant:
+            hb = np.empty(2)
+            hb[0], hb[1] = s[PC_HB0], s[PC_HB1]
+            var_k = quadratic_form2(hb, P[2:4, 2:4])
+            spread = math.sqrt(sd * sd + var_k + s[PC_NOISE])
+            x = (s[PC_DC] - p[P_ZMOT] * sd) / spread
+            power = 0.5 * (1.0 + math.erf((x - 0.0) / (1.0 * math.sqrt(2.0))))
+            if not power < p[P_POWER]:
+                return 0                               # "none": JointFilter.no_motion in Python
+            undecided += 1.0
+            decision = 1 if undecided <= p[P_MAXUND] else 2
+        if decision != 1:
+            undecided = 0.0
+        ks_before, kc_before = z[3], z[2]
+        prior_mean, prior_var = s[J_MP0], s[J_MP1]
+        post_var = P[4, 4]
+        has_nis, nis = False, 0.0
+        if post_var > 0 and prior_var > 0:             # JointFilter.motion_likelihood
+            info = 1.0 / post_var - 1.0 / prior_var
+            if info > 1e-12 / post_var:
+                R = 1.0 / info
+                m = R * (z[4] / post_var - prior_mean / prior_var)
+                if math.isfinite(R):
+                    has_nis, nis = True, _sq(m - prior_mean, two) / (R + prior_var)
+        n_mu, fu = s[J_NMU], 0.0
+        if decision == 0:
+            n_mu += 1.0
+            joint_moved(z, P, s[PC_PEAK], p[_i.J_UMAX])
+            fu = 1.0
+        # the schedule: undecided() or evaluated(significant, size, dt_u)
+        opt, inc, size, startup, done = s[SC_OPT], s[SC_INC], s[SC_SIZE], s[SC_STARTUP], s[SC_DONE]
+        reset = False
+        if decision == 1:
+            if c_size == _RAISE:
+                startup = _pmax(c_dtu - inc, 0.0)
+            elif c_size == _SETTLE:
+                startup = c_dtu
+        elif c_size == _RAISE:
+            if significant:
+                size = _SETTLE
+                startup = _pmax(c_dtu - inc / 2.0, 0.0)
         elif c_size == _SETTLE:
-            startup = c_dtu
-    elif c_size == _RAISE:
-        if significant:
-            size = _SETTLE
-            startup = _pmax(c_dtu - inc / 2.0, 0.0)
-    elif c_size == _SETTLE:
-        if significant:
-            opt = c_dtu
-            size, done, reset = _SMALL, 0.0, True
-        else:
-            startup = c_dtu + inc / 4.0
-    elif not significant and size >= _SMALL:
-        size = _RAISE
-        startup = _pmax(c_dtu, opt)
-        done = 0.0
-    if size >= _SMALL and done >= 3 * _PER_SIZE:
-        return 0                                   # a set is complete: the optimiser in Python
-    # -- _plan's second attempt: Δt_u, the prediction, the bias, the trigger
+            if significant:
+                opt = c_dtu
+                size, done, reset = _SMALL, 0.0, True
+            else:
+                startup = c_dtu + inc / 4.0
+        elif not significant and size >= _SMALL:
+            size = _RAISE
+            startup = _pmax(c_dtu, opt)
+            done = 0.0
+        if size >= _SMALL and done >= 3 * _PER_SIZE:
+            return 0                                   # a set is complete: the optimiser in Python
+    # -- _plan's attempt after the evaluation (or its first, without a pending cycle): Δt_u, the
+    # prediction, the bias (the full moments: no cycle is pending), the trigger
     dtu = _next_dtu(size, opt, inc, startup)
     if not dtu > 0:
         return 0                                   # a size skipped: in Python
@@ -299,7 +311,7 @@ def _cycle(s, p, t, offs, levs):
     # room for the log entry and the schedule's appended size
     n_log = int(s[LOG_N])
     n_set = int(s[SC_N])
-    if n_log >= N_LOG or (fires and size >= _SMALL and n_set >= N_SETS):
+    if (evaluate and n_log >= N_LOG) or (fires and size >= _SMALL and n_set >= N_SETS):
         return 0
     mk = int(s[_i.J_MK])
     hit = _i._memo_hit(s, ks, kc, dtu)
@@ -307,19 +319,20 @@ def _cycle(s, p, t, offs, levs):
     if cleared and s[_i.J_CLEARED] != 0.0:
         return 0                                   # a second clear before the import: in Python
     # ---- commit: nothing above has written to s
-    e = LOG_TAB + N_LOG_FIELDS * n_log
-    s[e + L_TA], s[e + L_TB], s[e + L_X1A], s[e + L_SIZE] = s[PC_TA], t, s[PC_X1A], c_size
-    s[e + L_DTU], s[e + L_SIGN], s[e + L_DCP], s[e + L_DCE] = c_dtu, c_sign, s[PC_DC], c_sign * dc_e
-    s[e + L_SDE], s[e + L_SIG], s[e + L_KSB], s[e + L_KCB] = sd, 1.0 if significant else 0.0, ks_before, kc_before
-    s[e + L_HASNIS], s[e + L_NIS], s[e + L_KS], s[e + L_KC] = 1.0 if has_nis else 0.0, nis, ks, kc
-    s[e + L_DEC] = decision
-    s[LOG_N] = n_log + 1.0
-    s[CN_EVAL] += 1.0
-    s[CN_UNDEC] += 1.0 if decision == 1 else 0.0
-    s[CN_SIG] += 1.0 if significant else 0.0
-    s[CN_FU] += fu
-    s[J_NMU] = n_mu
-    s[UNDEC] = undecided
+    if evaluate:
+        e = LOG_TAB + N_LOG_FIELDS * n_log
+        s[e + L_TA], s[e + L_TB], s[e + L_X1A], s[e + L_SIZE] = s[PC_TA], t, s[PC_X1A], c_size
+        s[e + L_DTU], s[e + L_SIGN], s[e + L_DCP], s[e + L_DCE] = c_dtu, c_sign, s[PC_DC], c_sign * dc_e
+        s[e + L_SDE], s[e + L_SIG], s[e + L_KSB], s[e + L_KCB] = sd, 1.0 if significant else 0.0, ks_before, kc_before
+        s[e + L_HASNIS], s[e + L_NIS], s[e + L_KS], s[e + L_KC] = 1.0 if has_nis else 0.0, nis, ks, kc
+        s[e + L_DEC] = decision
+        s[LOG_N] = n_log + 1.0
+        s[CN_EVAL] += 1.0
+        s[CN_UNDEC] += 1.0 if decision == 1 else 0.0
+        s[CN_SIG] += 1.0 if significant else 0.0
+        s[CN_FU] += fu
+        s[J_NMU] = n_mu
+        s[UNDEC] = undecided
     if reset:
         s[SC_RESET], s[SC_N] = 1.0, 0.0
     if not hit:                                    # Predictor.conditional's memo and model runs
@@ -403,7 +416,6 @@ def _cycle(s, p, t, offs, levs):
     pending = s[PC_HAS] != 0.0
     s[_i.DUE] = 1.0 if pending and (size >= _SMALL and done >= 3 * _PER_SIZE or size == _RAISE
                                     or size == _SETTLE) else 0.0
-    s[F_OK] = 1.0 if pending else 0.0
     s[_i.PLAN_OK] = s[_i.J_GRID] = s[_i.J_GP_OK] = 0.0
     nd = _next_dtu(size, opt, inc, startup)
     if nd > 0:
@@ -418,14 +430,20 @@ def _cycle(s, p, t, offs, levs):
 @njit(cache=True)
 def joint_cycle_step(s, p, y, offs, levs):
     """:func:`~controllers.solnic.idle_step.joint_idle_step` with :func:`_cycle` at a sample
-    whose first trigger test fires with a cycle pending."""
+    whose first trigger test fires (a pending cycle evaluated first) or whose set-boundary
+    evaluation is due."""
     owned = p[_i.J_OWNER] != 0.0
     if owned:
         _i._save_entry(s)
     s[_i.J_STAGE] = 0.0
     k = _i._joint_idle(s, p, y, offs, levs)
-    if k == 0 and s[_i.J_STAGE] == 2.0 and p[P_ON] != 0.0 and s[F_OK] != 0.0 and s[PC_HAS] != 0.0:
-        k = _cycle(s, p, (s[_i.N] - 1.0) * p[_i.TS], offs, levs)
+    if k == 0 and p[P_ON] != 0.0 and s[F_OK] != 0.0:
+        t = (s[_i.N] - 1.0) * p[_i.TS]
+        if s[_i.J_STAGE] == 2.0:                # the first trigger test fired: evaluate a pending cycle
+            k = _cycle(s, p, t, offs, levs, s[PC_HAS] != 0.0)
+        elif (s[_i.J_STAGE] == 1.0 and s[PC_HAS] != 0.0 and s[_i.DUE] != 0.0
+              and s[_i.SINCE] >= p[_i.EVAL_SAMPLES]):   # the set-boundary evaluation (SolnicController._step_tail)
+            k = _cycle(s, p, t, offs, levs, True)
     if k != 0 or not owned:
         return k
     for i in range(17):
