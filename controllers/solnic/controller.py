@@ -1041,6 +1041,8 @@ class SolnicController(Controller):
 
     def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
         """Δc of the last large cycle and the last Δc_e/Δc_p mismatch, held on ``t``."""
+        if self._ready and self._idle is not None:
+            self._import_idle()                         # the compiled cycles' log entries
         return log_series(self.log if self._ready else [], t)
 
     def summary(self) -> dict[str, Any]:
