@@ -69,7 +69,7 @@ from controllers.models.acker import max_on_time
 from controllers.solnic.cost import cycle_cost, optimal_dtu, optimal_increment
 from controllers.solnic.friction_filter import FrictionFilter
 from controllers.solnic.grid_posterior import FrictionGrid, Predictive
-from controllers.solnic import idle_step as _idle, noise_model as _noise
+from controllers.solnic import cycle_step as _cyc, idle_step as _idle, noise_model as _noise
 from controllers.solnic.filter_kernels import (joint_add_motion, joint_condition, joint_launch, joint_moved,
                                                 joint_predict, joint_update, joint_valid, quadratic_form2)
 from controllers.solnic.joint_filter import KS as _KS, JointFilter
@@ -127,7 +127,7 @@ def _warm_in_loop(controller: "SolnicController") -> None:
     try:
         joint = kind == "joint"
         if joint:
-            step, n_s, n_p, key = (_idle.joint_idle_step_address(), _idle.N_JOINT_STATE, _idle.N_JOINT_PARAMS,
+            step, n_s, n_p, key = (_cyc.joint_cycle_step_address(), _cyc.N_CYCLE_STATE, _cyc.N_CYCLE_PARAMS,
                                    _idle.J_OWNER)
         else:
             step, n_s, n_p, key = _idle.idle_step_address(), 2 * _idle.N_STATE, _idle.N_PARAMS, _idle.OWNER
@@ -234,6 +234,7 @@ class SolnicController(Controller):
     knobs = KNOBS
 
     python_in_loop = True     # the compiled idle step's Python samples inside its loop (False: hand-backs)
+    cycle_in_loop = True      # solnic-modern's common post-hand-over cycles compiled (controllers.solnic.cycle_step)
 
     def __init__(self, options: SolnicOptions | None = None, /, *, preset: str | None = None,
                  **fields: Any) -> None:
@@ -324,7 +325,7 @@ class SolnicController(Controller):
             return None
         joint = kind == "joint"
         if joint:
-            f, n_p, n_s, step = self.joint, _idle.N_JOINT_PARAMS, _idle.N_JOINT_STATE, _idle.joint_idle_step_address()
+            f, n_p, n_s, step = self.joint, _cyc.N_CYCLE_PARAMS, _cyc.N_CYCLE_STATE, _cyc.joint_cycle_step_address()
         else:
             f, n_p, n_s, step = self.mode2, _idle.N_PARAMS, 2 * _idle.N_STATE, _idle.idle_step_address()
         p = np.empty(n_p)
@@ -339,6 +340,12 @@ class SolnicController(Controller):
             s2, cap, min_ratio = self.predictor._brake_constants
             p[_idle.J_U:_idle.J_UMAX + 1] = U, t3, a, fd, s2, cap, min_ratio, f.u_max
             p[_idle.J_OWNER] = owner
+            p[_cyc.P_ZMOT], p[_cyc.P_POWER], p[_cyc.P_MAXUND] = self.z_motion, o.no_motion_power, o.max_undecided_cycles
+            p[_cyc.P_STUCK], p[_cyc.P_S5], p[_cyc.P_DTUMAX] = (o.stuck_confidence_sigmas, float(self.params.sigma5_sq),
+                                                               self.dtu_max)
+            p[_cyc.P_TWO], p[_cyc.P_ULEVEL] = 2.0, self.params.u_max
+            p[_cyc.P_ON] = (self.cycle_in_loop and o.motion_decision == "three-way" and not o.joint_correction_limit
+                            and not o.legacy_set_boundary)
         self._in_loop: tuple | None = None
         self._replay: BaseException | None = None
         self._idle = CompiledLaw(step, np.zeros(n_s), p, DriveType.BRIDGE, 4)
@@ -420,6 +427,7 @@ class SolnicController(Controller):
                     mk += 1
         del margin_changed
         self._memo_seen = (pr.memo_clears, len(memo))
+        self._export_cycles(s)
         s[_idle.J_MK] = s[_idle.J_MK0] = mk
         s[_idle.J_MCOUNT], s[_idle.J_CLEARED], s[_idle.J_RUNS] = len(memo), 0.0, 0.0
         brake, margin = pr._brake_args()[:2]
@@ -440,6 +448,66 @@ class SolnicController(Controller):
                 s[_idle.J_GP_OK], s[_idle.J_GP_DC] = 1.0, gp.dc_mean
         s[_idle.PLAN_OK] = 1.0
 
+    def _export_cycles(self, s: np.ndarray) -> None:
+        """What :func:`~controllers.solnic.cycle_step._cycle` reads and writes besides the idle
+        step's state: the pending cycle, the undecided run, the counters, the schedule, the
+        joint filter's motion-update count and prior of d; no cycle done yet."""
+        c, C, sch, cnt = self._pending, _cyc, self.schedule, self.counts
+        s[C.F_OK] = self.grid is None
+        if c is not None:
+            s[C.PC_HAS:C.PC_SPREAD + 1] = (1.0, c.t_a, c.x1_a, c.var_x1_a, c.sign, c.dt_u, c.size, c.delta_c,
+                                          c.H_b[0], c.H_b[1], c.peak_torque, c.moving_time, c.overshoot,
+                                          c.noise_var, c.spread_var)
+        else:
+            s[C.PC_HAS] = 0.0
+        s[C.UNDEC] = self._undecided
+        s[C.CN_EVAL:C.CN_BRAKED + 1] = (cnt["cycles_evaluated"], cnt["undecided_cycles"], cnt["significant_cycles"],
+                                        cnt["friction_updates"], cnt["startup_cycles"], cnt["pulses"],
+                                        cnt["overshoot_corrections"], cnt["braked_pulses"])
+        s[C.SC_OPT:C.SC_N + 1] = (sch.dtu_opt, sch.dtu_inc, sch.size, sch.dtu_startup, sch.cycles_done, 0.0, 0.0)
+        j = self.joint
+        s[C.J_NMU], (s[C.J_MP0], s[C.J_MP1]) = j.n_motion_updates, j.motion_prior
+        s[C.SN_NEW] = s[C.F_DONE] = s[C.LOG_N] = 0.0
+
+    def _import_cycles(self, s: np.ndarray) -> None:
+        """The objects as the compiled cycles since the export left them (:meth:`_export_cycles`);
+        the log entries and the filter's snapshot are consumed from the array."""
+        C, j, sch, cnt = _cyc, self.joint, self.schedule, self.counts
+        head = s[C.F_OK:C.LOG_N + 1].tolist()
+        v = lambda i: head[i - C.F_OK]                                      # noqa: E731
+        if v(C.SN_NEW):
+            j._snapshot = (s[C.SN_Z:C.SN_Z + 5].copy(), s[C.SN_P:C.SN_P + 25].reshape(5, 5).copy(), v(C.SN_T))
+            j._since = []
+        for i in range(int(v(C.LOG_N))):
+            e = s[C.LOG_TAB + C.N_LOG_FIELDS * i:C.LOG_TAB + C.N_LOG_FIELDS * (i + 1)].tolist()
+            entry = dict(t_a=e[C.L_TA], t_b=e[C.L_TB], x1_a=e[C.L_X1A], size=e[C.L_SIZE], dt_u=e[C.L_DTU],
+                         sign=e[C.L_SIGN], dc_p=e[C.L_DCP], dc_e=e[C.L_DCE], sd_e=e[C.L_SDE],
+                         significant=e[C.L_SIG], ks_before=e[C.L_KSB], kc_before=e[C.L_KCB])
+            if e[C.L_HASNIS]:
+                self._nis.append(e[C.L_NIS])
+                entry["nis"] = e[C.L_NIS]
+            entry.update(ks=e[C.L_KS], kc=e[C.L_KC], decision=C.DECISIONS[int(e[C.L_DEC])])
+            self.log.append(entry)
+        self._pending = (_Cycle(v(C.PC_TA), v(C.PC_X1A), v(C.PC_VX1A), int(v(C.PC_SIGN)), v(C.PC_DTU),
+                                int(v(C.PC_SIZE)), v(C.PC_DC), np.array([v(C.PC_HB0), v(C.PC_HB1)]),
+                                v(C.PC_PEAK), v(C.PC_MOVING), bool(v(C.PC_OVER)), v(C.PC_NOISE), v(C.PC_SPREAD))
+                         if v(C.PC_HAS) else None)
+        self._undecided = int(v(C.UNDEC))
+        for name, i in (("cycles_evaluated", C.CN_EVAL), ("undecided_cycles", C.CN_UNDEC),
+                        ("significant_cycles", C.CN_SIG), ("friction_updates", C.CN_FU),
+                        ("startup_cycles", C.CN_STARTUP), ("pulses", C.CN_PULSES),
+                        ("overshoot_corrections", C.CN_OVER), ("braked_pulses", C.CN_BRAKED)):
+            cnt[name] = int(v(i))
+        sch.dtu_opt, sch.dtu_inc, sch.size = v(C.SC_OPT), v(C.SC_INC), int(v(C.SC_SIZE))
+        sch.dtu_startup, sch.cycles_done = v(C.SC_STARTUP), int(v(C.SC_DONE))
+        if v(C.SC_RESET):
+            sch.set_sizes = []
+        sch.set_sizes.extend(int(x) for x in s[C.SC_TAB:C.SC_TAB + int(v(C.SC_N))].tolist())
+        j.n_motion_updates = int(v(C.J_NMU))
+        j.motion_prior = (v(C.J_MP0), v(C.J_MP1))
+        self._t_max = s.item(_idle.T_MAX)
+        s[C.SN_NEW] = s[C.F_DONE] = s[C.LOG_N] = s[C.SC_RESET] = s[C.SC_N] = 0.0
+
     def _import_joint(self) -> None:
         s, j, pr = self._idle.state, self.joint, self.predictor
         head = s[:_idle.J_Z].tolist()                   # the scalars N … J_CLEARED as Python floats
@@ -447,6 +515,8 @@ class SolnicController(Controller):
         j.t = head[_idle.FT]
         j.z[:] = s[_idle.J_Z:_idle.J_Z + 5]
         j.P[:] = s[_idle.J_P:_idle.J_P + 25].reshape(5, 5)
+        if s[_cyc.F_DONE] != 0.0:
+            self._import_cycles(s)                      # before the since-buffer: a launch resets it
         ns = int(head[_idle.J_NS])
         if ns:
             buf = iter(s[_idle.J_SBUF:_idle.J_SBUF + 2 * ns].tolist())
@@ -971,6 +1041,8 @@ class SolnicController(Controller):
 
     def report_series(self, t: np.ndarray, warmup_s: float) -> dict[str, np.ndarray]:
         """Δc of the last large cycle and the last Δc_e/Δc_p mismatch, held on ``t``."""
+        if self._ready and self._idle is not None:
+            self._import_idle()                         # the compiled cycles' log entries
         return log_series(self.log if self._ready else [], t)
 
     def summary(self) -> dict[str, Any]:
