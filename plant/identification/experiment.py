@@ -182,6 +182,9 @@ def design_experiment(options: ExperimentOptions = ExperimentOptions()) -> AxisL
     cmds += [_hold(0.0, drive)] * int(round(1.0 / tau))
     text = (f"solnic-bench identification plan ({o.drive} drive): play u at each t, record y.\n"
             + "\n".join(" ".join(WHY.split()).split(" * ")) + "\n"
+            + ("**torque doublets** (+max_torque for w, then -max_torque for w, w = 2 and 2.5 ms, "
+               f"{o.doublets} per width and direction): the sharp reversal excites a compliant shaft's mode.\n"
+               if o.doublets else "")
             + f"Abort (u = 0) if |y - y(0)| > max_angle = {o.max_angle!r} rad.\n"
             + f"max_angle = {o.max_angle!r}\nmax_torque = {o.max_torque!r}")
     return AxisLog(o.drive, tau, o.max_torque, tuple(cmds), None, text)
