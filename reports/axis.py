@@ -53,6 +53,9 @@ def experiment_command(
     holds: int = typer.Option(2, "--holds", help="Torque holds per ladder level and direction (linear drive; "
                                                  "0: the plan without holds)."),
     hold_time: float = typer.Option(0.15, "--hold-time", help="Seconds each torque hold lasts."),
+    doublets: int = typer.Option(0, "--doublets", help="Torque doublets (+max torque, then -max torque, 2 and 2.5 ms "
+                                                       "each) per width and direction (linear drive; 0: none): they "
+                                                       "excite a compliant shaft."),
 ) -> None:
     """Write the identification plan: u at each sample instant, to be played on the axis.
 
@@ -66,7 +69,8 @@ def experiment_command(
     try:
         opts = ExperimentOptions(drive=drive, sample_period=sample_period, max_torque=max_torque,
                                  ramp_fraction=ramp_fraction, ramp_time=ramp_time, repeats=repeats,
-                                 max_angle=max_angle, holds=holds, hold_time=hold_time)
+                                 max_angle=max_angle, holds=holds, hold_time=hold_time,
+                                 doublets=doublets)
     except ValueError as exc:
         raise UserError(str(exc).replace("ExperimentOptions.", "--").replace("_", "-")) from None
     plan = design_experiment(opts)

@@ -9,7 +9,9 @@ score sets come from one set of fold fits. Per log one JSON line (the per-move s
 family under each feature set, the choice's CPU seconds) is appended to ``OUT``; :func:`pick`
 applies a rule (feature set, significance threshold) to it offline.
 
-Run: ``python -m tests.identify_dev OUT SEED REPEATS FAMILY CASE``.
+Run: ``python -m tests.identify_dev OUT SEED REPEATS FAMILY CASE [OPTION …]`` (each OPTION a boolean keyword of
+:func:`~plant.identification.fit.choose_family` set True, e.g. ``shaft_profile``, or NAME=INT a field of the plan's
+:class:`~plant.identification.ExperimentOptions`, e.g. ``doublets=6``).
 """
 
 from __future__ import annotations
@@ -46,13 +48,14 @@ def _replicates(log, family, base, z, test, seed, n):
     return model, np.array(sims)
 
 
-def run(seed: int, repeats: int, family: str, case: int) -> dict:
-    """The choice on one dev log, with its per-move scores under both feature sets."""
+def run(seed: int, repeats: int, family: str, case: int, plan: dict | None = None, **options) -> dict:
+    """The choice on one dev log, with its per-move scores under both feature sets (``options``:
+    keywords of :func:`~plant.identification.fit.choose_family`; ``plan``: more fields of the plan's options)."""
     from plant.identification import ExperimentOptions
 
     from tests.identify_power import dev_log
 
-    log, _, _ = dev_log(family, case, seed, ExperimentOptions(repeats=repeats))
+    log, _, _ = dev_log(family, case, seed, ExperimentOptions(repeats=repeats, **(plan or {})))
     stash: dict = {}
     original = F._predictive_scores
 
@@ -68,7 +71,7 @@ def run(seed: int, repeats: int, family: str, case: int) -> dict:
     F._predictive_scores = both
     try:
         c0 = time.process_time()
-        _, choice = F.choose_family(log, bootstrap=0, final_fit=False)
+        _, choice = F.choose_family(log, bootstrap=0, final_fit=False, **options)
         cpu = time.process_time() - c0
     finally:
         F._predictive_scores = original
@@ -78,7 +81,8 @@ def run(seed: int, repeats: int, family: str, case: int) -> dict:
         for name in SPECS:
             per[name][fam][test] = out[name]
     assert all(np.array_equal(per["today"][f], choice.per_move[f], equal_nan=True) for f in FAMILY_FREE)
-    return {"seed": seed, "repeats": repeats, "family": family, "case": case, "picked": choice.family,
+    return {"seed": seed, "repeats": repeats, "family": family, "case": case, "options": sorted(options), "plan": plan or {},
+            "picked": choice.family,
             "picked_pairwise": F._rule_pairwise(list(choice.score), choice.score, choice.pairs),
             "cpu": cpu, "moves": G, "fold_cpu": {f: float(c) for f, c in choice.cpu.items()},
             "fold_fits": {f"{f} {k}": [float(x) for x in z] for (f, k), z in choice.fold_fits.items()},
@@ -100,7 +104,8 @@ def pick(per_move: dict, threshold: float) -> tuple[str, dict]:
 
 if __name__ == "__main__":
     out, seed, repeats, family, case = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
-    res = run(seed, repeats, family, case)
+    res = run(seed, repeats, family, case, {a.split("=")[0]: int(a.split("=")[1]) for a in sys.argv[6:] if "=" in a},
+              **dict.fromkeys([a for a in sys.argv[6:] if "=" not in a], True))
     with open(out, "a") as fh:
         fh.write(json.dumps(res) + "\n")
     print(family, case, repeats, res["picked"], f"cpu {res['cpu']:.0f}", flush=True)

@@ -238,3 +238,46 @@ def test_feature_windows_follow_the_spec_on_the_default_plans_moves():
     assert kinds == {1, 15}       # pulses (one sample on), holds and ramps (15 samples on)
     # the finer set is the default with the 5-sample window split into its samples
     assert _FINER_WINDOW_SPEC == (2, (1, 1, 1, 1, 1), 10) and _WINDOW_SPEC == _FIT_WINDOW_SPEC == (2, (5,), 10)
+
+
+@pytest.mark.parametrize("shaft", [1.0e4, 1.6e4])
+def test_shaft_profile_finds_the_shaft_of_a_log_without_friction_noise(shaft):
+    """The two-mass profile over k_sh (issue 25's eleventh session, ``choose_family(shaft_profile=True)``):
+    on a log whose only noise is the sensor's (friction noise off, so the noise frame is σ1²/window and the
+    truth's whitened residuals are the sensor noise alone), with the core refitted at each held k_sh from
+    a multimode core 10–20 % off the truth, the profile's least cost lies at one of the two grid points that
+    bracket the generating k_sh (truth between grid points: 1e4 in 8e3–1.25e4, 1.6e4 in 1.25e4–2e4); the
+    profile returns one point per grid value with k_sh held exactly."""
+    from plant.identification.fit import _SHAFT_PROFILE, _shaft_profile
+
+    quiet = dict(friction_noise_psd=0.0, correlated_friction_std=0.0)
+    p = get_family("two-mass").Params().replace(coulomb=1.2, stiction=1.7, inertia=0.55, motor_time_constant=0.0085,
+                                                 shaft_stiffness=shaft, **quiet)
+    log, _ = simulate_log(design_experiment(ExperimentOptions(repeats=1)), "two-mass", p, 7)
+    train = list(np.flatnonzero(_folds(log) == 0))
+    mm_base = get_family("multimode").Params().replace(sample_period=log.sample_period, **quiet)
+    tm_base = get_family("two-mass").Params().replace(sample_period=log.sample_period, **quiet)
+    sigma1 = _sigma1(log, moves(log))[0]
+    core = np.log([1.2 * 1.1, 0.5 * 0.8, (0.55 + tm_base.motor_inertia) * 1.15, 0.0085 * 0.85])
+    frame = _FeatureModel(log, "multimode", mm_base, train).frame(core, sigma1, 0)
+    tm = _FeatureModel(log, "two-mass", tm_base, train)
+    prof = _shaft_profile(tm, tm_base, core, frame)
+    assert [math.exp(z[4]) for z in prof] == pytest.approx(list(_SHAFT_PROFILE), rel=1e-12)
+    costs = [tm.cost(z, frame) for z in prof]
+    best = _SHAFT_PROFILE[int(np.argmin(costs))]
+    below = max(k for k in _SHAFT_PROFILE if k < shaft)
+    above = min(k for k in _SHAFT_PROFILE if k > shaft)
+    assert best in (below, above), (best, costs)
+    with pytest.raises(ValueError, match="two-mass"):
+        _shaft_profile(_FeatureModel(log, "multimode", mm_base, train), mm_base, core, frame)
+
+
+def test_choose_family_shaft_profile_must_be_a_bool():
+    """``shaft_profile`` is True or False; anything else is one clear error naming it (before any fit)."""
+    from plant.identification.fit import choose_family
+
+    log, _ = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
+                          get_family("multimode").Params(), None)
+    for bad in ("yes", 1, None):
+        with pytest.raises(ValueError, match="shaft_profile must be True or False"):
+            choose_family(log, final_fit=False, shaft_profile=bad)

@@ -68,6 +68,12 @@ class ExperimentOptions:
     holds : int
         Torque holds per ladder level and direction (0: no holds, the plan of the first
         release). Linear drive only: a bridge has no intermediate level.
+    doublets : int
+        Torque doublets per width and direction (linear drive only; default 0, the default plan
+        unchanged): +``max_torque`` for a width, −``max_torque`` for the same width, then 0, each
+        followed by a rest — the sharp torque reversal excites a compliant shaft's mode (issue 25's
+        eleventh session: on dev axes the moves of the most Fisher information in k_sh per second
+        of the plan, docs/axis.md "Eleventh session: auto — the shaft").
     hold_time : float
         Seconds each hold lasts [s]: long enough for the elastic and creeping responses and for
         a slide's speed-dependent friction to show, short enough that a slide at the top level
@@ -84,6 +90,7 @@ class ExperimentOptions:
     max_angle: float = 0.2
     holds: int = 2
     hold_time: float = 0.15
+    doublets: int = 0
 
     def __post_init__(self) -> None:
         if self.drive not in ("linear", "bridge"):
@@ -100,6 +107,13 @@ class ExperimentOptions:
             raise ValueError(f"ExperimentOptions.repeats must be an integer in [1, 100], got {self.repeats!r}")
         if not (isinstance(self.holds, int) and not isinstance(self.holds, bool) and 0 <= self.holds <= 100):
             raise ValueError(f"ExperimentOptions.holds must be an integer in [0, 100], got {self.holds!r}")
+        if not (isinstance(self.doublets, int) and not isinstance(self.doublets, bool) and 0 <= self.doublets <= 100):
+            raise ValueError(f"ExperimentOptions.doublets must be an integer in [0, 100], got {self.doublets!r}")
+        if self.doublets and self.drive != "linear":
+            raise ValueError("ExperimentOptions.doublets needs the linear drive (a bridge has no reversal within a pulse)")
+        if self.doublets and 2 * max(_DOUBLET_WIDTHS) >= self.sample_period:
+            raise ValueError(f"ExperimentOptions.doublets needs sample_period > {2 * max(_DOUBLET_WIDTHS)!r} s "
+                             f"(a doublet lies in one interval), got {self.sample_period!r}")
 
 
 # Pulse widths [s] (short moves: the friction noise grows like the move's duration^1.5). The
@@ -109,6 +123,8 @@ _BRIDGE_WIDTHS = ((1.0, (0.001, 0.0015, 0.002, 0.003)),)
 # Hold levels as fractions of the ramp peak (ramp_fraction·max_torque ≈ 1.2–1.5 k̄s, so the
 # ladder spans ≈ 0.25–1.4 k̄s: elastic, near-breakaway and constant-torque runs).
 _HOLD_LEVELS = (0.2, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.95)
+# Doublet widths [s] (``doublets``): +max_torque for w, −max_torque for w, then 0, in one sample interval.
+_DOUBLET_WIDTHS = (0.002, 0.0025)
 _BRIDGE_RAMP = tuple(round(0.0004 + 0.0001 * k, 6) for k in range(13))   # 0.4 … 1.6 ms
 
 
@@ -158,9 +174,17 @@ def design_experiment(options: ExperimentOptions = ExperimentOptions()) -> AxisL
             for _ in range(o.repeats):
                 for sign in (1, -1):
                     cmds += _pulse(width, sign * fraction * o.max_torque, tau, drive) + rest
+    for width in _DOUBLET_WIDTHS if o.doublets else ():
+        for _ in range(o.doublets):
+            for sign in (1, -1):
+                level = sign * o.max_torque
+                cmds += [DriveCommand(((0.0, level), (width, -level), (2 * width, 0.0)), drive)] + rest
     cmds += [_hold(0.0, drive)] * int(round(1.0 / tau))
     text = (f"solnic-bench identification plan ({o.drive} drive): play u at each t, record y.\n"
             + "\n".join(" ".join(WHY.split()).split(" * ")) + "\n"
+            + ("**torque doublets** (+max_torque for w, then -max_torque for w, w = 2 and 2.5 ms, "
+               f"{o.doublets} per width and direction): the sharp reversal excites a compliant shaft's mode.\n"
+               if o.doublets else "")
             + f"Abort (u = 0) if |y - y(0)| > max_angle = {o.max_angle!r} rad.\n"
             + f"max_angle = {o.max_angle!r}\nmax_torque = {o.max_torque!r}")
     return AxisLog(o.drive, tau, o.max_torque, tuple(cmds), None, text)
