@@ -151,3 +151,40 @@ def test_hermite_peak_with_scalar_roots_is_the_array_form():
             yb = ya
         assert hermite_peak(h, ya, da, yb, db) == reference_hermite_peak(h, ya, da, yb, db)
     assert hermite_peak(0.0, 1.0, 1.0, 2.0, -1.0) == 0.0
+
+
+def _kernel_records():
+    """Table 2-1 (β4 = β5, the decays shared) and variants with β4 ≠ β5, fast decays (the
+    Gauss–Legendre branch of q_moving) and no x4 noise, as kernel records."""
+    base = PlantParams()
+    variants = [base, base.replace(command_velocity_tau=333.0),
+                base.replace(correlated_friction_tau=0.025, command_velocity_tau=0.14),
+                base.replace(correlated_friction_tau=5e-4, command_velocity_tau=5e-4),
+                base.replace(command_velocity_std=0.0)]
+    return [v.kernel_record() for v in variants]
+
+
+def test_phi_and_q_with_shared_evaluations_are_the_separate_forms():
+    """phi_moving, q_moving and the fused phi_q_moving (the fresh end-of-segment step) give the
+    entries of the forms that evaluate every e-function per entry (tests/reference_kernels.py),
+    bit for bit, for widths from 1e-12 s to 1 s (both branches of q_moving) and both modes."""
+    from plant.multimode.moving import phi_moving, phi_q_moving, q_moving
+    from tests.reference_kernels import phi_moving_ref, q_moving_ref
+    rng = np.random.default_rng(11)
+    widths = np.concatenate((10.0 ** rng.uniform(-12, 0, 400), [1e-5, 2e-5, 1.5e-4, 0.004, 0.01]))
+    n_fused_shared = 0
+    for rec in _kernel_records():
+        p = rec[0]
+        for h in widths:
+            for mode in (1, 3):
+                P1, P2, P3 = np.empty((7, 7)), np.empty((7, 7)), np.empty((7, 7))
+                Q1, Q2, Q3 = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+                phi_moving_ref(mode, h, p, P1)
+                q_moving_ref(mode, h, p, Q1)
+                phi_moving(mode, h, p, P2)
+                q_moving(mode, h, p, Q2)
+                phi_q_moving(mode, h, p, P3, Q3)
+                for A, B in ((P1, P2), (P1, P3), (Q1, Q2), (Q1, Q3)):
+                    assert np.array_equal(A.view(np.uint64), B.view(np.uint64)), (mode, h, p["beta4"], p["beta5"])
+                n_fused_shared += p["beta4"] * h == p["beta5"] * h
+    assert n_fused_shared > 500            # the shared-decay branch is exercised

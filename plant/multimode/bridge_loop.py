@@ -9,7 +9,9 @@ the same normals read, made cheaper where that changes no bit:
 * the 7 × 7 and 4 × 4 scratch matrices of the fresh end-of-segment step and the ladder's
   thresholds come in as views made once per interval (three reshapes per segment were numba
   runtime calls);
-* it is compiled without numba's reference counting (it allocates nothing).
+* it is compiled without numba's reference counting (it allocates nothing);
+* the fresh end-of-segment step takes Φ and Q from one call
+  (:func:`plant.multimode.moving.phi_q_moving`), which evaluates the decays both use once.
 
 tests/test_bridge_loop.py runs both on the same states and normals.
 """
@@ -18,7 +20,7 @@ from __future__ import annotations
 from numba import njit
 
 from plant.multimode.crossing import crossed
-from plant.multimode.moving import chol_psd, phi_moving, q_moving, substep_peak, velocity_extremum_time
+from plant.multimode.moving import chol_psd, phi_q_moving, substep_peak, velocity_extremum_time
 from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _mean_min, _step
 
 __all__ = ["bridge_run"]
@@ -88,8 +90,7 @@ def bridge_run(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw,
             _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
         else:
             step = rem
-            phi_moving(mode, step, p, P)
-            q_moving(mode, step, p, Qtmp)
+            phi_q_moving(mode, step, p, P, Qtmp)
             chol_psd(Qtmp, L)
             _step(X, P, L, z, cursor, Xb)
         n += 1
