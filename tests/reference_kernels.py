@@ -17,6 +17,9 @@ replaced them (issue 27).
 :func:`~plant.multimode.moving.q_moving` evaluating every e-function where an entry uses it (e1(β3h) and
 e2(β3h) twice, the x4 and x5 decays separately when β4·h = β5·h), before the shared evaluations and
 :func:`~plant.multimode.moving.phi_q_moving` (issue 27).
+``hitting_midpoint_ref``: :func:`plant.multimode.zero_velocity._hitting_midpoint` evaluating exp
+of every weight (one of them exp(0) = 1) and its acceptance test as ``uniform(z, cursor) < accept``
+(issue 27).
 ``grid_table``: :meth:`controllers.solnic.grid_posterior.FrictionGrid.table` in numpy (np.clip,
 :func:`~controllers.solnic.grid_posterior.pulse_table`, np.gradient per lattice axis) (issue 27).
 """
@@ -30,8 +33,8 @@ from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
 from plant.expfun import e1, e2, e3, e4
 from plant.multimode.moving import (_GL4_W, _GL4_X, _PANEL_RATE, _SERIES_LIMIT, _fint, chol_psd, phi_moving, q_moving,
                                      substep_peak, velocity_extremum_time)
-from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _mean_min, _step
-from plant.randomness import normal, uniform_below
+from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _log_ncdf, _mean_min, _normal_above, _step
+from plant.randomness import normal, uniform, uniform_below
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -420,3 +423,40 @@ def q_moving_ref(mode, h, p, Q):
     Q[2, 2] = i44
     Q[2, 3] = Q[3, 2] = 0.0
     Q[3, 3] = i55
+
+
+@njit(cache=True)
+def hitting_midpoint_ref(a, b, mu, sd, s2h, z, cursor):
+    """x2 at the midpoint of a sub-step with x2 = a > 0 and b > 0 at its ends, given a crossing.
+
+    Unconditioned, the midpoint is N(μ, sd²) (:func:`_bridge_law`). Given it, the halves cross
+    with p_l = e^(−k_l·m), p_r = e^(−k_r·m) for m > 0 (k = 2·end/(σ_v²·w/2), the bridge
+    crossing probability) and surely for m ≤ 0, so the target density is
+    f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r − p_l·p_r)]. It is sampled exactly from the
+    proposal f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r)] — a mixture of three truncated normals,
+    since f(m)·e^(−k·m) ∝ N(m; μ − k·sd², sd²) — accepted with (p_l + p_r − p_l·p_r)/(p_l + p_r) ≥ ½.
+    """
+    if not sd > 0.0:
+        return mu
+    v = sd * sd
+    kl = 2.0 * a / s2h
+    kr = 2.0 * b / s2h
+    mul = mu - kl * v
+    mur = mu - kr * v
+    w0 = _log_ncdf(-mu / sd)
+    w1 = -kl * mu + 0.5 * kl * kl * v + _log_ncdf(mul / sd)
+    w2 = -kr * mu + 0.5 * kr * kr * v + _log_ncdf(mur / sd)
+    top = max(w0, w1, w2)
+    e0, e1, e2 = math.exp(w0 - top), math.exp(w1 - top), math.exp(w2 - top)
+    total = e0 + e1 + e2
+    while True:
+        pick = uniform(z, cursor) * total
+        if pick < e0:
+            return mu - sd * _normal_above(mu / sd, z, cursor)           # m ≤ 0: always crosses
+        centre = mul if pick < e0 + e1 else mur
+        m = centre + sd * _normal_above(-centre / sd, z, cursor)         # m > 0
+        pl = math.exp(-kl * m)
+        pr = math.exp(-kr * m)
+        accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
+        if uniform(z, cursor) < accept:
+            return m

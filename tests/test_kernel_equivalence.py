@@ -188,3 +188,28 @@ def test_phi_and_q_with_shared_evaluations_are_the_separate_forms():
                     assert np.array_equal(A.view(np.uint64), B.view(np.uint64)), (mode, h, p["beta4"], p["beta5"])
                 n_fused_shared += p["beta4"] * h == p["beta5"] * h
     assert n_fused_shared > 500            # the shared-decay branch is exercised
+
+
+def test_hitting_midpoint_without_exp_of_zero_is_the_full_form():
+    """_hitting_midpoint (exp skipped for the largest weight, exp(0) = 1, and the acceptance
+    test by uniform_below) returns the midpoint of the form that evaluates all three exps and
+    ``uniform() < accept`` (tests/reference_kernels.py), bit for bit, and reads the same normals:
+    ends from 0.01 to 30 σ, means on both sides of 0, ties between weights, sd = 0."""
+    from plant.multimode.zero_velocity import _hitting_midpoint
+    from tests.reference_kernels import hitting_midpoint_ref
+    rng = np.random.default_rng(5)
+    z = rng.standard_normal(200_000)
+    pos = 0
+    for trial in range(6000):
+        sd = 10.0 ** rng.uniform(-9, -5) if trial % 50 else 0.0
+        s2h = sd * sd * rng.uniform(2.0, 6.0) if sd > 0 else 1e-12
+        a, b = 10.0 ** rng.uniform(-2, 1.5, 2) * math.sqrt(s2h)
+        if trial % 7 == 0:
+            b = a                                   # w1 = w2: a tie for the largest weight
+        mu = rng.normal(0.0, 3.0) * sd
+        c1, c2 = np.array([pos], dtype=np.int64), np.array([pos], dtype=np.int64)
+        m1 = _hitting_midpoint(a, b, mu, sd, s2h, z, c1)
+        m2 = hitting_midpoint_ref(a, b, mu, sd, s2h, z, c2)
+        assert c1[0] == c2[0]
+        assert m1 == m2, (trial, a, b, mu, sd, s2h)
+        pos = int(c1[0]) if c1[0] < 190_000 else 0

@@ -272,6 +272,13 @@ def _normal_above(alpha, z, cursor):
             return x
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def _exp_shift(d):
+    """exp(d) for d = w − max(w…) ≤ 0: exactly 1.0 at d = ±0 (IEEE 754 and libm's exp(±0) = 1),
+    so the largest weight's exp is not evaluated."""
+    return 1.0 if d == 0.0 else math.exp(d)
+
+
 @njit(cache=True, _nrt=False)
 def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
     """x2 at the midpoint of a sub-step with x2 = a > 0 and b > 0 at its ends, given a crossing.
@@ -294,7 +301,7 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
     w1 = -kl * mu + 0.5 * kl * kl * v + _log_ncdf(mul / sd)
     w2 = -kr * mu + 0.5 * kr * kr * v + _log_ncdf(mur / sd)
     top = max(w0, w1, w2)
-    e0, e1, e2 = math.exp(w0 - top), math.exp(w1 - top), math.exp(w2 - top)
+    e0, e1, e2 = _exp_shift(w0 - top), _exp_shift(w1 - top), _exp_shift(w2 - top)
     total = e0 + e1 + e2
     while True:
         pick = uniform(z, cursor) * total
@@ -305,7 +312,7 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
         pl = math.exp(-kl * m)
         pr = math.exp(-kr * m)
         accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
-        if uniform(z, cursor) < accept:
+        if uniform_below(z, cursor, accept):       # uniform(z, cursor) < accept, erfc only if needed
             return m
 
 
