@@ -20,6 +20,8 @@ e2(β3h) twice, the x4 and x5 decays separately when β4·h = β5·h), before th
 ``hitting_midpoint_ref``: :func:`plant.multimode.zero_velocity._hitting_midpoint` evaluating exp
 of every weight (one of them exp(0) = 1) and its acceptance test as ``uniform(z, cursor) < accept``
 (issue 27).
+``bisect_level_ref``: one level of :func:`plant.multimode.zero_velocity._bisect`, evaluating the right
+half's crossing probability also when the left half surely crosses (issue 27).
 ``grid_table``: :meth:`controllers.solnic.grid_posterior.FrictionGrid.table` in numpy (np.clip,
 :func:`~controllers.solnic.grid_posterior.pulse_table`, np.gradient per lattice axis) (issue 27).
 """
@@ -33,7 +35,10 @@ from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
 from plant.expfun import e1, e2, e3, e4
 from plant.multimode.moving import (_GL4_W, _GL4_X, _PANEL_RATE, _SERIES_LIMIT, _fint, chol_psd, phi_moving, q_moving,
                                      substep_peak, velocity_extremum_time)
-from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _log_ncdf, _mean_min, _normal_above, _step
+from plant.multimode.zero_velocity import (_bisect, _bridge_low, _copy, _cross_prob, _log_ncdf, _mean_min, _normal_above,
+                                           _phi_times, _step)
+from plant.multimode.moving import NOISY_BLOCK
+from plant.randomness import ZPOS, NoiseExhausted
 from plant.randomness import normal, uniform, uniform_below
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
@@ -460,3 +465,41 @@ def hitting_midpoint_ref(a, b, mu, sd, s2h, z, cursor):
         accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
         if uniform(z, cursor) < accept:
             return m
+
+
+@njit(cache=True)
+def bisect_level_ref(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
+    """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
+    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`;
+    ``Fb`` is scratch for Φ(w)·Xa."""
+    _phi_times(Ph, Xa, Xm)
+    _phi_times(Pw, Xa, Fb)
+    d0 = Xb[A1] - Fb[A1]
+    d1 = Xb[A2] - Fb[A2]
+    d2 = Xb[A4] - Fb[A4]
+    d3 = Xb[A5] - Fb[A5]
+    for q in range(4):
+        Xm[NOISY_BLOCK[q]] += G[q, 0] * d0 + G[q, 1] * d1 + G[q, 2] * d2 + G[q, 3] * d3
+    mean2 = Xm[A2]
+    a, b = Xa[A2], Xb[A2]
+    if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
+        x2m = mean2 + C[0, 0] * normal(z, cursor)        # a sign change: both halves possible
+    else:
+        sgn = 1.0 if a > 0 else -1.0
+        x2m = sgn * hitting_midpoint_ref(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
+    pl = _cross_prob(a, x2m, half, sig_v2)
+    pr = _cross_prob(x2m, b, half, sig_v2)
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
+    Xm[A2] = x2m
+    i = cursor[ZPOS]                      # the next three normals, one bounds check (see _step)
+    if i + 3 > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[ZPOS] = i + 3
+    z1, z2, z3 = z[i], z[i + 1], z[i + 2]
+    dv = x2m - mean2
+    Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
+    Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
+    Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
+    if pl >= 1.0:
+        return True
+    return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)

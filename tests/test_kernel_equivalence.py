@@ -213,3 +213,36 @@ def test_hitting_midpoint_without_exp_of_zero_is_the_full_form():
         assert c1[0] == c2[0]
         assert m1 == m2, (trial, a, b, mu, sd, s2h)
         pos = int(c1[0]) if c1[0] < 190_000 else 0
+
+
+def test_bisection_level_skipping_the_right_half_probability_is_the_full_form():
+    """_bisect_level (the right half's crossing probability evaluated only when the left half's
+    is below 1) draws the same midpoint, reads the same normals and picks the same half as the
+    form that always evaluates both (tests/reference_kernels.py), on the bisection tables of
+    Table 2-1: ends of one sign (the hitting sampler) and of opposite signs, both modes."""
+    from plant.multimode.zero_velocity import _bisect_level
+    from tests.reference_kernels import bisect_level_ref
+    _, _, _, BPh, BPw, BG, BC = _tables(PlantParams(), SimOptions())
+    p = PlantParams()
+    sig_v2 = p.alpha ** 2 * p.sigma2_sq
+    rng = np.random.default_rng(9)
+    z = rng.standard_normal(400_000)
+    pos, lefts, levels_seen = 0, 0, set()
+    for trial in range(8000):
+        m, k = trial % 2, trial % BPh.shape[1]
+        half = SimOptions().substep / 2 ** (k + 1)
+        scale = math.sqrt(sig_v2 * 2 * half)
+        Xa = rng.normal(0.0, 1.0, 7) * np.array([1e-5, 1.0, 1.0, 1e-4, 0.3, 1.0, 3.0])
+        Xa[1] = abs(rng.normal(0.0, 2.0)) * scale * (1 if m == 1 else -1)
+        Xb = Xa.copy()
+        Xb[1] = Xa[1] * rng.uniform(-1.5, 3.0)
+        Xm1, Xm2, F1, F2 = np.empty(7), np.empty(7), np.empty(7), np.empty(7)
+        c1, c2 = np.array([pos], dtype=np.int64), np.array([pos], dtype=np.int64)
+        r1 = _bisect_level(BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], Xa, Xb, Xm1, F1, half, sig_v2, z, c1)
+        r2 = bisect_level_ref(BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], Xa, Xb, Xm2, F2, half, sig_v2, z, c2)
+        assert r1 == r2 and c1[0] == c2[0]
+        assert np.array_equal(Xm1.view(np.uint64), Xm2.view(np.uint64))
+        lefts += r1
+        levels_seen.add(k)
+        pos = int(c1[0]) if c1[0] < 390_000 else 0
+    assert 1000 < lefts < 7000 and len(levels_seen) == BPh.shape[1]

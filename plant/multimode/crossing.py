@@ -70,7 +70,7 @@ def exp_below(e, z, cursor):
     return 0.5 * math.erfc(-x / math.sqrt(2.0)) < pc
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def crossed(va, vb, h, sig_v2, z, cursor):
     """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc the bridge crossing probability of
     x2 from ``va`` to ``vb`` over ``h`` (σ_v² = ``sig_v2``): the decision and the normals read of

@@ -319,7 +319,7 @@ def gaussian_step(X, P, L, z, cursor, out):
         out[NOISY_BLOCK[r]] += L[r, 0] * z0 + L[r, 1] * z1 + L[r, 2] * z2 + L[r, 3] * z3
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def substep_peak(Xa, Xb, h, peak):
     """max(peak, |x1| at both ends, the interior extremum of the cubic Hermite of x1)."""
     pk = max(peak, abs(Xa[A1]), abs(Xb[A1]))

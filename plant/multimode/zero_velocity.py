@@ -48,7 +48,7 @@ def _square(v, n):
     return reshape_unchecked(v, (n, n), (n * f, f))
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _copy(dst, src):
     """dst[:] = src element by element (a slice assignment needs numba's runtime, which the
     interval's fast path, plant.multimode.interval._fast_span, is compiled without)."""
@@ -186,8 +186,6 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
         sgn = 1.0 if a > 0 else -1.0
         x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
     pl = _cross_prob(a, x2m, half, sig_v2)
-    pr = _cross_prob(x2m, b, half, sig_v2)
-    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     Xm[A2] = x2m
     i = cursor[ZPOS]                      # the next three normals, one bounds check (see _step)
     if i + 3 > z.shape[0]:
@@ -200,6 +198,8 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
     if pl >= 1.0:
         return True
+    pr = _cross_prob(x2m, b, half, sig_v2)    # only p_any needs it: not evaluated when pl ≥ 1
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)
 
 
@@ -418,7 +418,7 @@ def substep_tables(p, o_sub, o_rsub, TP, TL):
                 h = h * 2.0
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def _step(X, P, L, z, cursor, out):
     """out = P·X + N with the sparsity of Φ_1/Φ_3 (3-20)/(3-21); N = L·ζ on the noisy block.
 
