@@ -24,7 +24,14 @@ import llvmlite.ir as ir
 import numpy as np
 from numba import njit, types
 from numba.extending import intrinsic
-from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+
+try:    # numba's copies of numpy's ziggurat tables (a private module: without it, numpy draws)
+    from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+    _TABLES = True
+except ImportError:     # pragma: no cover - depends on the numba version
+    fi_double = ki_double = wi_double = np.zeros(256)
+    ziggurat_nor_inv_r = ziggurat_nor_r = 1.0
+    _TABLES = False
 
 __all__ = ["fill_normals", "draw_into", "applies"]
 
@@ -35,6 +42,7 @@ _WI = np.asarray(wi_double, dtype=np.float64)
 _FI = np.asarray(fi_double, dtype=np.float64)
 _NOR_R = float(ziggurat_nor_r)
 _NOR_INV_R = float(ziggurat_nor_inv_r)
+_TABLES = _TABLES and _KI.shape == _WI.shape == _FI.shape == (256,)
 _TWO_M53 = 1.0 / 9007199254740992.0
 
 
@@ -42,6 +50,8 @@ _TWO_M53 = 1.0 / 9007199254740992.0
 def _pcg_next(typingctx, st):
     """One PCG64 step on ``st`` = [state hi, state lo, inc hi, inc lo] (uint64[4], updated in
     place); returns the XSL-RR output word of the new state."""
+    if not (isinstance(st, types.Array) and st.dtype == types.uint64 and st.ndim == 1 and st.layout == "C"):
+        return None
     sig = types.uint64(st)
 
     def codegen(context, builder, signature, args):
@@ -112,18 +122,20 @@ def fill_normals(st, out):
 
 
 def applies(rng: np.random.Generator) -> bool:
-    """True when ``rng``'s bit generator is exactly numpy's PCG64 (the stream fill_normals reproduces)."""
-    return type(rng.bit_generator) is np.random.PCG64
+    """True when ``rng``'s bit generator is exactly numpy's PCG64 (the stream fill_normals reproduces)
+    and numba's copies of the ziggurat tables are available."""
+    return _TABLES and type(rng.bit_generator) is np.random.PCG64
 
 
 def draw_into(rng: np.random.Generator, out: np.ndarray) -> None:
     """``rng.standard_normal(out=out)`` for a PCG64 generator (:func:`applies`), via :func:`fill_normals`:
     the same numbers, and the generator's state afterwards is the one numpy leaves."""
     bg = rng.bit_generator
-    full = bg.state
-    pcg = full["state"]
-    s, inc = pcg["state"], pcg["inc"]
-    st = np.array([s >> 64, s & _MASK64, inc >> 64, inc & _MASK64], dtype=np.uint64)
-    fill_normals(st, out)
-    pcg["state"] = (int(st[0]) << 64) | int(st[1])
-    bg.state = full
+    with bg.lock:                   # as numpy's own draws hold it
+        full = bg.state
+        pcg = full["state"]
+        s, inc = pcg["state"], pcg["inc"]
+        st = np.array([s >> 64, s & _MASK64, inc >> 64, inc & _MASK64], dtype=np.uint64)
+        fill_normals(st, out)
+        pcg["state"] = (int(st[0]) << 64) | int(st[1])
+        bg.state = full
