@@ -10,7 +10,9 @@ warmed by a 1 s cell of each path first. ``make benchmark`` runs it (skipped und
 ``--benchmark-disable``).
 
 Known misses are xfail (the assertion stays the goal): dithered (its cell is the exact bridge's
-sub-steps: normals, the bridge loop, erfc/log; docs/plant.md) and solnic-modern (the idle step's
+sub-steps: normals, the bridge loop, erfc/log; at the goal on seed 0 since the eleventh session,
+0.209 → 0.148 s against 0fa69d0, seeds 1, 3, 4 at 0.153–0.158 s; docs/plant.md "Eleventh
+session"), so a non-strict xfail, and solnic-modern (the idle step's
 backward-equation solves and ~1130 Python samples a cell, since 8f0a95b called from inside the
 compiled loop: 0.302 → 0.234 s against 578603d, solnic 0.060 → 0.043 s; the full solve's second
 moment beside the first: 0.223 → 0.208 s against 75447cc; the Python sample going on from the

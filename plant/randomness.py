@@ -3,7 +3,9 @@
 Passing a ``numpy.random.Generator`` into a compiled function costs ~10 µs per call (numba
 unboxes the bit generator every time), more than a whole noise-free sample interval. The
 compiled plant therefore reads its randomness from a buffer of unit normals that
-:class:`NoiseStream` fills with ``Generator.standard_normal``. The stream is consumed strictly
+:class:`NoiseStream` fills with ``Generator.standard_normal`` — for numpy's PCG64 (the bit generator
+of ``default_rng``) through :func:`plant.pcg64_normals.draw_into`, the same numbers and the same
+generator state afterwards at ~2 ns a normal instead of ~8. The stream is consumed strictly
 in order and a Generator's normals do not depend on how they are blocked, so results are
 bit-identical whatever the block size, across runs and executors, from one
 ``SeedSequence(seed)``.
@@ -22,6 +24,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from plant.pcg64_normals import applies, draw_into
 
 __all__ = ["NoiseStream", "NoiseExhausted"]
 
@@ -76,7 +80,7 @@ class NoiseStream:
         Normals drawn per refill. Does not change any result.
     """
 
-    __slots__ = ("_rng", "_buf", "_pos", "_block", "_minimum", "_spare")
+    __slots__ = ("_rng", "_buf", "_pos", "_block", "_minimum", "_spare", "_pcg64")
 
     def __init__(self, rng: np.random.Generator, block: int = 8192) -> None:
         if not isinstance(rng, np.random.Generator):
@@ -87,6 +91,7 @@ class NoiseStream:
         self._block = int(block)
         self._minimum = min(2048, self._block // 2)
         self._spare = np.empty(0)
+        self._pcg64 = applies(rng)
 
     @classmethod
     def from_seed(cls, seed: int, block: int = 8192) -> "NoiseStream":
@@ -117,7 +122,10 @@ class NoiseStream:
             store = np.empty(max(size, 2 * self._block))
         buf = store[:size]
         buf[:keep] = self._buf[pos:]
-        self._rng.standard_normal(out=buf[keep:])
+        if self._pcg64:
+            draw_into(self._rng, buf[keep:])          # the same normals, ~4x cheaper (plant.pcg64_normals)
+        else:
+            self._rng.standard_normal(out=buf[keep:])
         self._spare = self._buf.base if self._buf.base is not None else self._buf
         self._buf = buf
         self._pos = 0

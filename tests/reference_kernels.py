@@ -13,6 +13,15 @@ p = exp(e) always (issue 27).
 replaced them (issue 27).
 ``hermite_peak``: :func:`plant.multimode.segments.hermite_peak` with its roots in an array
 (issue 27).
+``phi_moving_ref``, ``q_moving_ref``: :func:`plant.multimode.moving.phi_moving` and
+:func:`~plant.multimode.moving.q_moving` evaluating every e-function where an entry uses it (e1(β3h) and
+e2(β3h) twice, the x4 and x5 decays separately when β4·h = β5·h), before the shared evaluations and
+:func:`~plant.multimode.moving.phi_q_moving` (issue 27).
+``hitting_midpoint_ref``: :func:`plant.multimode.zero_velocity._hitting_midpoint` evaluating exp
+of every weight (one of them exp(0) = 1) and its acceptance test as ``uniform(z, cursor) < accept``
+(issue 27).
+``bisect_level_ref``: one level of :func:`plant.multimode.zero_velocity._bisect`, evaluating the right
+half's crossing probability also when the left half surely crosses (issue 27).
 ``grid_table``: :meth:`controllers.solnic.grid_posterior.FrictionGrid.table` in numpy (np.clip,
 :func:`~controllers.solnic.grid_posterior.pulse_table`, np.gradient per lattice axis) (issue 27).
 """
@@ -23,9 +32,14 @@ import numpy as np
 from numba import njit
 
 from controllers.solnic.noise_model import _PDE_SIGMAS, _v0, _x3
-from plant.multimode.moving import chol_psd, phi_moving, q_moving, substep_peak, velocity_extremum_time
-from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _mean_min, _step
-from plant.randomness import normal, uniform_below
+from plant.expfun import e1, e2, e3, e4
+from plant.multimode.moving import (_GL4_W, _GL4_X, _PANEL_RATE, _SERIES_LIMIT, _fint, chol_psd, phi_moving, q_moving,
+                                     substep_peak, velocity_extremum_time)
+from plant.multimode.zero_velocity import (_bisect, _bridge_low, _copy, _cross_prob, _log_ncdf, _mean_min, _normal_above,
+                                           _phi_times, _step)
+from plant.multimode.moving import NOISY_BLOCK
+from plant.randomness import ZPOS, NoiseExhausted
+from plant.randomness import normal, uniform, uniform_below
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
@@ -311,3 +325,181 @@ def bridge_segment(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, 
         _copy(X, Xb)
         t += step
     return h, False, peak, n, False
+
+
+@njit(cache=True)
+def phi_moving_ref(mode, h, p, P):
+    """Φ_1 or Φ_3 of (3-20)/(3-21) into P (7 × 7, augmented vector)."""
+    a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
+    for i in range(7):
+        for j in range(7):
+            P[i, j] = 1.0 if i == j else 0.0
+    y3 = b3 * h
+    y5 = b5 * h
+    s = 1.0 if mode == 1 else -1.0
+    P[A3, A3] = math.exp(-y3)                 # q33
+    P[A3, AU] = e1(y3)                        # q37
+    P[A4, A4] = math.exp(-b4 * h)             # q44
+    P[A1, A4] = -e1(b4 * h) / b4              # q14
+    P[A1, A2] = h
+    P[A1, A3] = a * e2(y3) / (b3 * b3)        # q13
+    P[A2, A3] = a * e1(y3) / b3               # q23
+    P[A1, AU] = a * e3(y3) / (b3 * b3)        # q17
+    P[A2, AU] = a * e2(y3) / b3               # q27
+    P[A5, A5] = math.exp(-y5)                 # q55
+    P[A1, A5] = s * a * e2(y5) / (b5 * b5)    # q15
+    P[A2, A5] = s * a * e1(y5) / b5           # q25
+    P[A1, AKC] = s * a * h * h / 2.0
+    P[A2, AKC] = s * a * h
+
+
+@njit(cache=True)
+def _q_closed_ref(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
+    """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
+
+    w2: q2·[h³/3, h²/2; ·, h] on (x1, x2);
+    w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.multimode.stuck);
+    w5: x1x1 q5·α²·F2(y5)/β5⁵, x1x2 q5·α²·F1(y5)/β5⁴, x1x5 q5·s·α·F0(y5)/β5³,
+        x2x2 q5·α²·e4(y5)/β5³, x2x5 q5·s·α·e1(y5)²/(2β5²), x5x5 q5·e1(2y5)/(2β5),
+    with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`).
+    """
+    E4, E5 = e1(y4), e1(y5)
+    Q[0, 0] = q2 * h * h * h / 3.0 + q4 * e4(y4) / b4 ** 3 + q5 * a * a * _fint(y5, 2) / b5 ** 5
+    Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + q5 * a * a * _fint(y5, 1) / b5 ** 4
+    Q[1, 1] = q2 * h + q5 * a * a * e4(y5) / b5 ** 3
+    Q[0, 2] = Q[2, 0] = -q4 * E4 * E4 / (2.0 * b4 * b4)
+    Q[0, 3] = Q[3, 0] = q5 * s * a * _fint(y5, 0) / b5 ** 3
+    Q[1, 2] = Q[2, 1] = 0.0
+    Q[1, 3] = Q[3, 1] = q5 * s * a * E5 * E5 / (2.0 * b5 * b5)
+    Q[2, 2] = q4 * e1(2.0 * y4) / (2.0 * b4)
+    Q[2, 3] = Q[3, 2] = 0.0
+    Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
+
+
+@njit(cache=True)
+def q_moving_ref(mode, h, p, Q):
+    """Noisy 4 × 4 block (x1, x2, x4, x5) of COV[N] = ∫₀ʰ Φ(v) Q Φ(v)ᵀ dv  (4-8).
+
+    The w2 column of Φ(v) is (v, 1, 0, 0) on the block, so its share is closed form:
+    α²σ2²·[h³/3, h²/2; h²/2, h] on (x1, x2). The w4 and w5 columns, (−e1(β4v)/β4, 0, e^(−β4v), 0)
+    and (s·α·e2(β5v)/β5², s·α·e1(β5v)/β5, 0, e^(−β5v)), are polynomials of degree ≤ 2 times a power
+    series in β·v. For β·h < 0.5 their integrals are closed forms (:func:`_q_closed`); beyond,
+    the products (degree ≤ 4) are integrated by 4-node Gauss–Legendre, exact through degree 7,
+    on panels with β·Δ ≤ 1e-3: the first neglected term is below (2β·Δ)⁴·2e-7 ≈ 3e-18 of the
+    entry, i.e. round-off (Van Loan is the test oracle).
+    """
+    a, b4, b5 = p.alpha, p.beta4, p.beta5
+    q2, q4, q5 = a * a * p.sigma2_sq, p.sigma4_sq, p.sigma5_sq
+    s = 1.0 if mode == 1 else -1.0
+    y4, y5 = b4 * h, b5 * h
+    if max(y4, y5) < _SERIES_LIMIT:
+        _q_closed_ref(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q)
+        return
+    i11 = i12 = i14 = i15 = i22 = i25 = i44 = i55 = 0.0
+    rate = max(b4, b5)
+    panels = max(1, int(math.ceil(rate * h / _PANEL_RATE)))
+    width = h / panels
+    for pnl in range(panels):
+        lo = pnl * width
+        for k in range(_GL4_X.shape[0]):
+            v = lo + 0.5 * width * (_GL4_X[k] + 1.0)
+            w = 0.5 * width * _GL4_W[k]
+            r1 = -e1(b4 * v) / b4            # x4 column: x1 and x4 rows
+            r4 = math.exp(-b4 * v)
+            c1 = s * a * e2(b5 * v) / (b5 * b5)   # x5 column: x1, x2 and x5 rows
+            c2 = s * a * e1(b5 * v) / b5
+            c5 = math.exp(-b5 * v)
+            wq4, wq5 = w * q4, w * q5
+            i11 += wq4 * r1 * r1 + wq5 * c1 * c1
+            i14 += wq4 * r1 * r4
+            i44 += wq4 * r4 * r4
+            i12 += wq5 * c1 * c2
+            i22 += wq5 * c2 * c2
+            i15 += wq5 * c1 * c5
+            i25 += wq5 * c2 * c5
+            i55 += wq5 * c5 * c5
+    Q[0, 0] = q2 * h * h * h / 3.0 + i11
+    Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + i12
+    Q[1, 1] = q2 * h + i22
+    Q[0, 2] = Q[2, 0] = i14
+    Q[0, 3] = Q[3, 0] = i15
+    Q[1, 2] = Q[2, 1] = 0.0
+    Q[1, 3] = Q[3, 1] = i25
+    Q[2, 2] = i44
+    Q[2, 3] = Q[3, 2] = 0.0
+    Q[3, 3] = i55
+
+
+@njit(cache=True)
+def hitting_midpoint_ref(a, b, mu, sd, s2h, z, cursor):
+    """x2 at the midpoint of a sub-step with x2 = a > 0 and b > 0 at its ends, given a crossing.
+
+    Unconditioned, the midpoint is N(μ, sd²) (:func:`_bridge_law`). Given it, the halves cross
+    with p_l = e^(−k_l·m), p_r = e^(−k_r·m) for m > 0 (k = 2·end/(σ_v²·w/2), the bridge
+    crossing probability) and surely for m ≤ 0, so the target density is
+    f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r − p_l·p_r)]. It is sampled exactly from the
+    proposal f(m)·[1{m ≤ 0} + 1{m > 0}(p_l + p_r)] — a mixture of three truncated normals,
+    since f(m)·e^(−k·m) ∝ N(m; μ − k·sd², sd²) — accepted with (p_l + p_r − p_l·p_r)/(p_l + p_r) ≥ ½.
+    """
+    if not sd > 0.0:
+        return mu
+    v = sd * sd
+    kl = 2.0 * a / s2h
+    kr = 2.0 * b / s2h
+    mul = mu - kl * v
+    mur = mu - kr * v
+    w0 = _log_ncdf(-mu / sd)
+    w1 = -kl * mu + 0.5 * kl * kl * v + _log_ncdf(mul / sd)
+    w2 = -kr * mu + 0.5 * kr * kr * v + _log_ncdf(mur / sd)
+    top = max(w0, w1, w2)
+    e0, e1, e2 = math.exp(w0 - top), math.exp(w1 - top), math.exp(w2 - top)
+    total = e0 + e1 + e2
+    while True:
+        pick = uniform(z, cursor) * total
+        if pick < e0:
+            return mu - sd * _normal_above(mu / sd, z, cursor)           # m ≤ 0: always crosses
+        centre = mul if pick < e0 + e1 else mur
+        m = centre + sd * _normal_above(-centre / sd, z, cursor)         # m > 0
+        pl = math.exp(-kl * m)
+        pr = math.exp(-kr * m)
+        accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
+        if uniform(z, cursor) < accept:
+            return m
+
+
+@njit(cache=True)
+def bisect_level_ref(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
+    """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
+    first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`;
+    ``Fb`` is scratch for Φ(w)·Xa."""
+    _phi_times(Ph, Xa, Xm)
+    _phi_times(Pw, Xa, Fb)
+    d0 = Xb[A1] - Fb[A1]
+    d1 = Xb[A2] - Fb[A2]
+    d2 = Xb[A4] - Fb[A4]
+    d3 = Xb[A5] - Fb[A5]
+    for q in range(4):
+        Xm[NOISY_BLOCK[q]] += G[q, 0] * d0 + G[q, 1] * d1 + G[q, 2] * d2 + G[q, 3] * d3
+    mean2 = Xm[A2]
+    a, b = Xa[A2], Xb[A2]
+    if (a > 0) != (b > 0) or a == 0.0 or b == 0.0:
+        x2m = mean2 + C[0, 0] * normal(z, cursor)        # a sign change: both halves possible
+    else:
+        sgn = 1.0 if a > 0 else -1.0
+        x2m = sgn * hitting_midpoint_ref(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
+    pl = _cross_prob(a, x2m, half, sig_v2)
+    pr = _cross_prob(x2m, b, half, sig_v2)
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
+    Xm[A2] = x2m
+    i = cursor[ZPOS]                      # the next three normals, one bounds check (see _step)
+    if i + 3 > z.shape[0]:
+        raise NoiseExhausted()
+    cursor[ZPOS] = i + 3
+    z1, z2, z3 = z[i], z[i + 1], z[i + 2]
+    dv = x2m - mean2
+    Xm[A1] += C[1, 0] * dv + C[1, 1] * z1
+    Xm[A4] += C[2, 0] * dv + C[2, 1] * z1 + C[2, 2] * z2
+    Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
+    if pl >= 1.0:
+        return True
+    return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)

@@ -140,3 +140,41 @@ def test_bridge_run_is_bridge_segment():
         long_n += r1[3] > 5
         pos = int(c1[0])
     assert stopped_n > 30 and reflected_n > 50 and long_n > 50
+
+
+def test_reflect_low_decides_no_push_as_the_computed_minimum_does():
+    """bridge_loop._reflect_low (erfc and log skipped where the table of log Φ shows the bridge
+    minimum stays ≥ 0) against zero_velocity._bridge_low, which evaluates it: the same normal
+    read, a push exactly where _bridge_low's minimum is below 0 and then the same minimum, bit
+    for bit. Cases straddle the decision ln Φ(x) = e = −2·va·vb/(σ_v²h) at relative distances
+    down to 1e-15, with va ≈ vb and va ≫ vb, x across the grid and off it."""
+    from plant.multimode.bridge_loop import _reflect_low
+    from plant.multimode.zero_velocity import _bridge_low
+    rng = np.random.default_rng(21)
+    sig_v2, h = 0.37, 1e-5
+    xs = np.concatenate((rng.uniform(-16.5, 0.5, 3000), -np.geomspace(1e-9, 15.99, 300), [-16.0, -1e-300, 0.0]))
+    rel = np.concatenate(([0.0], np.geomspace(1e-15, 0.9, 40)))
+    decided = pushed = 0
+    for x in xs:
+        z = np.array([x])
+        lphi = math.log(0.5 * math.erfc(-x / math.sqrt(2.0)))
+        for r in rel:
+            for sign in (-1.0, 1.0):
+                e = lphi * (1.0 + sign * r)
+                ratio = 10.0 ** rng.uniform(0, 4) if rng.uniform() < 0.5 else 1.0
+                prod = -e * sig_v2 * h / 2.0                  # va·vb
+                va = math.sqrt(prod * ratio)
+                vb = prod / va
+                for a, b in ((va, vb), (vb, va)):
+                    c1, c2 = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+                    got = _reflect_low(a, b, h, sig_v2, z, c1)
+                    ref = _bridge_low(a, b, h, sig_v2, z, c2)
+                    assert c1[0] == c2[0] == 1
+                    assert (got < 0.0) == (ref < 0.0), (x, e, a, b)
+                    if ref < 0.0:
+                        assert got == ref
+                        pushed += 1
+                    else:
+                        assert got == ref or got == min(a, b)
+                        decided += got != ref
+    assert decided > 10_000 and pushed > 10_000

@@ -151,3 +151,98 @@ def test_hermite_peak_with_scalar_roots_is_the_array_form():
             yb = ya
         assert hermite_peak(h, ya, da, yb, db) == reference_hermite_peak(h, ya, da, yb, db)
     assert hermite_peak(0.0, 1.0, 1.0, 2.0, -1.0) == 0.0
+
+
+def _kernel_records():
+    """Table 2-1 (β4 = β5, the decays shared) and variants with β4 ≠ β5, fast decays (the
+    Gauss–Legendre branch of q_moving) and no x4 noise, as kernel records."""
+    base = PlantParams()
+    variants = [base, base.replace(command_velocity_tau=333.0),
+                base.replace(correlated_friction_tau=0.025, command_velocity_tau=0.14),
+                base.replace(correlated_friction_tau=5e-4, command_velocity_tau=5e-4),
+                base.replace(command_velocity_std=0.0)]
+    return [v.kernel_record() for v in variants]
+
+
+def test_phi_and_q_with_shared_evaluations_are_the_separate_forms():
+    """phi_moving, q_moving and the fused phi_q_moving (the fresh end-of-segment step) give the
+    entries of the forms that evaluate every e-function per entry (tests/reference_kernels.py),
+    bit for bit, for widths from 1e-12 s to 1 s (both branches of q_moving) and both modes."""
+    from plant.multimode.moving import phi_moving, phi_q_moving, q_moving
+    from tests.reference_kernels import phi_moving_ref, q_moving_ref
+    rng = np.random.default_rng(11)
+    widths = np.concatenate((10.0 ** rng.uniform(-12, 0, 400), [1e-5, 2e-5, 1.5e-4, 0.004, 0.01]))
+    n_fused_shared = 0
+    for rec in _kernel_records():
+        p = rec[0]
+        for h in widths:
+            for mode in (1, 3):
+                P1, P2, P3 = np.empty((7, 7)), np.empty((7, 7)), np.empty((7, 7))
+                Q1, Q2, Q3 = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+                phi_moving_ref(mode, h, p, P1)
+                q_moving_ref(mode, h, p, Q1)
+                phi_moving(mode, h, p, P2)
+                q_moving(mode, h, p, Q2)
+                phi_q_moving(mode, h, p, P3, Q3)
+                for A, B in ((P1, P2), (P1, P3), (Q1, Q2), (Q1, Q3)):
+                    assert np.array_equal(A.view(np.uint64), B.view(np.uint64)), (mode, h, p["beta4"], p["beta5"])
+                n_fused_shared += p["beta4"] * h == p["beta5"] * h
+    assert n_fused_shared > 500            # the shared-decay branch is exercised
+
+
+def test_hitting_midpoint_without_exp_of_zero_is_the_full_form():
+    """_hitting_midpoint (exp skipped for the largest weight, exp(0) = 1, and the acceptance
+    test by uniform_below) returns the midpoint of the form that evaluates all three exps and
+    ``uniform() < accept`` (tests/reference_kernels.py), bit for bit, and reads the same normals:
+    ends from 0.01 to 30 σ, means on both sides of 0, ties between weights, sd = 0."""
+    from plant.multimode.zero_velocity import _hitting_midpoint
+    from tests.reference_kernels import hitting_midpoint_ref
+    rng = np.random.default_rng(5)
+    z = rng.standard_normal(200_000)
+    pos = 0
+    for trial in range(6000):
+        sd = 10.0 ** rng.uniform(-9, -5) if trial % 50 else 0.0
+        s2h = sd * sd * rng.uniform(2.0, 6.0) if sd > 0 else 1e-12
+        a, b = 10.0 ** rng.uniform(-2, 1.5, 2) * math.sqrt(s2h)
+        if trial % 7 == 0:
+            b = a                                   # w1 = w2: a tie for the largest weight
+        mu = rng.normal(0.0, 3.0) * sd
+        c1, c2 = np.array([pos], dtype=np.int64), np.array([pos], dtype=np.int64)
+        m1 = _hitting_midpoint(a, b, mu, sd, s2h, z, c1)
+        m2 = hitting_midpoint_ref(a, b, mu, sd, s2h, z, c2)
+        assert c1[0] == c2[0]
+        assert m1 == m2, (trial, a, b, mu, sd, s2h)
+        pos = int(c1[0]) if c1[0] < 190_000 else 0
+
+
+def test_bisection_level_skipping_the_right_half_probability_is_the_full_form():
+    """_bisect_level (the right half's crossing probability evaluated only when the left half's
+    is below 1) draws the same midpoint, reads the same normals and picks the same half as the
+    form that always evaluates both (tests/reference_kernels.py), on the bisection tables of
+    Table 2-1: ends of one sign (the hitting sampler) and of opposite signs, both modes."""
+    from plant.multimode.zero_velocity import _bisect_level
+    from tests.reference_kernels import bisect_level_ref
+    _, _, _, BPh, BPw, BG, BC = _tables(PlantParams(), SimOptions())
+    p = PlantParams()
+    sig_v2 = p.alpha ** 2 * p.sigma2_sq
+    rng = np.random.default_rng(9)
+    z = rng.standard_normal(400_000)
+    pos, lefts, levels_seen = 0, 0, set()
+    for trial in range(8000):
+        m, k = trial % 2, trial % BPh.shape[1]
+        half = SimOptions().substep / 2 ** (k + 1)
+        scale = math.sqrt(sig_v2 * 2 * half)
+        Xa = rng.normal(0.0, 1.0, 7) * np.array([1e-5, 1.0, 1.0, 1e-4, 0.3, 1.0, 3.0])
+        Xa[1] = abs(rng.normal(0.0, 2.0)) * scale * (1 if m == 1 else -1)
+        Xb = Xa.copy()
+        Xb[1] = Xa[1] * rng.uniform(-1.5, 3.0)
+        Xm1, Xm2, F1, F2 = np.empty(7), np.empty(7), np.empty(7), np.empty(7)
+        c1, c2 = np.array([pos], dtype=np.int64), np.array([pos], dtype=np.int64)
+        r1 = _bisect_level(BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], Xa, Xb, Xm1, F1, half, sig_v2, z, c1)
+        r2 = bisect_level_ref(BPh[m, k], BPw[m, k], BG[m, k], BC[m, k], Xa, Xb, Xm2, F2, half, sig_v2, z, c2)
+        assert r1 == r2 and c1[0] == c2[0]
+        assert np.array_equal(Xm1.view(np.uint64), Xm2.view(np.uint64))
+        lefts += r1
+        levels_seen.add(k)
+        pos = int(c1[0]) if c1[0] < 390_000 else 0
+    assert 1000 < lefts < 7000 and len(levels_seen) == BPh.shape[1]

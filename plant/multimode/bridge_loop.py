@@ -9,7 +9,11 @@ the same normals read, made cheaper where that changes no bit:
 * the 7 × 7 and 4 × 4 scratch matrices of the fresh end-of-segment step and the ladder's
   thresholds come in as views made once per interval (three reshapes per segment were numba
   runtime calls);
-* it is compiled without numba's reference counting (it allocates nothing).
+* it is compiled without numba's reference counting (it allocates nothing);
+* the reflecting push (:func:`_reflect_low`) skips erfc and log where the table of log Φ shows
+  that the bridge minimum stays above 0 (:func:`plant.multimode.crossing.minimum_above_zero`);
+* the fresh end-of-segment step takes Φ and Q from one call
+  (:func:`plant.multimode.moving.phi_q_moving`), which evaluates the decays both use once.
 
 tests/test_bridge_loop.py runs both on the same states and normals.
 """
@@ -17,13 +21,29 @@ from __future__ import annotations
 
 from numba import njit
 
-from plant.multimode.crossing import crossed
-from plant.multimode.moving import chol_psd, phi_moving, q_moving, substep_peak, velocity_extremum_time
+from plant.multimode.crossing import crossed, minimum_above_zero
+from plant.multimode.moving import chol_psd, phi_q_moving, substep_peak, velocity_extremum_time
 from plant.multimode.zero_velocity import _bisect, _bridge_low, _copy, _mean_min, _step
+from plant.randomness import ZPOS
 
 __all__ = ["bridge_run"]
 
 A1, A2, A5 = 0, 1, 4
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _reflect_low(va, vb, h, sig_v2, z, cursor):
+    """:func:`plant.multimode.zero_velocity._bridge_low` where it is below 0 (the push), and
+    min(va, vb) ≥ 0 where it is not: the same normal read, erfc and log skipped when the table
+    of log Φ decides that the minimum stays above 0 (both ends above 0, x < 0)."""
+    if va > 0.0 and vb > 0.0:
+        i = cursor[ZPOS]
+        if i < z.shape[0]:
+            x = z[i]
+            if x < 0.0 and minimum_above_zero(va, vb, 2.0 * sig_v2 * h, x):
+                cursor[ZPOS] = i + 1
+                return min(va, vb)
+    return _bridge_low(va, vb, h, sig_v2, z, cursor)
 
 
 @njit(cache=True, _nrt=False)
@@ -88,8 +108,7 @@ def bridge_run(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw,
             _step(X, TP[m, j, k], TL[m, j, k], z, cursor, Xb)
         else:
             step = rem
-            phi_moving(mode, step, p, P)
-            q_moving(mode, step, p, Qtmp)
+            phi_q_moving(mode, step, p, P, Qtmp)
             chol_psd(Qtmp, L)
             _step(X, P, L, z, cursor, Xb)
         n += 1
@@ -97,7 +116,7 @@ def bridge_run(X, mode, h, reflect, o_sub, o_rsub, tol, p, TP, TL, TH, BPh, BPw,
             return t, False, peak, n, True
         if reflect:
             va, vb = s * X[A2], s * Xb[A2]
-            low = _bridge_low(va, vb, step, sig_v2, z, cursor) if sig_v2 > 0 else min(va, vb)
+            low = _reflect_low(va, vb, step, sig_v2, z, cursor) if sig_v2 > 0 else min(va, vb)
             if low < 0.0:
                 Xb[A2] += s * (-low)
                 Xb[A1] += s * (-low) * step / 2.0

@@ -23,7 +23,7 @@ from numba import njit
 
 from plant.randomness import normal, uniform_below
 
-__all__ = ["crossed", "exp_below", "LOG_PHI_LO", "LOG_PHI_HI", "GRID_MIN", "GRID_STEP"]
+__all__ = ["crossed", "exp_below", "minimum_above_zero", "LOG_PHI_LO", "LOG_PHI_HI", "GRID_MIN", "GRID_STEP"]
 
 GRID_MIN = -16.0
 """Left end a_0 of the grid of x [unit normals]; its right end is 0 (U < ½)."""
@@ -70,7 +70,7 @@ def exp_below(e, z, cursor):
     return 0.5 * math.erfc(-x / math.sqrt(2.0)) < pc
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def crossed(va, vb, h, sig_v2, z, cursor):
     """``pc >= 1.0 or uniform_below(z, cursor, pc)`` with pc the bridge crossing probability of
     x2 from ``va`` to ``vb`` over ``h`` (σ_v² = ``sig_v2``): the decision and the normals read of
@@ -88,3 +88,28 @@ def crossed(va, vb, h, sig_v2, z, cursor):
         return exp_below(e, z, cursor)
     pc = math.exp(e)
     return pc >= 1.0 or uniform_below(z, cursor, pc)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def minimum_above_zero(va, vb, c, x):
+    """True when the reflecting sub-step's bridge minimum as
+    :func:`plant.multimode.zero_velocity._bridge_low` computes it,
+    ½·(va + vb − √((vb − va)² − c·ln U)) with U = Φ(x) = ½·erfc(−x/√2) and c = 2σ_v²h, is
+    certainly not below 0 — decided without erfc and log, for va, vb > 0 and x on the grid.
+
+    The sign is that of fl(va + vb) − fl(√D): no push iff the computed D ≤ fl(va + vb)². D adds two
+    non-negative numbers, the same fl((vb − va)²) and |fl(c·ln U)| ≤ c·(−LOG_PHI_LO[i])·(1 + 3ε)
+    (the table's lower end of log Φ on x's cell lies 1e-9 below it, far beyond the rounding of erfc
+    and log), so D ≤ ((vb − va)² + c·(−LOG_PHI_LO[i]))·(1 + 6ε); the test below asks for a
+    relative gap of 2e-12 instead, within the normal range of doubles. Otherwise (False) the
+    caller evaluates the minimum as before.
+    """
+    if not (GRID_MIN < x < 0.0):
+        return False
+    i = int((x - GRID_MIN) * (1.0 / GRID_STEP))
+    if i >= LOG_PHI_LO.shape[0]:
+        return False
+    bound = (vb - va) ** 2 + c * (-LOG_PHI_LO[i])
+    s = va + vb
+    ss = s * s
+    return bound * (1.0 + 1e-12) < ss * (1.0 - 1e-12) and 1e-290 < bound and ss < 1e300

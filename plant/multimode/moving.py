@@ -37,7 +37,7 @@ from plant.expfun import e1, e2, e3, e4
 from plant.randomness import normal
 from plant.multimode.segments import hermite_peak, torque_crossing_time
 
-__all__ = ["phi_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "deterministic_move",
+__all__ = ["phi_moving", "phi_q_moving", "q_moving", "chol_psd", "mean_path", "gaussian_step", "deterministic_move",
            "NOISY_BLOCK"]
 
 A1, A2, A3, A4, A5, AKC, AU = range(7)
@@ -51,6 +51,28 @@ _BRENT_ITER = 200
 @njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
 def phi_moving(mode, h, p, P):
     """Φ_1 or Φ_3 of (3-20)/(3-21) into P (7 × 7, augmented vector)."""
+    ex4, E4, ex5, E5 = _decays(h, p.beta4, p.beta5)
+    _phi_fill(mode, h, p, P, ex4, E4, ex5, E5)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _decays(h, b4, b5):
+    """(e^(−β4h), e1(β4h), e^(−β5h), e1(β5h)): the x4 and x5 decays that Φ and Q share. Each
+    exp and expm1 is evaluated once; when β4·h and β5·h are the same number (Table 2-1 has
+    β4 = β5) the x5 pair is the x4 pair, the same values the separate calls return."""
+    y4 = b4 * h
+    y5 = b5 * h
+    ex4 = math.exp(-y4)
+    E4 = e1(y4)
+    if y5 == y4:
+        return ex4, E4, ex4, E4
+    return ex4, E4, math.exp(-y5), e1(y5)
+
+
+@njit(cache=True, _nrt=False)
+def _phi_fill(mode, h, p, P, ex4, E4, ex5, E5):
+    """:func:`phi_moving` from the decays of :func:`_decays`; e1(β3h) and e2(β3h), which two
+    entries each use, evaluated once."""
     a, b3, b4, b5 = p.alpha, p.beta3, p.beta4, p.beta5
     for i in range(7):
         for j in range(7):
@@ -58,20 +80,31 @@ def phi_moving(mode, h, p, P):
     y3 = b3 * h
     y5 = b5 * h
     s = 1.0 if mode == 1 else -1.0
+    E3 = e1(y3)
+    F3 = e2(y3)
     P[A3, A3] = math.exp(-y3)                 # q33
-    P[A3, AU] = e1(y3)                        # q37
-    P[A4, A4] = math.exp(-b4 * h)             # q44
-    P[A1, A4] = -e1(b4 * h) / b4              # q14
+    P[A3, AU] = E3                            # q37
+    P[A4, A4] = ex4                           # q44
+    P[A1, A4] = -E4 / b4                      # q14
     P[A1, A2] = h
-    P[A1, A3] = a * e2(y3) / (b3 * b3)        # q13
-    P[A2, A3] = a * e1(y3) / b3               # q23
+    P[A1, A3] = a * F3 / (b3 * b3)            # q13
+    P[A2, A3] = a * E3 / b3                   # q23
     P[A1, AU] = a * e3(y3) / (b3 * b3)        # q17
-    P[A2, AU] = a * e2(y3) / b3               # q27
-    P[A5, A5] = math.exp(-y5)                 # q55
+    P[A2, AU] = a * F3 / b3                   # q27
+    P[A5, A5] = ex5                           # q55
     P[A1, A5] = s * a * e2(y5) / (b5 * b5)    # q15
-    P[A2, A5] = s * a * e1(y5) / b5           # q25
+    P[A2, A5] = s * a * E5 / b5               # q25
     P[A1, AKC] = s * a * h * h / 2.0
     P[A2, AKC] = s * a * h
+
+
+@njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
+def phi_q_moving(mode, h, p, P, Q):
+    """:func:`phi_moving` into P and :func:`q_moving` into Q for one width h, the decays they
+    share evaluated once: the same numbers as the two calls (a noisy segment's fresh last step)."""
+    ex4, E4, ex5, E5 = _decays(h, p.beta4, p.beta5)
+    _phi_fill(mode, h, p, P, ex4, E4, ex5, E5)
+    _q_fill(mode, h, p, Q, E4, E5)
 
 
 @njit(cache=True, _nrt=False)
@@ -135,26 +168,31 @@ def _fint(y, kind):
 
 
 @njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
-def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q):
+def _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q, E4, E5):
     """The integrals of :func:`q_moving` in closed form (y = β·h < 0.5), e-functions of plant.expfun:
 
     w2: q2·[h³/3, h²/2; ·, h] on (x1, x2);
     w4: x1x1 q4·e4(y4)/β4³, x1x4 −q4·e1(y4)²/(2β4²), x4x4 q4·e1(2y4)/(2β4) (as in plant.multimode.stuck);
     w5: x1x1 q5·α²·F2(y5)/β5⁵, x1x2 q5·α²·F1(y5)/β5⁴, x1x5 q5·s·α·F0(y5)/β5³,
         x2x2 q5·α²·e4(y5)/β5³, x2x5 q5·s·α·e1(y5)²/(2β5²), x5x5 q5·e1(2y5)/(2β5),
-    with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`).
+    with F0, F1, F2 the integrals of e2·e^(−x), e2·e1, e2² (:func:`_fint`); E4 = e1(y4) and
+    E5 = e1(y5) come from the caller (:func:`_decays`).
     """
-    E4, E5 = e1(y4), e1(y5)
-    Q[0, 0] = q2 * h * h * h / 3.0 + q4 * e4(y4) / b4 ** 3 + q5 * a * a * _fint(y5, 2) / b5 ** 5
+    same = y5 == y4             # then e4 and e1(2y) of x5 are those of x4 (one evaluation each)
+    G4 = e4(y4)
+    G5 = G4 if same else e4(y5)
+    D4 = e1(2.0 * y4)
+    D5 = D4 if same else e1(2.0 * y5)
+    Q[0, 0] = q2 * h * h * h / 3.0 + q4 * G4 / b4 ** 3 + q5 * a * a * _fint(y5, 2) / b5 ** 5
     Q[0, 1] = Q[1, 0] = q2 * h * h / 2.0 + q5 * a * a * _fint(y5, 1) / b5 ** 4
-    Q[1, 1] = q2 * h + q5 * a * a * e4(y5) / b5 ** 3
+    Q[1, 1] = q2 * h + q5 * a * a * G5 / b5 ** 3
     Q[0, 2] = Q[2, 0] = -q4 * E4 * E4 / (2.0 * b4 * b4)
     Q[0, 3] = Q[3, 0] = q5 * s * a * _fint(y5, 0) / b5 ** 3
     Q[1, 2] = Q[2, 1] = 0.0
     Q[1, 3] = Q[3, 1] = q5 * s * a * E5 * E5 / (2.0 * b5 * b5)
-    Q[2, 2] = q4 * e1(2.0 * y4) / (2.0 * b4)
+    Q[2, 2] = q4 * D4 / (2.0 * b4)
     Q[2, 3] = Q[3, 2] = 0.0
-    Q[3, 3] = q5 * e1(2.0 * y5) / (2.0 * b5)
+    Q[3, 3] = q5 * D5 / (2.0 * b5)
 
 
 @njit(cache=True, _nrt=False)   # allocation-free: no reference counts (interval._fast_span)
@@ -169,12 +207,23 @@ def q_moving(mode, h, p, Q):
     on panels with β·Δ ≤ 1e-3: the first neglected term is below (2β·Δ)⁴·2e-7 ≈ 3e-18 of the
     entry, i.e. round-off (Van Loan is the test oracle).
     """
+    y4, y5 = p.beta4 * h, p.beta5 * h
+    if max(y4, y5) < _SERIES_LIMIT:
+        E4 = e1(y4)
+        _q_fill(mode, h, p, Q, E4, E4 if y5 == y4 else e1(y5))
+    else:
+        _q_fill(mode, h, p, Q, 0.0, 0.0)
+
+
+@njit(cache=True, _nrt=False)
+def _q_fill(mode, h, p, Q, E4, E5):
+    """:func:`q_moving`, with E4 = e1(β4h) and E5 = e1(β5h) given (used by the closed form only)."""
     a, b4, b5 = p.alpha, p.beta4, p.beta5
     q2, q4, q5 = a * a * p.sigma2_sq, p.sigma4_sq, p.sigma5_sq
     s = 1.0 if mode == 1 else -1.0
     y4, y5 = b4 * h, b5 * h
     if max(y4, y5) < _SERIES_LIMIT:
-        _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q)
+        _q_closed(h, y4, y5, a, b4, b5, q2, q4, q5, s, Q, E4, E5)
         return
     i11 = i12 = i14 = i15 = i22 = i25 = i44 = i55 = 0.0
     rate = max(b4, b5)
@@ -270,7 +319,7 @@ def gaussian_step(X, P, L, z, cursor, out):
         out[NOISY_BLOCK[r]] += L[r, 0] * z0 + L[r, 1] * z1 + L[r, 2] * z2 + L[r, 3] * z3
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def substep_peak(Xa, Xb, h, peak):
     """max(peak, |x1| at both ends, the interior extremum of the cubic Hermite of x1)."""
     pk = max(peak, abs(Xa[A1]), abs(Xb[A1]))

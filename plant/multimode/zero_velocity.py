@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.np.arrayobj import reshape_unchecked
 
 from plant.fixed_linalg import gemv_lanes
 from plant.multimode.moving import (NOISY_BLOCK, chol_psd, mean_path, mean_velocity, noise_factor_moving, phi_moving,
@@ -38,7 +39,16 @@ __all__ = ["newton_segment", "substep_tables", "bisection_tables", "ladder_thres
 A1, A2, A3, A4, A5, AKC, AU = range(7)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, inline="always")
+def _square(v, n):
+    """The n × n C-ordered view of the contiguous n² floats ``v``: ``v.reshape((n, n))`` built in
+    place (numba's ``reshape_unchecked``), without the runtime call and reference counts of
+    ``reshape``, so the bisection runs without numba's runtime (issue 27)."""
+    f = v.itemsize
+    return reshape_unchecked(v, (n, n), (n * f, f))
+
+
+@njit(cache=True, _nrt=False, inline="always")
 def _copy(dst, src):
     """dst[:] = src element by element (a slice assignment needs numba's runtime, which the
     interval's fast path, plant.multimode.interval._fast_span, is compiled without)."""
@@ -46,7 +56,7 @@ def _copy(dst, src):
         dst[i] = src[i]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _cross_prob(va, vb, h, sig_v2):
     """Probability that a Brownian bridge of x2 from va to vb over h crosses 0."""
     if (va > 0) != (vb > 0) or va == 0.0 or vb == 0.0:
@@ -54,7 +64,7 @@ def _cross_prob(va, vb, h, sig_v2):
     return math.exp(-2.0 * va * vb / (sig_v2 * h))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
     """The law of the midpoint X(w/2) of a sub-step of width w given both its ends.
 
@@ -74,13 +84,13 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
     """
     phi_moving(mode, w / 2, p, Ph)
     phi_moving(mode, w, p, Pw)
-    Q1 = V[0:16].reshape((4, 4))
-    Qw = V[16:32].reshape((4, 4))
-    Lw = V[32:48].reshape((4, 4))
-    M = V[48:64].reshape((4, 4))
-    S = V[64:80].reshape((4, 4))
-    R = V[80:96].reshape((4, 4))
-    Lc = V[96:112].reshape((4, 4))
+    Q1 = _square(V[0:16], 4)
+    Qw = _square(V[16:32], 4)
+    Lw = _square(V[32:48], 4)
+    M = _square(V[48:64], 4)
+    S = _square(V[64:80], 4)
+    R = _square(V[80:96], 4)
+    Lc = _square(V[96:112], 4)
     q_moving(mode, w / 2, p, Q1)
     q_moving(mode, w, p, Qw)
     # M = Q1·P2ᵀ with P2 the noisy block of Φ(w/2)
@@ -142,7 +152,7 @@ def _bridge_law(mode, w, p, Ph, Pw, G, C, V):
             C[1 + a, 1 + b] = Lc[a, b]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _phi_times(P, X, out):
     """out = P·X for a moving-mode Φ (3-20)/(3-21), without its structural zeros."""
     x1, x2, x3, x4, x5, kc, u = X[A1], X[A2], X[A3], X[A4], X[A5], X[AKC], X[AU]
@@ -155,7 +165,7 @@ def _phi_times(P, X, out):
     out[AU] = u
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     """Draw the midpoint Xm of [Xa, Xb] (width 2·half) given a crossing inside; True if the
     first crossing lies in the left half. (Ph, Pw, G, C): the law of :func:`_bridge_law`;
@@ -176,8 +186,6 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
         sgn = 1.0 if a > 0 else -1.0
         x2m = sgn * _hitting_midpoint(sgn * a, sgn * b, sgn * mean2, C[0, 0], sig_v2 * half, z, cursor)
     pl = _cross_prob(a, x2m, half, sig_v2)
-    pr = _cross_prob(x2m, b, half, sig_v2)
-    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     Xm[A2] = x2m
     i = cursor[ZPOS]                      # the next three normals, one bounds check (see _step)
     if i + 3 > z.shape[0]:
@@ -190,10 +198,12 @@ def _bisect_level(Ph, Pw, G, C, Xa, Xb, Xm, Fb, half, sig_v2, z, cursor):
     Xm[A5] += C[3, 0] * dv + C[3, 1] * z1 + C[3, 2] * z2 + C[3, 3] * z3
     if pl >= 1.0:
         return True
+    pr = _cross_prob(x2m, b, half, sig_v2)    # only p_any needs it: not evaluated when pl ≥ 1
+    p_any = 1.0 - (1.0 - pl) * (1.0 - pr)
     return uniform_below(z, cursor, pl / p_any if p_any > 0.0 else 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC, V):
     """Bridge bisection of a crossing known to lie in a sub-step of length h; (time, levels).
 
@@ -209,10 +219,10 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     Xa = V[0:7]
     Xb = V[7:14]
     Xm = V[14:21]
-    Ph = V[21:70].reshape((7, 7))
-    Pw = V[70:119].reshape((7, 7))
-    G = V[119:135].reshape((4, 4))
-    C = V[135:151].reshape((4, 4))
+    Ph = _square(V[21:70], 7)
+    Pw = _square(V[70:119], 7)
+    G = _square(V[119:135], 4)
+    C = _square(V[135:151], 4)
     Vl = V[151:267]
     Fb = V[267:274]
     _copy(Xa, Xa0)
@@ -239,7 +249,7 @@ def _bisect(mode, Xa0, Xb0, h, tol, p, sig_v2, z, cursor, Xout, BPh, BPw, BG, BC
     return ta + w, levels
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _log_ncdf(x):
     """log Φ(x) for the standard normal CDF, accurate far into the lower tail."""
     if x > -30.0:
@@ -247,7 +257,7 @@ def _log_ncdf(x):
     return -0.5 * x * x - math.log(-x) - 0.5 * math.log(2.0 * math.pi) + math.log1p(-1.0 / (x * x))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _normal_above(alpha, z, cursor):
     """A unit normal conditioned to exceed ``alpha`` (Robert 1995's exponential proposal in the tail)."""
     if alpha < 0.45:
@@ -262,7 +272,14 @@ def _normal_above(alpha, z, cursor):
             return x
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, inline="always")
+def _exp_shift(d):
+    """exp(d) for d = w − max(w…) ≤ 0: exactly 1.0 at d = ±0 (IEEE 754 and libm's exp(±0) = 1),
+    so the largest weight's exp is not evaluated."""
+    return 1.0 if d == 0.0 else math.exp(d)
+
+
+@njit(cache=True, _nrt=False)
 def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
     """x2 at the midpoint of a sub-step with x2 = a > 0 and b > 0 at its ends, given a crossing.
 
@@ -284,7 +301,7 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
     w1 = -kl * mu + 0.5 * kl * kl * v + _log_ncdf(mul / sd)
     w2 = -kr * mu + 0.5 * kr * kr * v + _log_ncdf(mur / sd)
     top = max(w0, w1, w2)
-    e0, e1, e2 = math.exp(w0 - top), math.exp(w1 - top), math.exp(w2 - top)
+    e0, e1, e2 = _exp_shift(w0 - top), _exp_shift(w1 - top), _exp_shift(w2 - top)
     total = e0 + e1 + e2
     while True:
         pick = uniform(z, cursor) * total
@@ -295,7 +312,7 @@ def _hitting_midpoint(a, b, mu, sd, s2h, z, cursor):
         pl = math.exp(-kl * m)
         pr = math.exp(-kr * m)
         accept = 1.0 - pl * pr / (pl + pr) if pl + pr > 0.0 else 1.0
-        if uniform(z, cursor) < accept:
+        if uniform_below(z, cursor, accept):       # uniform(z, cursor) < accept, erfc only if needed
             return m
 
 
@@ -401,7 +418,7 @@ def substep_tables(p, o_sub, o_rsub, TP, TL):
                 h = h * 2.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, inline="always")
 def _step(X, P, L, z, cursor, out):
     """out = P·X + N with the sparsity of Φ_1/Φ_3 (3-20)/(3-21); N = L·ζ on the noisy block.
 
@@ -445,7 +462,7 @@ def _bridge_low(va, vb, h, sig_v2, z, cursor):
     return 0.5 * (va + vb - math.sqrt((vb - va) ** 2 - 2.0 * sig_v2 * h * math.log(u)))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mean_min(mode, X, p, h, t_ext):
     """min over τ in [0, h] of s·x̄2(τ), the mean velocity in the direction of motion.
 
