@@ -87,6 +87,7 @@ def test_prediction_tolerance_speedup(benchmark):
     fit, _ = _model("lugre", True)
     plant, _ = _model("lugre", True)
     plant.lugre_tolerances = TOLERANCES
+    fit.lugre_stiff = plant.lugre_stiff = 0.0     # the tolerance alone (the stiff-sliding step: tests/test_identify_stiff.py)
     ratios = []
     for point in ([1.2, 0.5, 0.5, 0.008, 0.006, 2e5], _POINTS["lugre"][:5] + [1e6]):
         z = np.log(point)
