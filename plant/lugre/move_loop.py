@@ -10,7 +10,10 @@ loop over ``advance`` (tests/test_identify_speed.py). Additive: nothing else cal
 
 :func:`play_all` (issue 25, lugrefast) plays every simulated move of a prediction in one compiled
 call on a trimmed copy of the kernel's noise-free arithmetic (below): ≈ 1.6× faster per prediction,
-the same angles and the same work counts, bit for bit.
+the same angles and the same work counts, bit for bit. When the tolerance vector carries a fifth
+entry > 0 (the fit's, ``fit._LUGRE_STIFF``), a step where the shaft slides and λh exceeds it is an
+extrapolated linearly implicit Euler step instead (issue 25, eleventh session, below): then the
+angles are the Dormand–Prince ones within ≈ 5e-11 rad, not bit for bit.
 """
 
 from __future__ import annotations
@@ -209,12 +212,12 @@ def _dp_step_s(t, y0, y1, y2, f0, f1, f2, h, u, x30, x50, th0, L):
 # prediction's cost grows ∝ σ0 (dev log 4646 case 12 at σ0 = 3e6: 97 % of 536 000 accepted steps had
 # λh > 1, mean h 5.8 µs). There, when the fit asks for it (``tol[4]`` > 0, the threshold on λh) and
 # the law is the fit's (no ripple, x5 = 0), a step is the linearly implicit Euler method extrapolated
-# (Deuflhard's; Hairer & Wanner, Solving ODEs II, §IV.9, eq. (9.25)–(9.26)): substeps
+# (Deuflhard's; Hairer & Wanner, Solving ODEs II, §IV.9, extrapolation methods): substeps
 # (I − hJ)·Δ = h·f(t_i, y_i) + h²·∂f/∂t with J = ∂f/∂y and ∂f/∂t at the step's start, n = 1 … 6 substeps
 # over the step, the results extrapolated in h (Aitken–Neville, the error's expansion in powers of h):
 # order 6, its error the difference of the tableau's last two columns, under the same norm and
-# tolerance as the Dormand–Prince step. Linearly implicit Euler damps |hλ| → ∞ (R(∞) = 0), so the step
-# follows the accuracy the slow motion needs. Independent truth: tests/test_identify_stiff.py
+# tolerance as the Dormand–Prince step. Linearly implicit Euler damps |hλ| → ∞ (R(∞) = 0, and so does each
+# extrapolated value, a linear combination of such results), so the step follows the accuracy the slow motion needs. Independent truth: tests/test_identify_stiff.py
 # (solve_ivp Radau at rtol 1e-12, every sample of the default plan's moves at σ0 up to 3e6).
 _LIE_COLUMNS = 6      # substep counts 1 … 6: 21 right-hand sides per step
 _LIE_STEP_COST = 3    # a step counted as this many Dormand–Prince steps (work clock; its CPU measured 2.9–3.7×)
