@@ -87,6 +87,7 @@ def test_prediction_tolerance_speedup(benchmark):
     fit, _ = _model("lugre", True)
     plant, _ = _model("lugre", True)
     plant.lugre_tolerances = TOLERANCES
+    fit.lugre_stiff = plant.lugre_stiff = 0.0     # the tolerance alone (the stiff-sliding step: tests/test_identify_stiff.py)
     ratios = []
     for point in ([1.2, 0.5, 0.5, 0.008, 0.006, 2e5], _POINTS["lugre"][:5] + [1e6]):
         z = np.log(point)
@@ -103,3 +104,30 @@ def test_prediction_tolerance_speedup(benchmark):
     benchmark.extra_info["speedup"] = ratios
     benchmark.pedantic(fit.predict, args=(np.log(_POINTS["lugre"]),), rounds=1, iterations=1)
     assert ratios[0] >= _TOL_GOAL, ratios
+
+
+# The fit's stiff-sliding step (issue 25, eleventh session): one prediction on a low-friction axis at the fit's
+# σ0 cap, with it and with Dormand–Prince alone, alternately. Measured 23× (131.7 / 5.6 ms, load ≈ 5); asserted ≥ 5.
+_STIFF_POINT = [0.665, 0.55, 0.8, 0.008, 0.0052, 3e6]
+_STIFF_GOAL = 5.0
+
+
+def test_prediction_stiff_step_speedup(benchmark):
+    if benchmark.disabled:
+        pytest.skip("a timing only (make benchmark)")
+    stiff, _ = _model("lugre", True)
+    explicit, _ = _model("lugre", True)
+    explicit.lugre_stiff = 0.0
+    z = np.log(_STIFF_POINT)
+    stiff.predict(z)
+    explicit.predict(z)
+    spent = {True: [], False: []}
+    for _ in range(3):
+        for flag, m in ((True, stiff), (False, explicit)):
+            t0 = time.process_time()
+            m.predict(z)
+            spent[flag].append(time.process_time() - t0)
+    ratio = float(np.median(spent[False]) / np.median(spent[True]))
+    benchmark.extra_info["speedup"] = ratio
+    benchmark.pedantic(stiff.predict, args=(z,), rounds=1, iterations=1)
+    assert ratio >= _STIFF_GOAL, ratio

@@ -96,6 +96,8 @@ def test_compiled_lugre_moves_are_bit_identical_to_the_python_loop(whole):
     model, params = _model("lugre")
     model.whole_moves = whole
     model.lugre_tolerances = TOLERANCES     # the plant's own (the Python loop's); the fit's are looser
+    model.lugre_stiff = 0.0                 # Dormand–Prince alone, the plant's step (the fit's stiff-sliding
+                                            # step is checked against Radau: tests/test_identify_stiff.py)
     old = _Model(model.log, "lugre", model.base)
     old.share_mirror = old.compiled_moves = False
     for point in ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
@@ -118,6 +120,7 @@ def test_compiled_lugre_moves_count_the_work_the_python_loop_counts():
     at the same point on either path — including a move where the plant leaves ok."""
     model, _ = _model("lugre")
     model.lugre_tolerances = TOLERANCES     # the plant's own (the Python loop's); the fit's are looser
+    model.lugre_stiff = 0.0                 # Dormand–Prince alone, the plant's step (see above)
     python = _Model(model.log, "lugre", model.base)
     python.compiled_moves = False
     from plant.identification.fit import _WorkClock
@@ -178,6 +181,7 @@ def test_whole_lugre_prediction_replays_the_work_clock_of_the_per_move_path(driv
                                 sample_period=log.sample_period)
     whole, per_move = _Model(log, "lugre", base), _Model(log, "lugre", base)
     per_move.whole_moves = False
+    whole.lugre_stiff = 0.0      # the per-move path has the plant's Dormand–Prince step alone
     points = ([1.2, 0.5, 0.5, 0.008, 0.004, 1e6], [0.9, 0.8, 0.35, 0.006, 0.012, 1e5],
               [0.3, 1.2, 0.8, 0.011, 0.002, 3e5])          # the last leaves ok (None)
     free = _traced(per_move, points)

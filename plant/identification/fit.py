@@ -79,6 +79,11 @@ _SETTLED = 1e-10       # rad: a LuGre shaft counts as settled when it can move l
 # Dormand–Prince steps. The plant itself (the benchmark's cells, the replicate logs) keeps its own tolerances.
 _LUGRE_TOLERANCES = lugre_tolerances * 100.0
 _LUGRE_TOLERANCES.flags.writeable = False
+# The fit's stiff-sliding step (plant.lugre.move_loop, issue 25, eleventh session): a lugre prediction's
+# step is the extrapolated linearly implicit Euler one wherever the shaft slides and the bristle rate λ
+# times the step would exceed this (Dormand–Prince's stability bound on the real axis is ≈ 3.3): there the
+# explicit step was stability-bound and a prediction cost ∝ σ0 (docs/axis.md "Eleventh session").
+_LUGRE_STIFF = 2.0
 
 
 @dataclass(frozen=True)
@@ -264,6 +269,7 @@ class _Model:
     whole_moves: bool = True      # lugre: a whole prediction in one compiled call (False: a call per move, for tests)
     lugre_tolerances = _LUGRE_TOLERANCES   # the compiled lugre paths' (the Python loop is the plant's own step at
                                            # the plant's 1e-10: tests set this to compare them bit for bit)
+    lugre_stiff = _LUGRE_STIFF             # the whole-prediction path's stiff-sliding step (0: Dormand–Prince alone)
 
     def __init__(self, log: AxisLog, family: str, base, only=None) -> None:
         self.log, self.family, self.fam, self.base = log, family, get_family(family), base
@@ -442,8 +448,10 @@ class _Model:
         x0 = self.fam.initial_state(p, 0.0).x
         x1 = np.empty(plan.n)
         j, checked, deadline = 0, False, self.deadline
+        tol = (np.append(self.lugre_tolerances, self.lugre_stiff) if self.lugre_stiff > 0.0
+               else self.lugre_tolerances)
         while j < len(plan.sims):
-            work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, self.lugre_tolerances, ring, _SETTLED,
+            work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, tol, ring, _SETTLED,
                                                       _UNIT_COST_S[self.family], self.clock.spent, deadline, j)
             for w in work.tolist():
                 if not checked and self.clock.past(self.deadline, self.family):

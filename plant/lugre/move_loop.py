@@ -10,7 +10,10 @@ loop over ``advance`` (tests/test_identify_speed.py). Additive: nothing else cal
 
 :func:`play_all` (issue 25, lugrefast) plays every simulated move of a prediction in one compiled
 call on a trimmed copy of the kernel's noise-free arithmetic (below): ≈ 1.6× faster per prediction,
-the same angles and the same work counts, bit for bit.
+the same angles and the same work counts, bit for bit. When the tolerance vector carries a fifth
+entry > 0 (the fit's, ``fit._LUGRE_STIFF``), a step where the shaft slides and λh exceeds it is an
+extrapolated linearly implicit Euler step instead (issue 25, eleventh session, below): then the
+angles are the Dormand–Prince ones within ≈ 5e-11 rad, not bit for bit.
 """
 
 from __future__ import annotations
@@ -203,6 +206,78 @@ def _dp_step_s(t, y0, y1, y2, f0, f1, f2, h, u, x30, x50, th0, L):
     return yn0, yn1, yn2, k60, k61, k62, e0, e1, e2
 
 
+# --- the fit's stiff-sliding step (issue 25, eleventh session) ----------------------------------------
+# While the shaft slides fast, the bristle state relaxes at λ = σ0·|v|/g(v) (ż = v − σ0·|v|·z/g); the
+# explicit Dormand–Prince step is then bound by stability (|hλ| ≲ 3.3), not by the tolerance, and a
+# prediction's cost grows ∝ σ0 (dev log 4646 case 12 at σ0 = 3e6: 97 % of 536 000 accepted steps had
+# λh > 1, mean h 5.8 µs). There, when the fit asks for it (``tol[4]`` > 0, the threshold on λh) and
+# the law is the fit's (no ripple, x5 = 0), a step is the linearly implicit Euler method extrapolated
+# (Deuflhard's; Hairer & Wanner, Solving ODEs II, §IV.9, extrapolation methods): substeps
+# (I − hJ)·Δ = h·f(t_i, y_i) + h²·∂f/∂t with J = ∂f/∂y and ∂f/∂t at the step's start, n = 1 … 6 substeps
+# over the step, the results extrapolated in h (Aitken–Neville, the error's expansion in powers of h):
+# order 6, its error the difference of the tableau's last two columns, under the same norm and
+# tolerance as the Dormand–Prince step. Linearly implicit Euler damps |hλ| → ∞ (R(∞) = 0, and so does each
+# extrapolated value, a linear combination of such results), so the step follows the accuracy the slow motion needs. Independent truth: tests/test_identify_stiff.py
+# (solve_ivp Radau at rtol 1e-12, every sample of the default plan's moves at σ0 up to 3e6).
+_LIE_COLUMNS = 6      # substep counts 1 … 6: 21 right-hand sides per step
+_LIE_STEP_COST = 3    # a step counted as this many Dormand–Prince steps (work clock; its CPU measured 2.9–3.7×)
+
+
+@njit(cache=True)
+def _lie_solve(m00, m01, m02, m10, m11, h, b0, b1, b2):
+    """Solve (I − hJ)·x = b for J = [[·, ·, ·], [·, ·, 0], [1, 0, 0]] given m00 = 1 − h·J00, m01 = −h·J01,
+    m02 = −h·J02, m10 = −h·J10, m11 = 1 − h·J11 (row 3 is Ḋ = v): x2 = b2 + h·x0, x1 = (b1 − m10·x0)/m11."""
+    x0 = (b0 - m01 * b1 / m11 - m02 * b2) / (m00 - m01 * m10 / m11 + m02 * h)
+    x1 = (b1 - m10 * x0) / m11
+    return x0, x1, b2 + h * x0
+
+
+@njit(cache=True)
+def _lie_step_s(t, y0, y1, y2, H, u, x30, x50, th0, L):
+    """One extrapolated linearly implicit Euler step of (v, z, D) from segment time t over H (the fit's
+    law: no ripple, x5 = 0): (yn0, yn1, yn2, error vector (3))."""
+    alpha, s0, s1, s2 = L[L_ALPHA], L[L_S0], L[L_S1], L[L_S2]
+    kc = max(L[L_KC], 0.0)
+    ks = max(L[L_KS], 0.0)
+    vs = L[L_VS]
+    r = y0 / vs
+    ex = math.exp(-r * r)
+    g = kc + (ks - kc) * ex
+    gp = (ks - kc) * ex * (-2.0 * r / vs)          # g'(v)
+    av = abs(y0)
+    sg = 1.0 if y0 > 0.0 else -1.0
+    jzz = -s0 * av / g                              # ∂ż/∂z
+    jzv = 1.0 - s0 * y1 * sg / g + s0 * y1 * av * gp / (g * g)   # ∂ż/∂v
+    jvv = -alpha * (s1 * jzv + s2)                  # ∂v̇/∂v
+    jvz = -alpha * (s0 + s1 * jzz)                  # ∂v̇/∂z
+    jvd = -alpha * L[L_SPRING]                      # ∂v̇/∂D
+    b3 = L[L_BETA3]
+    ft0 = alpha * (-b3 * (x30 - u) * math.exp(-b3 * t) + L[L_SPRING] * L[L_PULL])   # ∂v̇/∂t
+    T0 = np.empty((_LIE_COLUMNS, _LIE_COLUMNS))
+    T1 = np.empty((_LIE_COLUMNS, _LIE_COLUMNS))
+    T2 = np.empty((_LIE_COLUMNS, _LIE_COLUMNS))
+    for j in range(_LIE_COLUMNS):
+        n = j + 1
+        h = H / n
+        m00, m01, m02, m10, m11 = 1.0 - h * jvv, -h * jvz, -h * jvd, -h * jzv, 1.0 - h * jzz
+        w0, w1, w2 = y0, y1, y2
+        for i in range(n):
+            f0, f1, f2 = _rhs_s(t + i * h, w0, w1, w2, u, x30, x50, th0, L)
+            d0, d1, d2 = _lie_solve(m00, m01, m02, m10, m11, h, h * (f0 + h * ft0), h * f1, h * f2)
+            w0 += d0
+            w1 += d1
+            w2 += d2
+        T0[j, 0], T1[j, 0], T2[j, 0] = w0, w1, w2
+        for k in range(1, j + 1):
+            c = 1.0 / ((j + 1.0) / (j + 1.0 - k) - 1.0)
+            T0[j, k] = T0[j, k - 1] + (T0[j, k - 1] - T0[j - 1, k - 1]) * c
+            T1[j, k] = T1[j, k - 1] + (T1[j, k - 1] - T1[j - 1, k - 1]) * c
+            T2[j, k] = T2[j, k - 1] + (T2[j, k - 1] - T2[j - 1, k - 1]) * c
+    K = _LIE_COLUMNS - 1
+    return (T0[K, K], T1[K, K], T2[K, K], T0[K, K] - T0[K, K - 1], T1[K, K] - T1[K, K - 1],
+            T2[K, K] - T2[K, K - 1])
+
+
 @njit(cache=True)
 def _segment_s(X, H, L, hbox, vth, mode, tol):
     """integrate.segment, noise-free (eps = inf), without the peak, on scalars (:func:`_dp_step_s`):
@@ -216,9 +291,41 @@ def _segment_s(X, H, L, hbox, vth, mode, tol):
     h = hbox[0] if hbox[0] > 0.0 else _H0
     steps = 0
     new_mode = mode
+    # the fit's stiff-sliding step (above): tol[4] = the threshold on λh, when given and > 0
+    stiff = tol[4] if tol.shape[0] > 4 else 0.0
+    if stiff > 0.0 and (L[L_RIPPLE] != 0.0 or x50 != 0.0):
+        stiff = 0.0
     while t < H:
         last = h >= H - t
         hh = H - t if last else h
+        if stiff > 0.0 and mode != 2:
+            kcs = max(L[L_KC], 0.0)
+            rr = y0 / L[L_VS]
+            lam = L[L_S0] * abs(y0) / (kcs + (max(L[L_KS], 0.0) - kcs) * math.exp(-rr * rr))
+            if lam * hh > stiff:
+                yn0, yn1, yn2, e0, e1, e2 = _lie_step_s(t, y0, y1, y2, hh, u, x30, x50, th0, L)
+                steps += _LIE_STEP_COST
+                sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
+                sc1 = atol1 + rtol * max(abs(y1), abs(yn1))
+                sc2 = atol2 + rtol * hh * max(abs(y0), abs(yn0))
+                acc = 0.0 + (e0 / sc0) ** 2
+                acc += (e1 / sc1) ** 2
+                acc += (e2 / sc2) ** 2
+                err = math.sqrt(acc / 3.0)
+                if not err <= 1.0:
+                    h = hh * max(0.2, 0.9 * err ** (-1.0 / _LIE_COLUMNS)) if math.isfinite(err) else 0.2 * hh
+                    if steps > 5_000_000:
+                        break
+                    continue
+                t = H if last else t + hh
+                y0, y1, y2 = yn0, yn1, yn2
+                f0, f1, f2 = _rhs_s(t, y0, y1, y2, u, x30, x50, th0, L)
+                if not last:
+                    h = hh * (5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** (-1.0 / _LIE_COLUMNS))))
+                new_mode = 3 if y0 > vth else (1 if y0 < -vth else 2)
+                if new_mode != mode:
+                    break
+                continue
         yn0, yn1, yn2, k0, k1, k2, e0, e1, e2 = _dp_step_s(t, y0, y1, y2, f0, f1, f2, hh, u, x30, x50, th0, L)
         steps += 1
         sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
