@@ -310,7 +310,8 @@ class _Model:
         self.clock = _WorkClock()     # a fit may replace it by a clock its other models share
 
     def params(self, z: np.ndarray):
-        v = np.exp(z)
+        with np.errstate(over="ignore"):    # an optimiser's far step: inf fields, refused below (ValueError)
+            v = np.exp(z)
         fields = {"coulomb": v[0], "stiction": v[0] + v[1], "inertia": v[2], "motor_time_constant": v[3]}
         fields.update({name: v[4 + k] for k, name in enumerate(FAMILY_FREE[self.family])})
         return axis_params(self.base.replace(**{k: float(x) for k, x in fields.items()}))
