@@ -665,10 +665,15 @@ DOUBLET_COVERAGE_SEED = 6203  # coverage of every family's fit on the doublet pl
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 6 min of CPU: SOLNIC_AXIS_STUDY=1")
+@pytest.mark.xfail(strict=True, reason="measured 6 of 8 (both stribeck logs picked as multimode; the pairwise "
+                   "rule 7 of 8): docs/axis.md, 'Eleventh session: the doublet plan on held-out logs'")
 def test_eleventh_auto_with_doublets_second_fresh_seed():
     """As :func:`test_eleventh_auto_with_doublets_picks_the_generating_family` on the fresh seed 4409:
     the generating family picked in ≥ 90 % of 2 logs per family on the doublet plan (docs/axis.md,
-    "Eleventh session: the doublet plan on held-out logs", which states the measured count)."""
+    "Eleventh session: the doublet plan on held-out logs"). Measured (2026-11-28, `choose_family` without
+    the final point fit, one process per log, load ≈ 2): **6 of 8** — two-mass 2/2 (multimode's z 4.86,
+    5.43), lugre 2/2, multimode 2/2, stribeck 0/2 (→ multimode: z 1.39; −0.41 against lugre's best by the
+    mean, where the pairwise rule picks stribeck); CPU of the choice 18–44 s per log."""
     from plant.identification import ExperimentOptions
 
     picked = {}
@@ -683,11 +688,16 @@ def test_eleventh_auto_with_doublets_second_fresh_seed():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 20 min of CPU: SOLNIC_AXIS_STUDY=1")
-@pytest.mark.parametrize("family", ["two-mass", "multimode", "stribeck", "lugre"])
+@pytest.mark.parametrize("family", ["two-mass", pytest.param("multimode", marks=pytest.mark.xfail(
+    strict=True, reason="measured 17 of 20: case 2 misses k̄c, J, τ3 (k̄c by 5e-4 below its interval)")),
+    "stribeck", "lugre"])
 def test_eleventh_coverage_on_the_doublet_plan(family):
     """Every fitted field inside its stated 95 % interval in ≥ 90 % of 5 random axes per family (fresh
     seed 6203, cases 0–4, default 20-replicate bootstrap) on the plan with doublets=6 (docs/axis.md,
-    "Eleventh session: the doublet plan on held-out logs", which states the measured counts)."""
+    "Eleventh session: the doublet plan on held-out logs"). Measured (2026-11-28, one process per log,
+    two at a time, load ≈ 2): two-mass 25 of 25 (k_sh not identified on 5 of 5), multimode **17 of 20**,
+    stribeck 29 of 30, lugre 30 of 30; CPU per log 30–102 s two-mass, 3–5 s multimode, 31–60 s
+    stribeck, 50–73 s lugre."""
     from plant.identification import ExperimentOptions
 
     inside = []
