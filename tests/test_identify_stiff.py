@@ -18,35 +18,22 @@ sample within 0.01·σ1/√N = 6e-10 rad of the true response, so that a converg
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from plant.identification import design_experiment
 from plant.identification.fit import _LUGRE_STIFF, _Model, _WorkClock
 from plant.lugre.law import rhs
 from plant.lugre.move_loop import _lie_step_s
-from plant.lugre.reference import event_driven
 from plant.protocol import get_family
+from tests.test_identify_tolerance import BOUND, _model, worst_against_radau
 
-SIGMA1 = 5e-6       # rad, Table 2-1's encoder noise
-ROWS = 7000         # about the default plan's fitted samples
-BOUND = 0.01 * SIGMA1 / math.sqrt(ROWS)     # 6e-10 rad
 
 # (k̄c, k̄s − k̄c, J, τ3, v_s, σ0): a low-friction axis (dev log 4646 case 12's truth, rounded) at the
 # fit's σ0 cap and at 1e6, and the draws' region's middle
 LOW_FRICTION = [0.665, 0.55, 0.8, 0.008, 0.0052, 3e6]
 POINTS = (LOW_FRICTION, LOW_FRICTION[:5] + [1e6], [1.2, 0.5, 0.5, 0.008, 0.006, 2e5])
-
-
-def _model():
-    plan = design_experiment()
-    log = plan.with_y(np.zeros(plan.n))
-    fam = get_family("lugre")
-    base = fam.Params().replace(u_max=max(float(log.u_max), fam.Params().u_max), sample_period=log.sample_period)
-    return _Model(log, "lugre", base)
 
 
 def test_the_stiff_step_is_on_in_the_fit():
@@ -56,25 +43,7 @@ def test_the_stiff_step_is_on_in_the_fit():
 @pytest.mark.parametrize("point", [POINTS[0]] + [pytest.param(q, marks=pytest.mark.slow) for q in POINTS[1:]],
                          ids=["low-friction-3e6", "low-friction-1e6", "mid"])
 def test_prediction_against_radau_within_the_bound(point):
-    model = _model()
-    z = np.log(point)
-    pred = model.predict(z)
-    assert pred is not None
-    p = model.params(z)
-    log = model.log
-    kinds, worst, checked = set(), 0.0, 0
-    for g, (s, e) in enumerate(model.segs):
-        key = model.mirror[g][0]
-        if key in kinds:             # each kind of move once (a mirror pair once)
-            continue
-        kinds.add(key)
-        if len(kinds) % 2 != 1:      # every other kind: ramps, holds, pulses of each width (time)
-            continue
-        n_out = model.index[g].size
-        ref, _ = event_driven(p, get_family("lugre").initial_state(p, 0.0).x, log.commands[s:s + n_out],
-                              method="Radau", rtol=1e-12)
-        worst = max(worst, float(np.max(np.abs(pred[model.groups == g] - ref))))
-        checked += 1
+    worst, checked = worst_against_radau(_model(), point)
     assert checked >= 8
     print(f"worst |prediction − Radau| {worst:.3g} rad over {checked} kinds of move")
     assert worst <= BOUND, f"{worst:.3g} rad > {BOUND:.3g} rad"
