@@ -612,6 +612,34 @@ ELEVENTH_AUTO_SEED = 6827
 ELEVENTH_DOUBLETS = 6
 
 
+def _assert_doublet_auto_picks(seed: int):
+    """``--family auto`` on 2 logs per family at ``seed`` (:func:`auto_case`) on the plan with
+    doublets=6: the generating family picked in ≥ 90 % of the 8."""
+    from plant.identification import ExperimentOptions
+
+    picked = {}
+    for family in FAMILY_FREE:
+        for case in (0, 1):
+            choice, cpu = auto_case(family, case, seed=seed, options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
+            picked[family, case] = choice.family
+            print(family, case, choice.family, f"cpu {cpu:.1f}")
+    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+
+
+def _assert_doublet_coverage(family: str, seed: int):
+    """Every fitted field of 5 random ``family`` axes at ``seed`` (:func:`coverage_case`, bootstrap 20)
+    on the plan with doublets=6 inside its stated 95 % interval in ≥ 90 % of the fields."""
+    from plant.identification import ExperimentOptions
+
+    inside = []
+    for case in range(5):
+        res, cpu = coverage_case(family, case, seed=seed, bootstrap=20,
+                                 options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
+        print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
+        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
+    assert np.mean(inside) >= 0.90
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("SOLNIC_AXIS_STUDY"), reason="about 8 min of CPU: SOLNIC_AXIS_STUDY=1")
 def test_eleventh_auto_with_doublets_picks_the_generating_family():
@@ -622,16 +650,7 @@ def test_eleventh_auto_with_doublets_picks_the_generating_family():
     the 8 logs (docs/axis.md, "Eleventh session: auto — the shaft"). Measured (2026-11-28, the same
     draws, plan and choice without the final point fit, one process per log, two at a time, load
     5–7): **8 of 8**, every family picked right by both rules; CPU of the choice 21–81 s per log."""
-    from plant.identification import ExperimentOptions
-
-    picked = {}
-    for family in FAMILY_FREE:
-        for case in (0, 1):
-            choice, cpu = auto_case(family, case, seed=ELEVENTH_AUTO_SEED,
-                                    options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
-            picked[family, case] = choice.family
-            print(family, case, choice.family, f"cpu {cpu:.1f}")
-    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+    _assert_doublet_auto_picks(ELEVENTH_AUTO_SEED)
 
 
 ELEVENTH_SEED = 5381   # issue 25's eleventh session (helper fit11): named and committed before any run, to measure
@@ -674,16 +693,7 @@ def test_eleventh_auto_with_doublets_second_fresh_seed():
     the final point fit, one process per log, load ≈ 2): **6 of 8** — two-mass 2/2 (multimode's z 4.86,
     5.43), lugre 2/2, multimode 2/2, stribeck 0/2 (→ multimode: z 1.39; −0.41 against lugre's best by the
     mean, where the pairwise rule picks stribeck); CPU of the choice 18–44 s per log."""
-    from plant.identification import ExperimentOptions
-
-    picked = {}
-    for family in FAMILY_FREE:
-        for case in (0, 1):
-            choice, cpu = auto_case(family, case, seed=DOUBLET_AUTO_SEED,
-                                    options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
-            picked[family, case] = choice.family
-            print(family, case, choice.family, f"cpu {cpu:.1f}")
-    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+    _assert_doublet_auto_picks(DOUBLET_AUTO_SEED)
 
 
 @pytest.mark.slow
@@ -698,15 +708,7 @@ def test_eleventh_coverage_on_the_doublet_plan(family):
     two at a time, load ≈ 2): two-mass 25 of 25 (k_sh not identified on 5 of 5), multimode **17 of 20**,
     stribeck 29 of 30, lugre 30 of 30; CPU per log 30–102 s two-mass, 3–5 s multimode, 31–60 s
     stribeck, 50–73 s lugre."""
-    from plant.identification import ExperimentOptions
-
-    inside = []
-    for case in range(5):
-        res, cpu = coverage_case(family, case, seed=DOUBLET_COVERAGE_SEED, bootstrap=20,
-                                 options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
-        print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
-        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
-    assert np.mean(inside) >= 0.90
+    _assert_doublet_coverage(family, DOUBLET_COVERAGE_SEED)
 
 
 # issue 25's eleventh session (helper plan11, b9961ba): two more fresh seeds for the doublet plan, named and
@@ -724,16 +726,7 @@ def test_eleventh_auto_with_doublets_third_fresh_seed():
     Measured (helper plan11, on 3ddf87d, one process per log, two at a time): **5 of 8** — lugre 2/2,
     multimode 2/2, two-mass 1/2 (k=1: multimode's z 1.98), stribeck 0/2 (multimode's z 0.06, 0.91);
     the pairwise rule also 5 of 8; CPU of the choice 29–87 s per log."""
-    from plant.identification import ExperimentOptions
-
-    picked = {}
-    for family in FAMILY_FREE:
-        for case in (0, 1):
-            choice, cpu = auto_case(family, case, seed=PLAN11_AUTO_SEED,
-                                    options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
-            picked[family, case] = choice.family
-            print(family, case, choice.family, f"cpu {cpu:.1f}")
-    assert np.mean([f == p for (f, _), p in picked.items()]) >= 0.9, picked
+    _assert_doublet_auto_picks(PLAN11_AUTO_SEED)
 
 
 @pytest.mark.slow
@@ -743,12 +736,4 @@ def test_eleventh_doublet_plan_coverage_second_seed(family):
     """As :func:`test_eleventh_coverage_on_the_doublet_plan` at the fresh seed 5419. Measured (helper
     plan11, on 3ddf87d; the cases that ran before its deadline): two-mass 25 of 25 (cases 0–4),
     multimode 15 of 16 (cases 0–3), stribeck 11 of 12 (cases 0–1), lugre 12 of 12 (cases 0–1)."""
-    from plant.identification import ExperimentOptions
-
-    inside = []
-    for case in range(5):
-        res, cpu = coverage_case(family, case, seed=PLAN11_COVERAGE_SEED, bootstrap=20,
-                                 options=ExperimentOptions(doublets=ELEVENTH_DOUBLETS))
-        print(family, case, f"cpu {cpu:.1f}", {k: (round(e / v - 1, 3), lo <= v <= hi) for k, (v, e, (lo, hi), _) in res.items()})
-        inside += [lo <= v <= hi for v, _, (lo, hi), _ in res.values()]
-    assert np.mean(inside) >= 0.90
+    _assert_doublet_coverage(family, PLAN11_COVERAGE_SEED)
