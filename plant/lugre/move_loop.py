@@ -278,6 +278,19 @@ def _lie_step_s(t, y0, y1, y2, H, u, x30, x50, th0, L):
             T2[K, K] - T2[K, K - 1])
 
 
+@njit(cache=True, inline="always")
+def _error_norm(e0, e1, e2, y0, yn0, y1, yn1, hh, atol0, atol1, atol2, rtol):
+    """The RMS of a step's error estimate (e0, e1, e2) over the mixed tolerances of (v, z, D), the
+    scale of D being the displacement hh·max|v| (the same norm for the explicit and the stiff step)."""
+    sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
+    sc1 = atol1 + rtol * max(abs(y1), abs(yn1))
+    sc2 = atol2 + rtol * hh * max(abs(y0), abs(yn0))
+    acc = 0.0 + (e0 / sc0) ** 2
+    acc += (e1 / sc1) ** 2
+    acc += (e2 / sc2) ** 2
+    return math.sqrt(acc / 3.0)
+
+
 @njit(cache=True)
 def _segment_s(X, H, L, hbox, vth, mode, tol):
     """integrate.segment, noise-free (eps = inf), without the peak, on scalars (:func:`_dp_step_s`):
@@ -305,13 +318,7 @@ def _segment_s(X, H, L, hbox, vth, mode, tol):
             if lam * hh > stiff:
                 yn0, yn1, yn2, e0, e1, e2 = _lie_step_s(t, y0, y1, y2, hh, u, x30, x50, th0, L)
                 steps += _LIE_STEP_COST
-                sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
-                sc1 = atol1 + rtol * max(abs(y1), abs(yn1))
-                sc2 = atol2 + rtol * hh * max(abs(y0), abs(yn0))
-                acc = 0.0 + (e0 / sc0) ** 2
-                acc += (e1 / sc1) ** 2
-                acc += (e2 / sc2) ** 2
-                err = math.sqrt(acc / 3.0)
+                err = _error_norm(e0, e1, e2, y0, yn0, y1, yn1, hh, atol0, atol1, atol2, rtol)
                 if not err <= 1.0:
                     h = hh * max(0.2, 0.9 * err ** (-1.0 / _LIE_COLUMNS)) if math.isfinite(err) else 0.2 * hh
                     if steps > 5_000_000:
@@ -328,13 +335,7 @@ def _segment_s(X, H, L, hbox, vth, mode, tol):
                 continue
         yn0, yn1, yn2, k0, k1, k2, e0, e1, e2 = _dp_step_s(t, y0, y1, y2, f0, f1, f2, hh, u, x30, x50, th0, L)
         steps += 1
-        sc0 = atol0 + rtol * max(abs(y0), abs(yn0))
-        sc1 = atol1 + rtol * max(abs(y1), abs(yn1))
-        sc2 = atol2 + rtol * hh * max(abs(y0), abs(yn0))
-        acc = 0.0 + (e0 / sc0) ** 2
-        acc += (e1 / sc1) ** 2
-        acc += (e2 / sc2) ** 2
-        err = math.sqrt(acc / 3.0)
+        err = _error_norm(e0, e1, e2, y0, yn0, y1, yn1, hh, atol0, atol1, atol2, rtol)
         if not err <= 1.0:
             h = hh * max(0.2, 0.9 * err ** -0.2) if math.isfinite(err) else 0.2 * hh
             if steps > 5_000_000:
