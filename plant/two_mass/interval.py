@@ -679,6 +679,7 @@ def advance(state: PlantState, command: DriveCommand, params: TwoMassParams, noi
     if not noisy:
         o = o.copy()
         o[_O_NOISE] = 0.0
+        o.flags.writeable = False   # read-only like plan()'s: the kernels' one signature (docs/plant.md)
     out = np.empty(N_X + _SHEET)
     ev = _event_scratch() if record else _NO_EVENTS
     z, pos = noise.window() if noisy else (_NO_NOISE, 0)
