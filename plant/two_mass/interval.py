@@ -670,7 +670,7 @@ def advance(state: PlantState, command: DriveCommand, params: TwoMassParams, noi
     offsets, levels = command.arrays()
     if offsets[-1] >= h:
         raise ValueError(f"command segment at offset {offsets[-1]} s lies beyond the interval ({h} s)")
-    x = np.asarray(state.x, dtype=float)
+    x = np.array(state.x, dtype=float)   # a writable copy: the kernels' one signature (docs/plant.md)
     if x.shape != (N_X,):
         raise ValueError(f"two-mass state must have {N_X} entries, got shape {x.shape}")
     bridge = command.drive is DriveType.BRIDGE
