@@ -634,6 +634,8 @@ def plan(params: TwoMassParams, options: SimOptions) -> tuple:
     """
     q = np.array([params.shaft_stiffness, params.shaft_damping, params.motor_inertia])
     V, Vi, lam = decompose(params)
+    for a in (q, V, Vi, lam):       # frozen before the table builders use them, as the kernels get them:
+        a.flags.writeable = False   # one compiled signature of process_noise, bridge_law (docs/plant.md)
     prm = params.kernel_record()
     TP = np.empty((2, 2, NX, NX))
     TL = np.empty((2, 2, NNB, NNB))
