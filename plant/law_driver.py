@@ -56,8 +56,7 @@ def run_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, params: 
     A, B, C, D = (np.ascontiguousarray(m, dtype=np.float64) for m in (law.A, law.B, law.C, law.D))
     cx = np.zeros(A.shape[0])
     x = np.array(state.x, dtype=np.float64)
-    x_view = x.view()
-    x_view.flags.writeable = False
+    x_view = x.view()     # writable, as every caller of the interval kernels passes it (docs/plant.md)
     sheet = np.array([state.t, float(state.mode), 1.0 if state.flyback else 0.0])
     out = np.empty(n_state + sheet_size)
     totals = np.zeros(len(TOTAL_FIELDS))
@@ -254,8 +253,7 @@ def run_law_chunks(chunk: Callable[..., int], family_args: tuple, law: Any, para
         m, k = p.shape[0], x.shape[0]
         p = np.concatenate((p, x, sheet))
         x, sheet = p[m:m + k], p[m + k:]
-    x_view = x.view()
-    x_view.flags.writeable = False
+    x_view = x.view()     # writable, as every caller of the interval kernels passes it (docs/plant.md)
     out = np.empty(n_state + sheet_size)
     totals = np.zeros(len(TOTAL_FIELDS))
     if sums is not None:

@@ -39,10 +39,10 @@ def _both(name, scenario, seed, noise=True, duration=12.0, **options):
 def test_compiled_law_is_bit_identical_to_the_python_loop(name, scenario, seed, noise, options):
     from plant.multimode.interval import interval_kernel
     python, compiled = _both(name, scenario, seed, noise, **options)
-    # the compiled loop adds no specialization: it and advance pass a read-only state vector, one
-    # signature (pulse_motion's noise-free intervals, plant/multimode/pulse.py, pass a writable one:
-    # a second signature whenever an oracle-pulse run compiled them earlier in this process)
-    assert len([sig for sig in interval_kernel.signatures if not sig[0].mutable]) == 1
+    # the compiled loop adds no specialization: it, advance and pulse_motion's noise-free intervals
+    # (plant/multimode/pulse.py) all pass a writable state vector and typed (not literal) ints and
+    # bools, one signature (docs/plant.md, "One compiled signature per kernel")
+    assert [sig[0].mutable for sig in interval_kernel.signatures] == [True]
     assert python[1] == compiled[1] == "ok"
     assert python[0] == compiled[0]          # every metric, exactly
     assert python[2] == compiled[2]

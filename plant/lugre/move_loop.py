@@ -45,13 +45,13 @@ def _play(x, tau, offs, levs, starts, bridge, prm, L, o, tol, z, ev, last, sigma
     After sample ``last`` (u = 0 from there) the shaft is frozen once |z| + |x3|/σ0 + |x2|·ring ≤
     ``settled`` (plant.identification.fit)."""
     out = np.empty(N_STATE + SHEET_SIZE)
-    mode, flyback, t = 2, False, 0.0
+    mode, flyback, t = np.int64(2), bool(False), 0.0    # typed, not literal: one kernel signature
     n = x1.shape[0]
     k = 0
     n_ev, n_sub = 0.0, 0.0
     while k < n:
         interval_kernel(x, mode, flyback, t, tau, offs[starts[k]:starts[k + 1]].copy(),
-                        levs[starts[k]:starts[k + 1]].copy(), bridge, prm, L, o, z, 0, ev, out, tol)
+                        levs[starts[k]:starts[k + 1]].copy(), bridge, prm, L, o, z, np.int64(0), ev, out, tol)
         n_ev += out[N_STATE + SHEET_EVENTS]
         n_sub += out[N_STATE + SHEET_SUBSTEPS]
         code = int(out[N_STATE + SHEET_STATUS])

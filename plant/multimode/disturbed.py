@@ -666,7 +666,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     if not noisy and ov[0] != 0.0:
         ov = ov.copy()
         ov[0] = 0.0
-    x = np.ascontiguousarray(state.x, dtype=np.float64)
+    x = np.array(state.x, dtype=np.float64)   # a writable copy: the kernels' one signature (docs/plant.md)
     out = np.empty(N_X + disturbed_jit.SHEET_SIZE)
     ev = getattr(_SCRATCH, "events", None) if record else _NO_EVENTS
     if ev is None:

@@ -493,10 +493,7 @@ def advance(state: PlantState, command: DriveCommand, params: PlantParams, noise
     if offsets[-1] >= h:
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
-    x = state.x
-    if x.flags.writeable:   # one compiled signature: the kernel always gets a read-only state vector
-        x = np.array(x, dtype=np.float64)
-        x.flags.writeable = False
+    x = np.array(state.x, dtype=np.float64)   # a writable copy: the kernels' one signature (docs/plant.md)
     noisy = options.noise and noise is not None
     o, TP, TL, BPh, BPw, BG, BC = _plan(params, options, noisy)
     out = np.empty(N_STATE + _SHEET)

@@ -28,13 +28,13 @@ def _play(x, tau, offs, levs, starts, bridge, prm, o, TP, TL, BPh, BPw, BG, BC, 
     sample ``last`` (u = 0 from there) the shaft is frozen once it is stuck (mode 2, no flyback)
     with x2 = 0 and |x3| ≤ k̄s (plant.identification.fit)."""
     out = np.empty(N_STATE + _SHEET)
-    mode, flyback, t = 2, False, 0.0
+    mode, flyback, t = np.int64(2), bool(False), 0.0    # typed, not literal: one kernel signature
     n = x1.shape[0]
     k = 0
     n_ev, n_sub = 0.0, 0.0
     while k < n:
         interval_kernel(x, mode, flyback, t, tau, offs[starts[k]:starts[k + 1]].copy(),
-                        levs[starts[k]:starts[k + 1]].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev,
+                        levs[starts[k]:starts[k + 1]].copy(), bridge, prm, o, TP, TL, BPh, BPw, BG, BC, z, np.int64(0), ev,
                         out)
         n_ev += out[N_STATE + _NEV]
         n_sub += out[N_STATE + _NSUB]

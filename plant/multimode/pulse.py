@@ -131,7 +131,8 @@ def _interval(xs, mode, flyback, t, h, level, offsets, levels, prm, o, TP, TL, B
     ``t_stop``), the new state and sheet in ``out``. ``offsets`` (= [0]) and ``levels`` are the
     caller's one-element command arrays."""
     levels[0] = level
-    interval_kernel(xs, mode, flyback, t, h, offsets, levels, True, prm, o, TP, TL, BPh, BPw, BG, BC, z, 0, ev, out)
+    interval_kernel(xs, mode, flyback, t, h, offsets, levels, bool(True), prm, o, TP, TL, BPh, BPw, BG, BC, z, np.int64(0),
+                    ev, out)                      # bool(), np.int64(): typed, not literal (docs/plant.md)
     S = out[N_STATE:]
     for i in range(int(S[_SHEET_NREC])):
         if ev[i, 6] == _STICK:

@@ -270,7 +270,7 @@ def advance(state: PlantState, command: DriveCommand, params, noise: NoiseStream
     if offsets[-1] >= h:
         raise ValueError(f"DriveCommand segment at offset {offsets[-1]!r} s lies beyond the interval of {h!r} s")
     bridge = command.drive is DriveType.BRIDGE
-    x = np.asarray(state.x, dtype=np.float64)
+    x = np.array(state.x, dtype=np.float64)   # a writable copy: the kernels' one signature (docs/plant.md)
     if x.shape[0] != N_STATE:
         raise ValueError(f"a stribeck state has {N_STATE} entries (x1..x5, u, θ), got {x.shape[0]}")
     noisy = options.noise and noise is not None

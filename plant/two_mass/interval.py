@@ -634,6 +634,8 @@ def plan(params: TwoMassParams, options: SimOptions) -> tuple:
     """
     q = np.array([params.shaft_stiffness, params.shaft_damping, params.motor_inertia])
     V, Vi, lam = decompose(params)
+    for a in (q, V, Vi, lam):       # frozen before the table builders use them, as the kernels get them:
+        a.flags.writeable = False   # one compiled signature of process_noise, bridge_law (docs/plant.md)
     prm = params.kernel_record()
     TP = np.empty((2, 2, NX, NX))
     TL = np.empty((2, 2, NNB, NNB))
@@ -670,7 +672,7 @@ def advance(state: PlantState, command: DriveCommand, params: TwoMassParams, noi
     offsets, levels = command.arrays()
     if offsets[-1] >= h:
         raise ValueError(f"command segment at offset {offsets[-1]} s lies beyond the interval ({h} s)")
-    x = np.asarray(state.x, dtype=float)
+    x = np.array(state.x, dtype=float)   # a writable copy: the kernels' one signature (docs/plant.md)
     if x.shape != (N_X,):
         raise ValueError(f"two-mass state must have {N_X} entries, got shape {x.shape}")
     bridge = command.drive is DriveType.BRIDGE
@@ -679,6 +681,7 @@ def advance(state: PlantState, command: DriveCommand, params: TwoMassParams, noi
     if not noisy:
         o = o.copy()
         o[_O_NOISE] = 0.0
+        o.flags.writeable = False   # read-only like plan()'s: the kernels' one signature (docs/plant.md)
     out = np.empty(N_X + _SHEET)
     ev = _event_scratch() if record else _NO_EVENTS
     z, pos = noise.window() if noisy else (_NO_NOISE, 0)

@@ -109,6 +109,7 @@ def run_law(law, params: TwoMassParams, options: SimOptions, state: PlantState, 
     if not noisy:
         o = o.copy()
         o[_O_NOISE] = 0.0
+        o.flags.writeable = False   # read-only like plan()'s: the kernels' one signature (docs/plant.md)
     return run_chunks(_chunk, (q, V, Vi, lam, o, TP, TL, BT), law, params, options, state, sensor, n_warm, noise, noisy, deadline,
                       n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
                       interval_status=interval_status)
@@ -192,6 +193,7 @@ def run_compiled_law(law, params, options: SimOptions, state: PlantState, sensor
     if not noisy:
         o = o.copy()
         o[_O_NOISE] = 0.0
+        o.flags.writeable = False   # read-only like plan()'s: the kernels' one signature (docs/plant.md)
     return run_law_chunks(_law_chunk, (q, V, Vi, lam, o, TP, TL, BT), law, params, options, state, sensor, n_warm, noise, noisy,
                           deadline, n_state=N_STATE, sheet_size=SHEET_SIZE, no_events=NO_EVENTS, status_ok=STATUS_OK,
                           interval_status=interval_status, record_full=_RecordFull, **resume)
