@@ -737,3 +737,10 @@ def test_eleventh_doublet_plan_coverage_second_seed(family):
     plan11, on 3ddf87d; the cases that ran before its deadline): two-mass 25 of 25 (cases 0–4),
     multimode 15 of 16 (cases 0–3), stribeck 11 of 12 (cases 0–1), lugre 12 of 12 (cases 0–1)."""
     _assert_doublet_coverage(family, PLAN11_COVERAGE_SEED)
+
+
+# issue 25's twelfth session (helper strib12): the plan with slow reversals (ExperimentOptions(reversals=3),
+# `experiment --reversals 3`, with doublets=6) was chosen on dev seed 8484's stribeck axes (docs/axis.md,
+# "Twelfth session"); this fresh seed was named and committed before any of its logs ran
+TWELFTH_AUTO_SEED = 3517
+TWELFTH_REVERSALS = 3
