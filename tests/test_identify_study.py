@@ -756,7 +756,8 @@ def test_twelfth_auto_with_doublets_and_reversals():
     (``ExperimentOptions(doublets=6, reversals=3)``: +19.8 s over the doublet plan): the generating family
     picked in ≥ 90 % of the 8 logs. Measured (2026-11-28, `choose_family` without the final point fit, one
     process per log, two at a time, load 2–5): **7 of 8** — lugre 2/2, multimode 2/2, two-mass 2/2,
-    stribeck 1/2 (k=0 → multimode); the pairwise rule also 7 of 8; CPU of the choice 37–82 s per log."""
+    stribeck 1/2 (k=0 → multimode); the pairwise rule also 7 of 8; CPU of the choice 37–82 s per log. The same
+    logs on the doublet plan alone (run after, for comparison): 6 of 8 (stribeck k=0 → lugre, k=1 → multimode)."""
     from plant.identification import ExperimentOptions
 
     picked = {}
