@@ -56,6 +56,10 @@ def experiment_command(
     doublets: int = typer.Option(0, "--doublets", help="Torque doublets (+max torque, then -max torque, 2 and 2.5 ms "
                                                        "each) per width and direction (linear drive; 0: none): they "
                                                        "excite a compliant shaft."),
+    reversals: int = typer.Option(0, "--reversals", help="Slow reversals (a 2.5-ms kick at max torque, then "
+                                                         "+/-level for the hold time each way; levels 0.35, 0.45, "
+                                                         "0.55 of the ramp peak) per level and direction (linear "
+                                                         "drive; 0: none): slides where a Stribeck law acts."),
 ) -> None:
     """Write the identification plan: u at each sample instant, to be played on the axis.
 
@@ -70,7 +74,7 @@ def experiment_command(
         opts = ExperimentOptions(drive=drive, sample_period=sample_period, max_torque=max_torque,
                                  ramp_fraction=ramp_fraction, ramp_time=ramp_time, repeats=repeats,
                                  max_angle=max_angle, holds=holds, hold_time=hold_time,
-                                 doublets=doublets)
+                                 doublets=doublets, reversals=reversals)
     except ValueError as exc:
         raise UserError(str(exc).replace("ExperimentOptions.", "--").replace("_", "-")) from None
     plan = design_experiment(opts)

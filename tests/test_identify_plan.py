@@ -249,3 +249,87 @@ def test_sigma1_interval_covers_on_the_plan_with_holds():
         z.append((s - p.measurement_noise_std) / (s / math.sqrt(2 * dof)))
     z = np.array(z)
     assert np.sum(np.abs(z) <= 1.96) >= 16 and np.abs(z).max() < 4, np.round(z, 2)
+
+
+def test_reversals_are_appended_after_the_doublets_and_split_over_both_folds():
+    """``reversals=k`` (issue 25's twelfth session): the plan without them (reversals = 0) is unchanged,
+    command for command, with and without doublets; k > 0 inserts, before the final 1-s rest, 3 levels
+    (0.35, 0.45, 0.55 of the ramp peak P = ramp_fraction·max_torque) × k × 2 directions of moves
+    [kick ±max_torque for 2.5 ms then ±level, (n_hold − 1) holds at ±level, kick ∓max_torque then
+    ∓level, n_hold − 1 holds at ∓level] each followed by the 0.8-s rest: 2·n_hold + 80 samples per move
+    (n_hold = hold_time/τs); every level and direction has moves in each fold of the held-out split."""
+    from plant.identification.fit import _folds, moves
+
+    assert design_experiment(ExperimentOptions(reversals=0)).commands == design_experiment().commands
+    for base in (ExperimentOptions(hold_time=0.12), ExperimentOptions(doublets=2, hold_time=0.12)):
+        plain = design_experiment(base)
+        assert design_experiment(ExperimentOptions(doublets=base.doublets, reversals=0, hold_time=0.12)).commands \
+            == plain.commands
+        k, o = 2, ExperimentOptions(doublets=base.doublets, reversals=2, hold_time=0.12)
+        longer = design_experiment(o)
+        n_hold, peak = 12, 0.15 * 20.0
+        assert longer.n == plain.n + 3 * k * 2 * (2 * n_hold + 80)
+        assert longer.commands[:plain.n - 100] == plain.commands[:-100]
+        assert longer.commands[-100:] == plain.commands[-100:]
+        added = list(longer.commands[plain.n - 100:-100])
+        moves_seen = []
+        i = 0
+        while i < len(added):
+            c = added[i]
+            (o0, kick), (o1, level) = c.segments
+            assert o0 == 0.0 and o1 == 0.0025 and abs(kick) == 20.0 and math.copysign(1.0, level) == math.copysign(1.0, kick)
+            first = added[i + 1:i + n_hold]
+            assert all(h.segments == ((0.0, level),) for h in first)
+            (p0, kick2), (p1, level2) = added[i + n_hold].segments
+            assert p1 == 0.0025 and kick2 == -kick and level2 == -level
+            assert all(h.segments == ((0.0, level2),) for h in added[i + n_hold + 1:i + 2 * n_hold])
+            assert all(h.segments == ((0.0, 0.0),) for h in added[i + 2 * n_hold:i + 2 * n_hold + 80])
+            moves_seen.append((round(abs(level) / peak, 9), math.copysign(1.0, level)))
+            i += 2 * n_hold + 80
+        assert sorted(moves_seen) == sorted([(f, s) for f in (0.35, 0.45, 0.55) for s in (1.0, -1.0)] * k)
+        assert "reversals" not in plain.description and "slow reversals" in longer.description
+        log = longer.with_y(np.zeros(longer.n))
+        fold, segs = _folds(log), moves(log)
+        for f in (0.35, 0.45, 0.55):
+            for sign in (1.0, -1.0):
+                ks = [g for g, (s, e) in enumerate(segs) if len(longer.commands[s].segments) == 2
+                      and longer.commands[s].segments[1][0] == 0.0025
+                      and longer.commands[s].segments[1][1] == sign * f * peak]
+                assert len(ks) == k and {0, 1} <= set(fold[ks].tolist())
+
+
+def test_reversals_stay_inside_max_angle_on_a_light_axis():
+    """The reversal moves' largest excursion from the move's start, noise-free, on the region's lightest
+    corner (tests/identify_draws.py: k̄c 0.9, k̄s 1.2·k̄c, J 0.3, τ3 6 ms) for multimode and for stribeck at
+    its least friction (v_s 10 mrad/s, b 0.5): inside the plan's max_angle (0.2 rad) with a margin of 2."""
+    from plant.identification.fit import _Model, moves
+
+    plan = design_experiment(ExperimentOptions(reversals=1))
+    start = design_experiment().n - 100
+    for family, extra in (("multimode", {}), ("stribeck", dict(stribeck_velocity=0.01, viscous=0.5))):
+        p = get_family(family).Params().replace(coulomb=0.9, stiction=1.08, inertia=0.3, motor_time_constant=0.006,
+                                                **extra)
+        log, _ = simulate_log(plan, family, p, 5)
+        segs = [g for g, (s, e) in enumerate(moves(log)) if s >= start]
+        assert len(segs) == 6
+        model = _Model(log, family, get_family(family).Params().replace(u_max=20.0, sample_period=0.01), only=segs)
+        z = np.log([0.9, 0.18, 0.3, 0.006] + ([0.01, 0.5] if extra else []))
+        pred = model.predict(z)
+        worst = max(np.max(np.abs(pred[model.groups == g] - model.offsets[g])) for g in range(len(segs)))
+        assert 1e-4 < worst < 0.1, worst
+
+
+@pytest.mark.parametrize("options, match", [(dict(reversals=-1), "reversals"), (dict(reversals=2.0), "reversals"),
+                                            (dict(reversals=True), "reversals"),
+                                            (dict(reversals=2, drive="bridge"), "linear drive"),
+                                            (dict(reversals=2, sample_period=0.002), "sample_period")])
+def test_reversal_options_are_validated(options, match, tmp_path):
+    with pytest.raises(ValueError, match=match):
+        ExperimentOptions(**options)
+    args = [a for k, v in options.items() if not isinstance(v, (bool, float)) or k == "sample_period"
+            for a in ("--" + k.replace("_", "-"), str(v))]
+    if "--reversals" in args:
+        r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "p.csv"), *args])
+        assert r.exit_code == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "q.csv"), "--reversals", "2"])
+    assert r.exit_code == 0 and f"{7324 + 3 * 2 * 2 * (2 * 15 + 80)} samples" in r.stdout

@@ -74,6 +74,14 @@ class ExperimentOptions:
         followed by a rest — the sharp torque reversal excites a compliant shaft's mode (issue 25's
         eleventh session: on dev axes the moves of the most Fisher information in k_sh per second
         of the plan, docs/axis.md "Eleventh session: auto — the shaft").
+    reversals : int
+        Slow reversals per ladder level and direction (linear drive only; default 0, the default plan
+        unchanged): a kick of +``max_torque`` for 2.5 ms (to break away) then +level for ``hold_time``,
+        a kick of −``max_torque`` for 2.5 ms then −level for ``hold_time``, then 0 and a 0.8-s rest;
+        levels 0.35, 0.45 and 0.55 of the ramp peak (≈ 1–1.2 k̄c for k̄c = 0.35–0.55·peak). A slide
+        held just above k̄c runs at the speeds where a Stribeck curve and viscous friction act, and
+        the reversal passes through zero speed (issue 25's twelfth session: on dev stribeck axes the
+        moves of the most separation from multimode per second, docs/axis.md "Twelfth session").
     hold_time : float
         Seconds each hold lasts [s]: long enough for the elastic and creeping responses and for
         a slide's speed-dependent friction to show, short enough that a slide at the top level
@@ -91,6 +99,7 @@ class ExperimentOptions:
     holds: int = 2
     hold_time: float = 0.15
     doublets: int = 0
+    reversals: int = 0
 
     def __post_init__(self) -> None:
         if self.drive not in ("linear", "bridge"):
@@ -109,6 +118,13 @@ class ExperimentOptions:
             raise ValueError(f"ExperimentOptions.holds must be an integer in [0, 100], got {self.holds!r}")
         if not (isinstance(self.doublets, int) and not isinstance(self.doublets, bool) and 0 <= self.doublets <= 100):
             raise ValueError(f"ExperimentOptions.doublets must be an integer in [0, 100], got {self.doublets!r}")
+        if not (isinstance(self.reversals, int) and not isinstance(self.reversals, bool) and 0 <= self.reversals <= 100):
+            raise ValueError(f"ExperimentOptions.reversals must be an integer in [0, 100], got {self.reversals!r}")
+        if self.reversals and self.drive != "linear":
+            raise ValueError("ExperimentOptions.reversals needs the linear drive (a bridge has one level)")
+        if self.reversals and _REVERSAL_KICK >= self.sample_period:
+            raise ValueError(f"ExperimentOptions.reversals needs sample_period > {_REVERSAL_KICK!r} s "
+                             f"(a kick lies in one interval), got {self.sample_period!r}")
         if self.doublets and self.drive != "linear":
             raise ValueError("ExperimentOptions.doublets needs the linear drive (a bridge has no reversal within a pulse)")
         if self.doublets and 2 * max(_DOUBLET_WIDTHS) >= self.sample_period:
@@ -125,6 +141,9 @@ _BRIDGE_WIDTHS = ((1.0, (0.001, 0.0015, 0.002, 0.003)),)
 _HOLD_LEVELS = (0.2, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.95)
 # Doublet widths [s] (``doublets``): +max_torque for w, −max_torque for w, then 0, in one sample interval.
 _DOUBLET_WIDTHS = (0.002, 0.0025)
+# Slow reversals (``reversals``): levels as fractions of the ramp peak, the kick's width [s] at max_torque.
+_REVERSAL_LEVELS = (0.35, 0.45, 0.55)
+_REVERSAL_KICK = 0.0025
 _BRIDGE_RAMP = tuple(round(0.0004 + 0.0001 * k, 6) for k in range(13))   # 0.4 … 1.6 ms
 
 
@@ -179,12 +198,24 @@ def design_experiment(options: ExperimentOptions = ExperimentOptions()) -> AxisL
             for sign in (1, -1):
                 level = sign * o.max_torque
                 cmds += [DriveCommand(((0.0, level), (width, -level), (2 * width, 0.0)), drive)] + rest
+    for fraction in _REVERSAL_LEVELS if o.reversals else ():
+        n_hold = max(int(round(o.hold_time / tau)), 1)
+        for _ in range(o.reversals):
+            for sign in (1, -1):
+                for s in (sign, -sign):
+                    level = s * fraction * peak
+                    cmds += [DriveCommand(((0.0, s * o.max_torque), (_REVERSAL_KICK, level)), drive)]
+                    cmds += [_hold(level, drive)] * (n_hold - 1)
+                cmds += rest * 2
     cmds += [_hold(0.0, drive)] * int(round(1.0 / tau))
     text = (f"solnic-bench identification plan ({o.drive} drive): play u at each t, record y.\n"
             + "\n".join(" ".join(WHY.split()).split(" * ")) + "\n"
             + ("**torque doublets** (+max_torque for w, then -max_torque for w, w = 2 and 2.5 ms, "
                f"{o.doublets} per width and direction): the sharp reversal excites a compliant shaft's mode.\n"
                if o.doublets else "")
+            + ("**slow reversals** (+max_torque for 2.5 ms then +level for the hold time, the same with -, "
+               f"levels 0.35, 0.45, 0.55 of the ramp peak, {o.reversals} per level and direction): slides just "
+               "above Coulomb friction, where a speed-dependent law acts.\n" if o.reversals else "")
             + f"Abort (u = 0) if |y - y(0)| > max_angle = {o.max_angle!r} rad.\n"
             + f"max_angle = {o.max_angle!r}\nmax_torque = {o.max_torque!r}")
     return AxisLog(o.drive, tau, o.max_torque, tuple(cmds), None, text)
