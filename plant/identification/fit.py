@@ -449,8 +449,11 @@ class _Model:
         x0 = self.fam.initial_state(p, 0.0).x
         x1 = np.empty(plan.n)
         j, checked, deadline = 0, False, self.deadline
-        tol = (np.append(self.lugre_tolerances, self.lugre_stiff) if self.lugre_stiff > 0.0
-               else self.lugre_tolerances)
+        if self.lugre_stiff > 0.0:
+            tol = np.append(self.lugre_tolerances, self.lugre_stiff)
+            tol.flags.writeable = False   # read-only as _LUGRE_TOLERANCES: one compiled signature (docs/plant.md)
+        else:
+            tol = self.lugre_tolerances
         while j < len(plan.sims):
             work, code, zero_div = move_loop.play_all(plan, x1, x0, p, _OPTS, tol, ring, _SETTLED,
                                                       _UNIT_COST_S[self.family], self.clock.spent, deadline, j)
