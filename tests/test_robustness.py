@@ -469,6 +469,7 @@ def _tiny(tmp_path, monkeypatch):
     monkeypatch.setattr(CB, "available_controllers", lambda: dict(keep))
 
 
+@pytest.mark.slow   # CLI end to end through the process pool (~25 s of it compiling in the workers): make test-slow
 def test_robustness_command_runs_writes_its_matrix_and_resumes(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
