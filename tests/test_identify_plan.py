@@ -106,20 +106,32 @@ def test_a_plan_with_doublets_round_trips_through_both_log_formats(tmp_path):
         assert back.u_max == log.u_max and back.sample_period == log.sample_period
 
 
-@pytest.mark.parametrize("options, match", [(dict(doublets=-1), "doublets"), (dict(doublets=2.0), "doublets"),
-                                            (dict(doublets=True), "doublets"),
-                                            (dict(doublets=2, drive="bridge"), "linear drive"),
-                                            (dict(doublets=2, sample_period=0.004), "sample_period")])
-def test_doublet_options_are_validated(options, match, tmp_path):
+def _option_cases(name: str, short_period: float) -> list[tuple[dict, str]]:
+    """Bad values of the plan option ``name`` and the message naming the fault."""
+    return [(dict([(name, -1)]), name), (dict([(name, 2.0)]), name), (dict([(name, True)]), name),
+            (dict([(name, 2), ("drive", "bridge")]), "linear drive"),
+            (dict([(name, 2), ("sample_period", short_period)]), "sample_period")]
+
+
+# samples the plan gets with the option at 2 (closed forms): doublets 2 widths × 2 directions × (1 + 40 rest);
+# reversals 3 levels × 2 directions × (2 holds of 15 samples + 80 rest)
+_PLUS_TWO = {"doublets": 2 * 2 * 2 * 41, "reversals": 3 * 2 * 2 * (2 * 15 + 80)}
+
+
+@pytest.mark.parametrize("options, match", _option_cases("doublets", 0.004) + _option_cases("reversals", 0.002))
+def test_plan_options_are_validated(options, match, tmp_path):
+    """A bad option is a ValueError naming it, and on the CLI one line and exit 2; the option at 2 adds
+    the samples its closed form says."""
+    name = next(k for k in _PLUS_TWO if k in options)
     with pytest.raises(ValueError, match=match):
         ExperimentOptions(**options)
     args = [a for k, v in options.items() if not isinstance(v, (bool, float)) or k == "sample_period"
             for a in ("--" + k.replace("_", "-"), str(v))]
-    if "--doublets" in args:
+    if "--" + name in args:
         r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "p.csv"), *args])
         assert r.exit_code == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "q.csv"), "--doublets", "2"])
-    assert r.exit_code == 0 and f"{7324 + 2 * 2 * 2 * 41} samples" in r.stdout
+    r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "q.csv"), "--" + name, "2"])
+    assert r.exit_code == 0 and f"{7324 + _PLUS_TWO[name]} samples" in r.stdout
 
 
 def _fit(est, lo, hi):
@@ -317,19 +329,3 @@ def test_reversals_stay_inside_max_angle_on_a_light_axis():
         pred = model.predict(z)
         worst = max(np.max(np.abs(pred[model.groups == g] - model.offsets[g])) for g in range(len(segs)))
         assert 1e-4 < worst < 0.1, worst
-
-
-@pytest.mark.parametrize("options, match", [(dict(reversals=-1), "reversals"), (dict(reversals=2.0), "reversals"),
-                                            (dict(reversals=True), "reversals"),
-                                            (dict(reversals=2, drive="bridge"), "linear drive"),
-                                            (dict(reversals=2, sample_period=0.002), "sample_period")])
-def test_reversal_options_are_validated(options, match, tmp_path):
-    with pytest.raises(ValueError, match=match):
-        ExperimentOptions(**options)
-    args = [a for k, v in options.items() if not isinstance(v, (bool, float)) or k == "sample_period"
-            for a in ("--" + k.replace("_", "-"), str(v))]
-    if "--reversals" in args:
-        r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "p.csv"), *args])
-        assert r.exit_code == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    r = CliRunner().invoke(app, ["experiment", "--out", str(tmp_path / "q.csv"), "--reversals", "2"])
-    assert r.exit_code == 0 and f"{7324 + 3 * 2 * 2 * (2 * 15 + 80)} samples" in r.stdout
