@@ -264,6 +264,7 @@ def test_frontier_takes_the_identified_matrix(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------- --family auto
 
+@pytest.mark.slow      # two whole choices, ~25 CPU s: make test-slow (choose_family end to end stays in make test: tests/test_identify_parallel.py)
 def test_auto_prefers_the_simpler_family_unless_the_richer_predicts_held_out_moves_better():
     """The held-out rule on logs with sensor noise only (σ1 = 5 µrad, no friction noise), so the
     generating law is the only structure: a stribeck log with a strong curve (v_s = 20 mrad/s,

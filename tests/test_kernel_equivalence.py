@@ -164,6 +164,7 @@ def _kernel_records():
     return [v.kernel_record() for v in variants]
 
 
+@pytest.mark.slow      # 4050 cases, ~15 CPU s (q_moving's quadrature on the fast-decay record at widths to 1 s): make test-slow
 def test_phi_and_q_with_shared_evaluations_are_the_separate_forms():
     """phi_moving, q_moving and the fused phi_q_moving (the fresh end-of-segment step) give the
     entries of the forms that evaluate every e-function per entry (tests/reference_kernels.py),
