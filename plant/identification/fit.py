@@ -1555,7 +1555,11 @@ _SHAFT_PROFILE_NFEV = 40    # least-squares evaluations of the core's refit at e
 # point, so that the multimode corner is on the profile too) k̄c, k̄s − k̄c, J, τ3 and ln b refitted
 # with v_s held (:func:`_stribeck_profile`). The twelfth session found stribeck fold fits ending at the
 # multimode corner (v_s 0.0–0.5 mrad/s, b → 0) on logs whose other fold found the law (fresh 3517 k=1:
-# 0.0 and 26.8 against 26.9 mrad/s; docs/axis.md "Twelfth session: auto — the Stribeck law").
+# 0.0 and 26.8 against 26.9 mrad/s; docs/axis.md "Twelfth session: auto — the Stribeck law"). With
+# restart=True on the doublet plan (docs/axis.md "Thirteenth session"): fresh 4637 6 of 8 (without: 6),
+# fresh 8219 5 of 8 (without: 6; the profile's group led one fold to the multimode corner), 3517 re-run
+# gained its stribeck k=1; the fold fits mostly find v_s and still predict separably worse than the
+# truth: an option, not the default, not recommended.
 _STRIBECK_PROFILE = (2e-3, 4e-3, 8e-3, 1.6e-2, 3.2e-2, 6.4e-2)
 _STRIBECK_PROFILE_NFEV = 30    # least-squares evaluations of the core's and b's refit at each profile point
 
