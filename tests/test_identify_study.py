@@ -777,6 +777,9 @@ def test_twelfth_auto_with_doublets_and_reversals():
 THIRTEENTH_AUTO_SEED = 4637
 # the session's second fresh seed, named and committed (after 4637's logs ran) before any of its logs ran
 THIRTEENTH_SECOND_SEED = 8219
+# the profile's points then joined the unshifted core's group of starts (chosen on dev seed 8484's reversal-plan
+# logs); the session's third fresh seed, named and committed with that change before any of its logs ran
+THIRTEENTH_THIRD_SEED = 6143
 
 
 @pytest.mark.slow
@@ -784,7 +787,7 @@ THIRTEENTH_SECOND_SEED = 8219
 @pytest.mark.xfail(strict=True, reason="measured 6 of 8 on 4637 (both stribeck logs picked as multimode, its z "
                    "1.57 and 1.53 against stribeck) and 5 of 8 on 8219 (both stribeck logs → multimode, lugre k=0 → "
                    "two-mass): docs/axis.md, 'Thirteenth session: auto — a profile in the Stribeck fold fit'")
-@pytest.mark.parametrize("seed", [THIRTEENTH_AUTO_SEED, THIRTEENTH_SECOND_SEED])
+@pytest.mark.parametrize("seed", [THIRTEENTH_AUTO_SEED, THIRTEENTH_SECOND_SEED, THIRTEENTH_THIRD_SEED])
 def test_thirteenth_auto_with_the_stribeck_profile_and_restart(seed):
     """``--family auto`` with the stribeck fold fit's profile over v_s and the restart
     (``choose_family(stribeck_profile=True, restart=True)``) on 2 fresh logs per family (seed 4637 or 8219,

@@ -1555,11 +1555,12 @@ _SHAFT_PROFILE_NFEV = 40    # least-squares evaluations of the core's refit at e
 # point, so that the multimode corner is on the profile too) k̄c, k̄s − k̄c, J, τ3 and ln b refitted
 # with v_s held (:func:`_stribeck_profile`). The twelfth session found stribeck fold fits ending at the
 # multimode corner (v_s 0.0–0.5 mrad/s, b → 0) on logs whose other fold found the law (fresh 3517 k=1:
-# 0.0 and 26.8 against 26.9 mrad/s; docs/axis.md "Twelfth session: auto — the Stribeck law"). With
-# restart=True on the doublet plan (docs/axis.md "Thirteenth session"): fresh 4637 6 of 8 (without: 6),
-# fresh 8219 5 of 8 (without: 6; the profile's group led one fold to the multimode corner), 3517 re-run
-# gained its stribeck k=1; the fold fits mostly find v_s and still predict separably worse than the
-# truth: an option, not the default, not recommended.
+# 0.0 and 26.8 against 26.9 mrad/s; docs/axis.md "Twelfth session: auto — the Stribeck law"). First
+# built as a group of starts of its own (with restart=True on the doublet plan, docs/axis.md "Thirteenth
+# session": fresh 4637 6 of 8, without the options 6; fresh 8219 5 of 8, without 6 — that group led one
+# fold to the multimode corner; 3517 re-run 7 of 8, without 6); then, chosen on dev logs (seed 8484: the
+# reversal plan's k=2 and k=3 2 of 2 against 1 of 2, the doublet plan's as before), the points join the
+# unshifted core's group, as shaft_profile's do, tested on fresh seed 6143. An option, not the default.
 _STRIBECK_PROFILE = (2e-3, 4e-3, 8e-3, 1.6e-2, 3.2e-2, 6.4e-2)
 _STRIBECK_PROFILE_NFEV = 30    # least-squares evaluations of the core's and b's refit at each profile point
 
@@ -1901,8 +1902,8 @@ class _FoldFits:
                                       _FEATURE_GRID) for k in _CORE_SHIFT.get(f, (1.0,))]
                 if f == "two-mass" and self.shaft_profile:   # the profile's points start it too (_SHAFT_PROFILE)
                     groups[0] = groups[0] + _shaft_profile(fm, bases[f], z_mm[:4], frame)
-                if f == "stribeck" and self.stribeck_profile:   # one more group: the profile's points (_STRIBECK_PROFILE)
-                    groups.append(_stribeck_profile(fm, bases[f], z_mm[:4], frame))
+                if f == "stribeck" and self.stribeck_profile:   # the profile's points start it too (_STRIBECK_PROFILE)
+                    groups[0] = groups[0] + _stribeck_profile(fm, bases[f], z_mm[:4], frame)
                 z = _feature_fit(fm, groups[0], frame, sigma1, seed, groups=groups if len(groups) > 1 else None)[0]
             else:
                 z = _fold_fit(log, f, bases[f], train, z_mm[:4], scale, seeds)[0]
@@ -1990,10 +1991,10 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     ``shaft_profile`` (an option, eleventh session): the two-mass fold fit also starts from a profile
     over k_sh (:func:`_shaft_profile` at :data:`_SHAFT_PROFILE`: the core refitted at each held k_sh;
     the least-cost start of the grid and the profile's points begins the fit).
-    ``stribeck_profile`` (an option, thirteenth session): the stribeck fold fit has one more group of
-    starts, a profile over v_s (:func:`_stribeck_profile` at :data:`_STRIBECK_PROFILE`: the core and b
-    refitted at each held v_s); its least-cost point begins that group's first round, which competes
-    with the four core-shift groups' (:func:`_feature_fit`, ``groups``).
+    ``stribeck_profile`` (an option, thirteenth session): the stribeck fold fit also starts from a
+    profile over v_s (:func:`_stribeck_profile` at :data:`_STRIBECK_PROFILE`: the core and b refitted at
+    each held v_s); its points join the unshifted core's group of starts, whose least-cost point begins
+    that group's first round (:func:`_feature_fit`, ``groups``), as ``shaft_profile`` does for two-mass.
 
     ``mapper`` (like the builtin ``map``, the default; or a process pool's ``map``) runs the two
     folds (:class:`_FoldFits`: independent, so the choice, scores and fold fits are the same, bit
