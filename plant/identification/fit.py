@@ -1560,7 +1560,8 @@ _SHAFT_PROFILE_NFEV = 40    # least-squares evaluations of the core's refit at e
 # session": fresh 4637 6 of 8, without the options 6; fresh 8219 5 of 8, without 6 — that group led one
 # fold to the multimode corner; 3517 re-run 7 of 8, without 6); then, chosen on dev logs (seed 8484: the
 # reversal plan's k=2 and k=3 2 of 2 against 1 of 2, the doublet plan's as before), the points join the
-# unshifted core's group, as shaft_profile's do, tested on fresh seed 6143. An option, not the default.
+# unshifted core's group, as shaft_profile's do: fresh 6143 8 of 8 (without the options 7: the restart's
+# gain), re-runs 4637 6, 8219 5, 3517 7 — 26 of 32 against 25 without. An option, not the default.
 _STRIBECK_PROFILE = (2e-3, 4e-3, 8e-3, 1.6e-2, 3.2e-2, 6.4e-2)
 _STRIBECK_PROFILE_NFEV = 30    # least-squares evaluations of the core's and b's refit at each profile point
 
