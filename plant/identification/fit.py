@@ -1548,6 +1548,22 @@ _FEATURE_GRID = {"shaft_stiffness": (8e3, 1.2e4, 1.6e4, 2.2e4, 3e4, 5e4, 1e5)}
 # not carry the shaft above the friction noise; the plan's doublets do): an option, not the default.
 _SHAFT_PROFILE = (5e3, 8e3, 1.25e4, 2e4, 3.2e4, 5e4, 8e4, 1.25e5)
 _SHAFT_PROFILE_NFEV = 40    # least-squares evaluations of the core's refit at each profile point
+# choose_family(stribeck_profile=True) (issue 25's thirteenth session, an option): the stribeck feature
+# fit also starts from a profile over the Stribeck velocity — at each of these v_s [rad/s] (log-even,
+# ratio 2: the studies' stribeck region v_s ∈ [10, 30] mrad/s (tests/identify_draws.py) bracketed with
+# one grid point on either side of it, and 2–4 mrad/s, where the law is close to multimode's nesting
+# point, so that the multimode corner is on the profile too) k̄c, k̄s − k̄c, J, τ3 and ln b refitted
+# with v_s held (:func:`_stribeck_profile`). The twelfth session found stribeck fold fits ending at the
+# multimode corner (v_s 0.0–0.5 mrad/s, b → 0) on logs whose other fold found the law (fresh 3517 k=1:
+# 0.0 and 26.8 against 26.9 mrad/s; docs/axis.md "Twelfth session: auto — the Stribeck law"). First
+# built as a group of starts of its own (with restart=True on the doublet plan, docs/axis.md "Thirteenth
+# session": fresh 4637 6 of 8, without the options 6; fresh 8219 5 of 8, without 6 — that group led one
+# fold to the multimode corner; 3517 re-run 7 of 8, without 6); then, chosen on dev logs (seed 8484: the
+# reversal plan's k=2 and k=3 2 of 2 against 1 of 2, the doublet plan's as before), the points join the
+# unshifted core's group, as shaft_profile's do: fresh 6143 8 of 8 (without the options 7: the restart's
+# gain), re-runs 4637 6, 8219 5, 3517 7 — 26 of 32 against 25 without. An option, not the default.
+_STRIBECK_PROFILE = (2e-3, 4e-3, 8e-3, 1.6e-2, 3.2e-2, 6.4e-2)
+_STRIBECK_PROFILE_NFEV = 30    # least-squares evaluations of the core's and b's refit at each profile point
 
 
 class _FeatureModel:
@@ -1725,6 +1741,42 @@ def _shaft_profile(fm: "_FeatureModel", base, core: np.ndarray, frame,
     return out
 
 
+def _stribeck_profile(fm: "_FeatureModel", base, core: np.ndarray, frame,
+                      grid: tuple[float, ...] = _STRIBECK_PROFILE) -> list[np.ndarray]:
+    """The profile of the stribeck feature fit's cost over the Stribeck velocity: per v_s of ``grid``
+    [rad/s], the point (ln k̄c, ln(k̄s − k̄c), ln J, ln τ3, ln v_s, ln b) whose core and viscous
+    coefficient b [ozf·in·s/rad] minimise the robust cost (:func:`_robust_cost`) in ``frame`` with
+    v_s held. Each refit starts from the least-cost of :func:`_candidates`' points at that v_s
+    (multimode's core ``core`` with k̄c lowered by each :data:`_CORE_SHIFT` factor, k̄s held, times the
+    :data:`_GRID` values of b: 12 evaluations), each free parameter within a factor 30 of that start,
+    :data:`_STRIBECK_PROFILE_NFEV` evaluations, the t loss when the start is near the data (median
+    |whitened residual| ≤ :data:`_ROBUST_NEAR`) as in :func:`_feature_fit`.
+
+    Why: the fit's free descent from the grid ended at the multimode corner (v_s → 0, b → 0) on one
+    fold of logs whose other fold found the law (twelfth session); held at each v_s, the core and b
+    follow, and the profile's least cost marks the Stribeck velocity the training moves favour."""
+    if fm.family != "stribeck":
+        raise ValueError(f"the Stribeck profile is the stribeck family's, got {fm.family!r}")
+    out = []
+    for vs in grid:
+        starts = [z for k in _CORE_SHIFT["stribeck"]
+                  for z in _candidates(fm.model, "stribeck", base, _shifted(core, k), (),
+                                       {"stribeck_velocity": (float(vs),)})]
+        z0 = min(starts, key=lambda z: fm.cost(z, frame))
+        lv = z0[4]
+
+        def residual(c, lv=lv):
+            return fm.residual(np.concatenate([c[:4], [lv], c[4:]]), frame)
+        c0 = np.append(z0[:4], z0[5])
+        near = float(np.median(np.abs(residual(c0)))) <= _ROBUST_NEAR
+        sol = optimize.least_squares(residual, c0, method="trf", diff_step=1e-5, x_scale=1.0,
+                                     max_nfev=_STRIBECK_PROFILE_NFEV, xtol=1e-8, ftol=1e-10,
+                                     bounds=(c0 - math.log(30.0), c0 + math.log(30.0)),
+                                     loss="cauchy" if near else "linear", f_scale=math.sqrt(_FEATURE_NU))
+        out.append(np.concatenate([sol.x[:4], [lv], sol.x[4:]]))
+    return out
+
+
 def _rule_pairwise(fams, score: dict, pairs: dict, threshold: float = _SEPARABLE_Z) -> str:
     """The ``"pairwise"`` rule (issue 25, tenth session): the fewest parameters (then the lower
     score) among the families that no other family predicts separably better — W(f, g) ≤
@@ -1802,6 +1854,7 @@ class _FoldFits:
     restart: bool = False
     core: np.ndarray | None = None
     shaft_profile: bool = False
+    stribeck_profile: bool = False
 
     def __call__(self, k: int):
         log, fams, bases, fold, sigma1, seed, criterion = (self.log, self.fams, self.bases, self.fold, self.sigma1,
@@ -1850,6 +1903,8 @@ class _FoldFits:
                                       _FEATURE_GRID) for k in _CORE_SHIFT.get(f, (1.0,))]
                 if f == "two-mass" and self.shaft_profile:   # the profile's points start it too (_SHAFT_PROFILE)
                     groups[0] = groups[0] + _shaft_profile(fm, bases[f], z_mm[:4], frame)
+                if f == "stribeck" and self.stribeck_profile:   # the profile's points start it too (_STRIBECK_PROFILE)
+                    groups[0] = groups[0] + _stribeck_profile(fm, bases[f], z_mm[:4], frame)
                 z = _feature_fit(fm, groups[0], frame, sigma1, seed, groups=groups if len(groups) > 1 else None)[0]
             else:
                 z = _fold_fit(log, f, bases[f], train, z_mm[:4], scale, seeds)[0]
@@ -1895,7 +1950,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
                   budget_s: float = DEFAULT_BUDGET_S, criterion: str = "predictive",
                   final_fit: bool = True, mapper=map,
                   separable: float | None = None, rule: str = "mean",
-                  restart: bool = False, shaft_profile: bool = False) -> tuple[AxisFit | None, FamilyChoice]:
+                  restart: bool = False, shaft_profile: bool = False,
+                  stribeck_profile: bool = False) -> tuple[AxisFit | None, FamilyChoice]:
     """The family that best predicts moves it was not fitted on, fitted with its uncertainties.
 
     Rule (:data:`RULE`): the moves are split into two folds, each kind of move evenly
@@ -1936,6 +1992,10 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     ``shaft_profile`` (an option, eleventh session): the two-mass fold fit also starts from a profile
     over k_sh (:func:`_shaft_profile` at :data:`_SHAFT_PROFILE`: the core refitted at each held k_sh;
     the least-cost start of the grid and the profile's points begins the fit).
+    ``stribeck_profile`` (an option, thirteenth session): the stribeck fold fit also starts from a
+    profile over v_s (:func:`_stribeck_profile` at :data:`_STRIBECK_PROFILE`: the core and b refitted at
+    each held v_s); its points join the unshifted core's group of starts, whose least-cost point begins
+    that group's first round (:func:`_feature_fit`, ``groups``), as ``shaft_profile`` does for two-mass.
 
     ``mapper`` (like the builtin ``map``, the default; or a process pool's ``map``) runs the two
     folds (:class:`_FoldFits`: independent, so the choice, scores and fold fits are the same, bit
@@ -1966,6 +2026,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         raise ValueError(f"restart must be True or False, got {restart!r}")
     if not isinstance(shaft_profile, bool):
         raise ValueError(f"shaft_profile must be True or False, got {shaft_profile!r}")
+    if not isinstance(stribeck_profile, bool):
+        raise ValueError(f"stribeck_profile must be True or False, got {stribeck_profile!r}")
     if rule == "pairwise" and criterion != "predictive":
         raise ValueError("rule 'pairwise' needs criterion 'predictive' (its signed-rank tests)")
     t0 = time.perf_counter()
@@ -1985,7 +2047,8 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
     fold_fits = {}
     # the two folds through ``mapper`` (a process pool's map: at once), merged in fold order
     for test, per_k, oe_k, fits_k, cpu_k in mapper(_FoldFits(log, fams, bases, fold, sigma1, seed, criterion,
-                                                             restart=restart, shaft_profile=shaft_profile),
+                                                             restart=restart, shaft_profile=shaft_profile,
+                                                             stribeck_profile=stribeck_profile),
                                              (0, 1)):
         for f in fams:
             per_move[f][test], per_move_oe[f][test] = per_k[f], oe_k[f]
