@@ -1,10 +1,11 @@
 """Wall time of ``solnic-bench identify`` on simulated logs (issue 25: "fitting time per log ≤ 60 s on 2 cores").
 
     .venv/bin/python benchmarks/fit_time.py [--seed 7207] [--cases 1] [--workers 2] [--modes auto,own]
-                                            [--families multimode,stribeck,lugre,two-mass] [--json]
+                                            [--families multimode,stribeck,lugre,two-mass] [--doublets 0] [--json]
 
 For each family and case a log of the default plan (``design_experiment()``, Table 2-1 noise) is
-simulated from ``tests/identify_draws.draw``'s parameters — the draws and log seeds of the coverage
+simulated (``--doublets N``: the plan with N torque doublets per width and direction) from
+``tests/identify_draws.draw``'s parameters — the draws and log seeds of the coverage
 studies (docs/axis.md: ``rng = default_rng([seed, family index])``, the case-th draw, log seed
 ``seed·1000 + case``) — and written as CSV; then the command a user runs on it is timed as a
 subprocess, wall clock from launch to exit (start-up, imports, the forkserver's workers, the fit, the
@@ -32,11 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]     # the checkout: tests/identify_dr
 FAMILIES = ("multimode", "stribeck", "lugre", "two-mass")
 
 
-def _log(family: str, seed: int, case: int, path: Path) -> dict:
+def _log(family: str, seed: int, case: int, path: Path, doublets: int = 0) -> dict:
     """Simulate the case-th coverage-study log of ``family`` at ``seed`` into ``path``; its truth."""
     import numpy as np
 
-    from plant.identification import design_experiment, simulate_log
+    from plant.identification import ExperimentOptions, design_experiment, simulate_log
     from plant.identification.families import FAMILY_FREE
     from plant.identification.log import write_log
     if str(ROOT) not in sys.path:
@@ -46,7 +47,7 @@ def _log(family: str, seed: int, case: int, path: Path) -> dict:
     rng = np.random.default_rng([seed, list(FAMILY_FREE).index(family)])
     for _ in range(case + 1):
         p = draw(family, rng)
-    log, truth = simulate_log(design_experiment(), family, p, seed * 1000 + case)
+    log, truth = simulate_log(design_experiment(ExperimentOptions(doublets=doublets)), family, p, seed * 1000 + case)
     write_log(log, path)
     return {k: getattr(p, k) for k in ("coulomb", "stiction", "inertia", "motor_time_constant")}
 
@@ -69,6 +70,7 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--modes", default="auto,own", help="auto, own, or both (comma-separated)")
     ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--doublets", type=int, default=0, help="torque doublets in the plan (experiment --doublets)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     modes = [m for m in args.modes.split(",") if m]
@@ -82,7 +84,7 @@ def main() -> int:
         for family in families:
             for case in range(args.cases):
                 log = Path(tmp) / f"{family}-{case}.csv"
-                _log(family, args.seed, case, log)
+                _log(family, args.seed, case, log, args.doublets)
                 for mode in modes:
                     load = os.getloadavg()[0]
                     wall, chosen, rc = _identify(log, "auto" if mode == "auto" else family, args.workers,
@@ -96,9 +98,10 @@ def main() -> int:
                         print(f"{family:10s} case {case}  {mode:4s}  {wall:6.1f} s  chose {chosen:10s}"
                               f"  load before {load:4.2f}{flag}", flush=True)
     if args.json:
-        print(json.dumps({"seed": args.seed, "workers": args.workers, "goal_s": GOAL_S, "rows": rows}))
+        print(json.dumps({"seed": args.seed, "workers": args.workers, "doublets": args.doublets, "goal_s": GOAL_S, "rows": rows}))
     else:
-        print(f"{len(rows) - bad} of {len(rows)} runs ≤ {GOAL_S:.0f} s on {args.workers} workers (seed {args.seed})")
+        print(f"{len(rows) - bad} of {len(rows)} runs ≤ {GOAL_S:.0f} s on {args.workers} workers (seed {args.seed}, "
+              f"doublets {args.doublets})")
     return 1 if bad else 0
 
 
