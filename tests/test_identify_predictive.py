@@ -272,15 +272,17 @@ def test_shaft_profile_finds_the_shaft_of_a_log_without_friction_noise(shaft):
         _shaft_profile(_FeatureModel(log, "multimode", mm_base, train), mm_base, core, frame)
 
 
-def test_choose_family_shaft_profile_must_be_a_bool():
-    """``shaft_profile`` is True or False; anything else is one clear error naming it (before any fit)."""
+@pytest.mark.parametrize("option", ["shaft_profile", "stribeck_profile"])
+def test_choose_family_profile_options_must_be_bools(option):
+    """``shaft_profile`` and ``stribeck_profile`` are True or False; anything else is one clear error
+    naming the option (before any fit)."""
     from plant.identification.fit import choose_family
 
     log, _ = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
                           get_family("multimode").Params(), None)
     for bad in ("yes", 1, None):
-        with pytest.raises(ValueError, match="shaft_profile must be True or False"):
-            choose_family(log, final_fit=False, shaft_profile=bad)
+        with pytest.raises(ValueError, match=f"{option} must be True or False"):
+            choose_family(log, final_fit=False, **{option: bad})
 
 
 @pytest.mark.parametrize("vs", [pytest.param(0.012, marks=pytest.mark.slow), 0.024])
@@ -323,14 +325,3 @@ def test_stribeck_profile_finds_the_stribeck_velocity_of_a_log_with_table_2_1_no
     assert min(costs) <= st.cost(truth, frame), (min(costs), st.cost(truth, frame))
     with pytest.raises(ValueError, match="stribeck family"):
         _stribeck_profile(_FeatureModel(log, "multimode", mm_base, train), mm_base, core, frame)
-
-
-def test_choose_family_stribeck_profile_must_be_a_bool():
-    """``stribeck_profile`` is True or False; anything else is one clear error naming it (before any fit)."""
-    from plant.identification.fit import choose_family
-
-    log, _ = simulate_log(design_experiment(ExperimentOptions(repeats=1, holds=0)), "multimode",
-                          get_family("multimode").Params(), None)
-    for bad in ("yes", 1, None):
-        with pytest.raises(ValueError, match="stribeck_profile must be True or False"):
-            choose_family(log, final_fit=False, stribeck_profile=bad)

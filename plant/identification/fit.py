@@ -1708,6 +1708,18 @@ def _feature_fit(fm: _FeatureModel, starts: list[np.ndarray], frame, sigma1: flo
     return z, frame
 
 
+def _held_refit(residual, c0: np.ndarray, nfev: int):
+    """One profile point's refit (:func:`_shaft_profile`, :func:`_stribeck_profile`): least squares of
+    ``residual`` from ``c0`` with each parameter within a factor 30 of it, ``nfev`` evaluations, the t loss
+    when the start is near the data (median |whitened residual| ≤ :data:`_ROBUST_NEAR`) as in
+    :func:`_feature_fit`; scipy's result."""
+    near = float(np.median(np.abs(residual(c0)))) <= _ROBUST_NEAR
+    return optimize.least_squares(residual, c0, method="trf", diff_step=1e-5, x_scale=1.0,
+                                  max_nfev=nfev, xtol=1e-8, ftol=1e-10,
+                                  bounds=(c0 - math.log(30.0), c0 + math.log(30.0)),
+                                  loss="cauchy" if near else "linear", f_scale=math.sqrt(_FEATURE_NU))
+
+
 def _shaft_profile(fm: "_FeatureModel", base, core: np.ndarray, frame,
                    grid: tuple[float, ...] = _SHAFT_PROFILE) -> list[np.ndarray]:
     """The profile of the two-mass feature fit's cost over the shaft stiffness: per k_sh of ``grid``
@@ -1732,11 +1744,7 @@ def _shaft_profile(fm: "_FeatureModel", base, core: np.ndarray, frame,
         def residual(c, lk=lk):
             return fm.residual(np.append(c, lk), frame)
         c0 = z0[:4].copy()
-        near = float(np.median(np.abs(residual(c0)))) <= _ROBUST_NEAR
-        sol = optimize.least_squares(residual, c0, method="trf", diff_step=1e-5, x_scale=1.0,
-                                     max_nfev=_SHAFT_PROFILE_NFEV, xtol=1e-8, ftol=1e-10,
-                                     bounds=(c0 - math.log(30.0), c0 + math.log(30.0)),
-                                     loss="cauchy" if near else "linear", f_scale=math.sqrt(_FEATURE_NU))
+        sol = _held_refit(residual, c0, _SHAFT_PROFILE_NFEV)
         out.append(np.append(sol.x, lk))
     return out
 
@@ -1768,11 +1776,7 @@ def _stribeck_profile(fm: "_FeatureModel", base, core: np.ndarray, frame,
         def residual(c, lv=lv):
             return fm.residual(np.concatenate([c[:4], [lv], c[4:]]), frame)
         c0 = np.append(z0[:4], z0[5])
-        near = float(np.median(np.abs(residual(c0)))) <= _ROBUST_NEAR
-        sol = optimize.least_squares(residual, c0, method="trf", diff_step=1e-5, x_scale=1.0,
-                                     max_nfev=_STRIBECK_PROFILE_NFEV, xtol=1e-8, ftol=1e-10,
-                                     bounds=(c0 - math.log(30.0), c0 + math.log(30.0)),
-                                     loss="cauchy" if near else "linear", f_scale=math.sqrt(_FEATURE_NU))
+        sol = _held_refit(residual, c0, _STRIBECK_PROFILE_NFEV)
         out.append(np.concatenate([sol.x[:4], [lv], sol.x[4:]]))
     return out
 
@@ -2022,12 +2026,9 @@ def choose_family(log: AxisLog, families=None, *, bootstrap: int = 20, seed: int
         raise ValueError(f"separable must be a number in [0, 10], got {separable!r}")
     if rule not in _RULES:
         raise ValueError(f"rule must be one of {', '.join(_RULES)}, got {rule!r}")
-    if not isinstance(restart, bool):
-        raise ValueError(f"restart must be True or False, got {restart!r}")
-    if not isinstance(shaft_profile, bool):
-        raise ValueError(f"shaft_profile must be True or False, got {shaft_profile!r}")
-    if not isinstance(stribeck_profile, bool):
-        raise ValueError(f"stribeck_profile must be True or False, got {stribeck_profile!r}")
+    for name, flag in (("restart", restart), ("shaft_profile", shaft_profile), ("stribeck_profile", stribeck_profile)):
+        if not isinstance(flag, bool):
+            raise ValueError(f"{name} must be True or False, got {flag!r}")
     if rule == "pairwise" and criterion != "predictive":
         raise ValueError("rule 'pairwise' needs criterion 'predictive' (its signed-rank tests)")
     t0 = time.perf_counter()
